@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Installs hemirad's build and test dependencies from Debian packages (bookworm or later).
+set -euo pipefail
+
+packages=(
+  build-essential cmake ninja-build pkg-config
+  ocl-icd-opencl-dev opencl-clhpp-headers pocl-opencl-icd clinfo
+  libglm-dev
+  libtinygltf-dev nlohmann-json3-dev libstb-dev
+  # OpenImageIO's CMake config also names openimageio-tools, python3-imath and OpenCV's headers.
+  libopenimageio-dev openimageio-tools python3-imath libopencv-core-dev
+  catch2 libcli11-dev libfmt-dev
+)
+
+sudo=""
+if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+echo "install-deps: installing ${missing[*]}"
+$sudo apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
