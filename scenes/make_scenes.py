@@ -1,0 +1,623 @@
+#!/usr/bin/env python3
+"""Generate the glTF 2.0 scenes bundled with hemirad.
+
+    python3 scenes/make_scenes.py
+
+writes, next to this script:
+
+    cornell_box.gltf   the Cornell box from the Cornell Program of Computer Graphics
+                       "Cornell Box Data" (https://www.graphics.cornell.edu/online/box/data.html)
+    closed_room.gltf   a closed 4 m x 2.5 m x 5 m room with a ceiling panel light and a cube
+
+Python 3 standard library only; the output is byte-for-byte deterministic.
+
+Conventions (see DESIGN.md): glTF 2.0, Y-up, a triangle's front is its counter-clockwise
+side, surfaces are one-sided (doubleSided false), emission = emissiveFactor x
+KHR_materials_emissive_strength, reflectance = baseColorFactor.rgb.
+
+Every surface is a quad written as two indexed triangles (0,1,2) and (0,2,3) sharing the
+diagonal 0-2. The winding is computed, not trusted: each quad is flipped if needed so its
+front faces into the room/box (or out of a block), and after writing, the file is read back
+and every triangle is checked again.
+"""
+
+import base64
+import json
+import math
+import os
+import struct
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+EMISSIVE_EXT = "KHR_materials_emissive_strength"
+
+# --------------------------------------------------------------------------------------
+# small vector helpers
+# --------------------------------------------------------------------------------------
+
+
+def sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def norm(a):
+    return math.sqrt(dot(a, a))
+
+
+def unit(a):
+    n = norm(a)
+    assert n > 0.0, "degenerate vector"
+    return (a[0] / n, a[1] / n, a[2] / n)
+
+
+def mean(points):
+    n = float(len(points))
+    return (sum(p[0] for p in points) / n, sum(p[1] for p in points) / n, sum(p[2] for p in points) / n)
+
+
+def tri_normal(a, b, c):
+    """Unit normal of the counter-clockwise (front) side of triangle a, b, c."""
+    return unit(cross(sub(b, a), sub(c, a)))
+
+
+def f32(x):
+    """Round a Python float to the nearest float32 (what ends up in the buffer)."""
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+QUAD_TRIS = ((0, 1, 2), (0, 2, 3))
+
+# --------------------------------------------------------------------------------------
+# orientation rules: a rule takes a triangle's (normal, centroid) and says whether its
+# front faces the right way.
+# --------------------------------------------------------------------------------------
+
+
+def faces_towards(point):
+    """Front faces towards `point` (e.g. the inside of a room)."""
+    return ("towards", tuple(point))
+
+
+def faces_away_from(point):
+    """Front faces away from `point` (e.g. the outside of a block)."""
+    return ("away", tuple(point))
+
+
+def faces_direction(d):
+    """Front faces (nearly exactly) along direction d."""
+    return ("direction", tuple(unit(d)))
+
+
+def check_rule(rule, n, centroid):
+    kind, p = rule
+    if kind == "towards":
+        return dot(n, sub(p, centroid)) > 0.0
+    if kind == "away":
+        return dot(n, sub(centroid, p)) > 0.0
+    if kind == "direction":
+        return dot(n, p) > 0.999
+    raise ValueError(kind)
+
+
+def orient_quad(quad, rule):
+    """Return the quad's 4 corners, reversed if needed, so both triangles obey `rule`."""
+    quad = [tuple(float(c) for c in v) for v in quad]
+    assert len(quad) == 4
+
+    def ok(q):
+        return all(check_rule(rule, tri_normal(*(q[i] for i in t)), mean([q[i] for i in t])) for t in QUAD_TRIS)
+
+    if ok(quad):
+        return quad
+    flipped = [quad[0], quad[3], quad[2], quad[1]]  # same diagonal 0-2, opposite winding
+    assert ok(flipped), "quad %r cannot be oriented by rule %r (non-convex or mis-ordered?)" % (quad, rule)
+    return flipped
+
+
+# --------------------------------------------------------------------------------------
+# glTF writer
+# --------------------------------------------------------------------------------------
+
+
+class GltfBuilder:
+    def __init__(self, extras):
+        self.bin = bytearray()
+        self.gltf = {
+            "asset": {"version": "2.0", "generator": "hemirad make_scenes.py", "extras": extras},
+            "scene": 0,
+            "scenes": [{"name": "scene", "nodes": []}],
+            "nodes": [],
+            "meshes": [],
+            "materials": [],
+            "accessors": [],
+            "bufferViews": [],
+            "buffers": [],
+        }
+        self.material_index = {}
+        self.uses_emissive_strength = False
+
+    def _align(self):
+        while len(self.bin) % 4:
+            self.bin.append(0)
+
+    def _view(self, data, target):
+        self._align()
+        offset = len(self.bin)
+        self.bin += data
+        self.gltf["bufferViews"].append(
+            {"buffer": 0, "byteOffset": offset, "byteLength": len(data), "target": target}
+        )
+        return len(self.gltf["bufferViews"]) - 1
+
+    def material(self, name, base_color, emission=None, strength=None):
+        """emission: emissiveFactor (each in [0,1]); strength: KHR_materials_emissive_strength."""
+        for c in base_color:
+            assert 0.0 <= c <= 1.0
+        m = {
+            "name": name,
+            "pbrMetallicRoughness": {
+                "baseColorFactor": [float(c) for c in base_color] + [1.0],
+                "metallicFactor": 0.0,
+                "roughnessFactor": 1.0,
+            },
+            "doubleSided": False,
+        }
+        if emission is not None:
+            for c in emission:
+                assert 0.0 <= c <= 1.0
+            m["emissiveFactor"] = [float(c) for c in emission]
+            if strength is not None and strength != 1.0:
+                m["extensions"] = {EMISSIVE_EXT: {"emissiveStrength": float(strength)}}
+                self.uses_emissive_strength = True
+        self.gltf["materials"].append(m)
+        self.material_index[name] = len(self.gltf["materials"]) - 1
+        return self.material_index[name]
+
+    def mesh_node(self, name, quads, material):
+        """One node + one mesh + one primitive holding the given (already oriented) quads."""
+        positions = []
+        indices = []
+        for q in quads:
+            base = len(positions)
+            positions.extend(q)
+            for t in QUAD_TRIS:
+                indices.extend(base + i for i in t)
+        assert len(positions) <= 65535
+
+        pos_data = b"".join(struct.pack("<3f", *p) for p in positions)
+        idx_data = struct.pack("<%dH" % len(indices), *indices)
+        pos_view = self._view(pos_data, 34962)  # ARRAY_BUFFER
+        idx_view = self._view(idx_data, 34963)  # ELEMENT_ARRAY_BUFFER
+
+        p32 = [tuple(f32(c) for c in p) for p in positions]
+        acc = self.gltf["accessors"]
+        acc.append(
+            {
+                "bufferView": pos_view,
+                "componentType": 5126,  # FLOAT
+                "count": len(positions),
+                "type": "VEC3",
+                "min": [min(p[k] for p in p32) for k in range(3)],
+                "max": [max(p[k] for p in p32) for k in range(3)],
+            }
+        )
+        pos_acc = len(acc) - 1
+        acc.append(
+            {
+                "bufferView": idx_view,
+                "componentType": 5123,  # UNSIGNED_SHORT
+                "count": len(indices),
+                "type": "SCALAR",
+            }
+        )
+        idx_acc = len(acc) - 1
+
+        self.gltf["meshes"].append(
+            {
+                "name": name,
+                "primitives": [
+                    {
+                        "attributes": {"POSITION": pos_acc},
+                        "indices": idx_acc,
+                        "material": self.material_index[material],
+                        "mode": 4,  # TRIANGLES
+                    }
+                ],
+            }
+        )
+        self.add_node({"name": name, "mesh": len(self.gltf["meshes"]) - 1})
+
+    def camera_node(self, node_name, camera_name, yfov, aspect, znear, translation, rotation=None):
+        cams = self.gltf.setdefault("cameras", [])
+        cams.append(
+            {
+                "name": camera_name,
+                "type": "perspective",
+                "perspective": {"yfov": yfov, "aspectRatio": aspect, "znear": znear},
+            }
+        )
+        node = {"name": node_name, "camera": len(cams) - 1, "translation": [float(c) for c in translation]}
+        if rotation is not None:
+            node["rotation"] = [float(c) for c in rotation]
+        self.add_node(node)
+
+    def add_node(self, node):
+        self.gltf["nodes"].append(node)
+        self.gltf["scenes"][0]["nodes"].append(len(self.gltf["nodes"]) - 1)
+
+    def write(self, path):
+        self._align()
+        if self.uses_emissive_strength:
+            self.gltf["extensionsUsed"] = [EMISSIVE_EXT]
+        self.gltf["buffers"] = [
+            {
+                "byteLength": len(self.bin),
+                "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(self.bin)).decode("ascii"),
+            }
+        ]
+        # Put the keys in a conventional order; everything else keeps insertion order.
+        order = ["asset", "extensionsUsed", "scene", "scenes", "nodes", "cameras", "meshes",
+                 "materials", "accessors", "bufferViews", "buffers"]
+        out = {k: self.gltf[k] for k in order if k in self.gltf}
+        text = json.dumps(out, indent=2) + "\n"
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+        return path
+
+
+# --------------------------------------------------------------------------------------
+# self-check: read a written file back and verify it
+# --------------------------------------------------------------------------------------
+
+
+def quat_rotate(q, v):
+    x, y, z, w = q
+    u = (x, y, z)
+    t = cross(u, v)
+    t = (2 * t[0], 2 * t[1], 2 * t[2])
+    c = cross(u, t)
+    return (v[0] + w * t[0] + c[0], v[1] + w * t[1] + c[1], v[2] + w * t[2] + c[2])
+
+
+def load_and_check(path, rules, expect_camera=None, closed_groups=()):
+    """rules: node name -> orientation rule (every mesh node must have one).
+    expect_camera: (node name, world position, world view direction, world up).
+    closed_groups: lists of node names whose triangles together must form a closed,
+    consistently oriented surface (every directed edge matched by its reverse exactly once)."""
+    with open(path, "r", encoding="utf-8") as f:
+        g = json.load(f)
+
+    assert g["asset"]["version"] == "2.0"
+    assert len(g["buffers"]) == 1
+    prefix = "data:application/octet-stream;base64,"
+    uri = g["buffers"][0]["uri"]
+    assert uri.startswith(prefix)
+    blob = base64.b64decode(uri[len(prefix):])
+    assert len(blob) == g["buffers"][0]["byteLength"]
+
+    if any(EMISSIVE_EXT in m.get("extensions", {}) for m in g["materials"]):
+        assert EMISSIVE_EXT in g.get("extensionsUsed", [])
+    for m in g["materials"]:
+        assert m.get("doubleSided", False) is False
+        for c in m["pbrMetallicRoughness"]["baseColorFactor"]:
+            assert 0.0 <= c <= 1.0, (m["name"], c)
+        for c in m.get("emissiveFactor", [0, 0, 0]):
+            assert 0.0 <= c <= 1.0, (m["name"], c)
+
+    def read_accessor(i):
+        a = g["accessors"][i]
+        v = g["bufferViews"][a["bufferView"]]
+        start = v.get("byteOffset", 0) + a.get("byteOffset", 0)
+        if a["componentType"] == 5126 and a["type"] == "VEC3":
+            assert start % 4 == 0 and v["byteLength"] >= 12 * a["count"]
+            flat = struct.unpack_from("<%df" % (3 * a["count"]), blob, start)
+            data = [tuple(flat[3 * k:3 * k + 3]) for k in range(a["count"])]
+            assert "min" in a and "max" in a, "POSITION accessor needs min/max"
+            assert a["min"] == [min(p[k] for p in data) for k in range(3)]
+            assert a["max"] == [max(p[k] for p in data) for k in range(3)]
+            return data
+        if a["componentType"] == 5123 and a["type"] == "SCALAR":
+            assert start % 2 == 0 and v["byteLength"] >= 2 * a["count"]
+            return list(struct.unpack_from("<%dH" % a["count"], blob, start))
+        raise AssertionError("unexpected accessor %r" % a)
+
+    scene_nodes = g["scenes"][g["scene"]]["nodes"]
+    tris_by_node = {}
+    for ni in scene_nodes:
+        node = g["nodes"][ni]
+        if "mesh" not in node:
+            continue
+        # mesh nodes carry no transform: local = world
+        assert not any(k in node for k in ("matrix", "translation", "rotation", "scale", "children"))
+        name = node["name"]
+        assert name in rules, "no orientation rule for node %r" % name
+        tris = []
+        for prim in g["meshes"][node["mesh"]]["primitives"]:
+            assert prim.get("mode", 4) == 4
+            pos = read_accessor(prim["attributes"]["POSITION"])
+            idx = read_accessor(prim["indices"])
+            assert len(idx) % 3 == 0 and all(0 <= i < len(pos) for i in idx)
+            for k in range(0, len(idx), 3):
+                a, b, c = (pos[idx[k]], pos[idx[k + 1]], pos[idx[k + 2]])
+                n = tri_normal(a, b, c)
+                assert check_rule(rules[name], n, mean([a, b, c])), (
+                    "%s: triangle %d of node %r faces the wrong way (normal %r)" % (path, k // 3, name, n)
+                )
+                tris.append((a, b, c))
+        tris_by_node[name] = tris
+    assert set(tris_by_node) == set(rules), (sorted(tris_by_node), sorted(rules))
+
+    for group in closed_groups:
+        edges = {}
+        for name in group:
+            for t in tris_by_node[name]:
+                for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+                    edges[e] = edges.get(e, 0) + 1
+        for (a, b), count in edges.items():
+            assert count == 1 and edges.get((b, a), 0) == 1, "%s: group %r is not closed at edge %r-%r" % (
+                path, group, a, b)
+
+    if expect_camera is not None:
+        cname, cpos, cdir, cup = expect_camera
+        cams = [g["nodes"][i] for i in scene_nodes if g["nodes"][i].get("name") == cname]
+        assert len(cams) == 1 and "camera" in cams[0]
+        node = cams[0]
+        q = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
+        assert all(abs(node["translation"][k] - cpos[k]) < 1e-9 for k in range(3))
+        d = quat_rotate(q, (0.0, 0.0, -1.0))  # glTF cameras look down local -Z
+        u = quat_rotate(q, (0.0, 1.0, 0.0))
+        assert dot(d, unit(cdir)) > 1.0 - 1e-9, d
+        assert dot(u, unit(cup)) > 1.0 - 1e-9, u
+        cam = g["cameras"][node["camera"]]
+        assert cam["type"] == "perspective" and 0.0 < cam["perspective"]["yfov"] < math.pi
+
+    return g
+
+
+# --------------------------------------------------------------------------------------
+# Scene 1: the Cornell box
+# --------------------------------------------------------------------------------------
+
+# Cornell Program of Computer Graphics, "Cornell Box Data",
+# https://www.graphics.cornell.edu/online/box/data.html -- millimetres, Y up. Each quad is
+# copied in the order published. (The published quads are not all exactly planar or
+# rectangular -- e.g. the red wall -- and that is kept as is.)
+CORNELL_MM = {
+    "floor": [
+        [(552.8, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 559.2), (549.6, 0.0, 559.2)],
+    ],
+    "light": [
+        [(343.0, 548.8, 227.0), (343.0, 548.8, 332.0), (213.0, 548.8, 332.0), (213.0, 548.8, 227.0)],
+    ],
+    "ceiling": [
+        [(556.0, 548.8, 0.0), (556.0, 548.8, 559.2), (0.0, 548.8, 559.2), (0.0, 548.8, 0.0)],
+    ],
+    "back_wall": [
+        [(549.6, 0.0, 559.2), (0.0, 0.0, 559.2), (0.0, 548.8, 559.2), (556.0, 548.8, 559.2)],
+    ],
+    # "Right wall" in the data (green): x = 0, on the camera's right.
+    "right_wall": [
+        [(0.0, 0.0, 559.2), (0.0, 0.0, 0.0), (0.0, 548.8, 0.0), (0.0, 548.8, 559.2)],
+    ],
+    # "Left wall" in the data (red): x ~ 550, on the camera's left.
+    "left_wall": [
+        [(552.8, 0.0, 0.0), (549.6, 0.0, 559.2), (556.0, 548.8, 559.2), (556.0, 548.8, 0.0)],
+    ],
+    "short_block": [
+        [(130.0, 165.0, 65.0), (82.0, 165.0, 225.0), (240.0, 165.0, 272.0), (290.0, 165.0, 114.0)],
+        [(290.0, 0.0, 114.0), (290.0, 165.0, 114.0), (240.0, 165.0, 272.0), (240.0, 0.0, 272.0)],
+        [(130.0, 0.0, 65.0), (130.0, 165.0, 65.0), (290.0, 165.0, 114.0), (290.0, 0.0, 114.0)],
+        [(82.0, 0.0, 225.0), (82.0, 165.0, 225.0), (130.0, 165.0, 65.0), (130.0, 0.0, 65.0)],
+        [(240.0, 0.0, 272.0), (240.0, 165.0, 272.0), (82.0, 165.0, 225.0), (82.0, 0.0, 225.0)],
+    ],
+    "tall_block": [
+        [(423.0, 330.0, 247.0), (265.0, 330.0, 296.0), (314.0, 330.0, 456.0), (472.0, 330.0, 406.0)],
+        [(423.0, 0.0, 247.0), (423.0, 330.0, 247.0), (472.0, 330.0, 406.0), (472.0, 0.0, 406.0)],
+        [(472.0, 0.0, 406.0), (472.0, 330.0, 406.0), (314.0, 330.0, 456.0), (314.0, 0.0, 456.0)],
+        [(314.0, 0.0, 456.0), (314.0, 330.0, 456.0), (265.0, 330.0, 296.0), (265.0, 0.0, 296.0)],
+        [(265.0, 0.0, 296.0), (265.0, 330.0, 296.0), (423.0, 330.0, 247.0), (423.0, 0.0, 247.0)],
+    ],
+}
+
+# Camera from the data: position (278, 273, -800) mm, direction (0, 0, 1), up (0, 1, 0),
+# focal length 0.035 m, film 0.025 m x 0.025 m.
+CORNELL_CAMERA_MM = (278.0, 273.0, -800.0)
+CORNELL_FOCAL = 0.035
+CORNELL_FILM = 0.025
+
+# In the data the light is coplanar with the ceiling (y = 548.8). A coplanar emitter would
+# z-fight with the ceiling, so it is lowered by 0.5 mm to y = 548.3.
+CORNELL_LIGHT_DROP_MM = 0.5
+
+MM = 0.001  # the file is written in metres (glTF's unit); hemirad itself is unit independent
+
+
+def make_cornell(path):
+    drop = CORNELL_LIGHT_DROP_MM
+    data = {k: [[tuple(c for c in v) for v in q] for q in quads] for k, quads in CORNELL_MM.items()}
+    data["light"] = [[(v[0], v[1] - drop, v[2]) for v in q] for q in data["light"]]
+    assert all(v[1] == 548.3 for q in data["light"] for v in q)
+
+    # Which wall is red: seen from the camera (looking +Z, up +Y, right-handed), the
+    # camera's right is direction x up = (0,0,1) x (0,1,0) = (-1,0,0), so the x = 0 wall is
+    # on the right (green) and the x ~ 550 wall is on the left (red), as the data says.
+    cam_right = cross((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))
+    assert cam_right == (-1.0, 0.0, 0.0)
+    assert all(v[0] > 540.0 for q in data["left_wall"] for v in q)
+    assert all(v[0] == 0.0 for q in data["right_wall"] for v in q)
+    # The open side is the one facing the camera: z = 0 (the camera is at z = -800).
+    assert CORNELL_CAMERA_MM[2] < 0.0
+
+    # Convert to metres.
+    data = {k: [[(v[0] * MM, v[1] * MM, v[2] * MM) for v in q] for q in quads] for k, quads in data.items()}
+
+    # The room's interior reference point: the centre of the box's bounding volume.
+    room = [v for k in ("floor", "ceiling", "back_wall", "left_wall", "right_wall") for q in data[k] for v in q]
+    lo = [min(v[k] for v in room) for k in range(3)]
+    hi = [max(v[k] for v in room) for k in range(3)]
+    inside = tuple((lo[k] + hi[k]) / 2 for k in range(3))
+
+    rules = {
+        "floor": faces_towards(inside),
+        "ceiling": faces_towards(inside),
+        "back_wall": faces_towards(inside),
+        "left_wall": faces_towards(inside),
+        "right_wall": faces_towards(inside),
+        "light": faces_direction((0.0, -1.0, 0.0)),
+        "short_block": faces_away_from(mean([v for q in data["short_block"] for v in q])),
+        "tall_block": faces_away_from(mean([v for q in data["tall_block"] for v in q])),
+    }
+    # Axis-aligned surfaces must also face along their exact axis.
+    axis = {"floor": (0, 1, 0), "ceiling": (0, -1, 0), "back_wall": (0, 0, -1), "right_wall": (1, 0, 0)}
+
+    b = GltfBuilder(
+        {
+            "title": "Cornell box",
+            "source": "Cornell Program of Computer Graphics, Cornell Box Data, "
+                      "https://www.graphics.cornell.edu/online/box/data.html",
+            "units": "metres (the published data is in millimetres; every coordinate was multiplied by 0.001)",
+            "changes": "light lowered by 0.5 mm (y 548.8 mm -> 548.3 mm) so it is not coplanar with the ceiling; "
+                       "winding set so fronts face into the box and out of the blocks; "
+                       "spectral data replaced by RGB reflectances and emission",
+            "left_wall": "red, x ~ 0.55 m, on the camera's left",
+            "right_wall": "green, x = 0, on the camera's right",
+            "open_side": "z = 0 (facing the camera), left open as in the original",
+            "emission": "light radiance (17, 12, 4) = emissiveFactor (1, 12/17, 4/17) x emissiveStrength 17",
+        }
+    )
+    b.material("white", (0.725, 0.71, 0.68))
+    b.material("red", (0.63, 0.065, 0.05))
+    b.material("green", (0.14, 0.45, 0.091))
+    b.material("light", (0.78, 0.78, 0.78), emission=(1.0, 12.0 / 17.0, 4.0 / 17.0), strength=17.0)
+
+    nodes = [
+        ("floor", "white"),
+        ("ceiling", "white"),
+        ("back_wall", "white"),
+        ("left_wall", "red"),
+        ("right_wall", "green"),
+        ("light", "light"),
+        ("short_block", "white"),
+        ("tall_block", "white"),
+    ]
+    for name, mat in nodes:
+        quads = [orient_quad(q, rules[name]) for q in data[name]]
+        if name in axis:
+            for q in quads:
+                for t in QUAD_TRIS:
+                    assert dot(tri_normal(*(q[i] for i in t)), axis[name]) > 0.9999, name
+        b.mesh_node(name, quads, mat)
+
+    yfov = 2.0 * math.atan((CORNELL_FILM / 2.0) / CORNELL_FOCAL)
+    cam_pos = tuple(c * MM for c in CORNELL_CAMERA_MM)
+    # glTF cameras look down local -Z; a 180 degree turn about +Y makes them look down +Z.
+    b.camera_node("camera", "cornell", yfov, 1.0, 0.01, cam_pos, rotation=(0.0, 1.0, 0.0, 0.0))
+    b.write(path)
+
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, (0, 0, 1), (0, 1, 0)))
+
+
+# --------------------------------------------------------------------------------------
+# Scene 2: a closed room
+# --------------------------------------------------------------------------------------
+
+ROOM_X, ROOM_Y, ROOM_Z = 4.0, 2.5, 5.0  # metres; x in [-2, 2], y in [0, 2.5], z in [-2.5, 2.5]
+
+
+def box_faces(x0, x1, y0, y1, z0, z1):
+    """The six faces of an axis-aligned box, as unoriented quads, by name."""
+    return {
+        "floor": [(x0, y0, z0), (x1, y0, z0), (x1, y0, z1), (x0, y0, z1)],
+        "ceiling": [(x0, y1, z0), (x1, y1, z0), (x1, y1, z1), (x0, y1, z1)],
+        "wall_north": [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)],  # z = z0 (north = -Z)
+        "wall_south": [(x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)],  # z = z1
+        "wall_east": [(x1, y0, z0), (x1, y0, z1), (x1, y1, z1), (x1, y1, z0)],  # x = x1 (east = +X)
+        "wall_west": [(x0, y0, z0), (x0, y0, z1), (x0, y1, z1), (x0, y1, z0)],  # x = x0
+    }
+
+
+def make_room(path):
+    hx, hz = ROOM_X / 2.0, ROOM_Z / 2.0
+    shell = box_faces(-hx, hx, 0.0, ROOM_Y, -hz, hz)
+    inside = (0.0, ROOM_Y / 2.0, 0.0)
+
+    # 1 m x 1 m light panel, centred under the ceiling, 1 cm below it, facing down.
+    ly = ROOM_Y - 0.01
+    light = [(-0.5, ly, -0.5), (0.5, ly, -0.5), (0.5, ly, 0.5), (-0.5, ly, 0.5)]
+
+    # 0.8 m cube standing on the floor, off-centre (towards the north-east), turned 20
+    # degrees about Y. Five faces: the bottom would lie in the floor's plane and is never
+    # seen, so it is left out (as the Cornell blocks have no bottom).
+    s = 0.8
+    cx, cz, turn = 0.8, -0.9, math.radians(20.0)
+    ca, sa = math.cos(turn), math.sin(turn)
+
+    def place(p):
+        x, y, z = p
+        return (cx + ca * x + sa * z, y, cz - sa * x + ca * z)
+
+    cube_local = box_faces(-s / 2, s / 2, 0.0, s, -s / 2, s / 2)
+    cube = [[place(v) for v in cube_local[k]] for k in ("ceiling", "wall_north", "wall_south", "wall_east", "wall_west")]
+    cube_centre = (cx, s / 2.0, cz)
+    # The cube must stand fully inside the room, clear of the walls.
+    for q in cube:
+        for v in q:
+            assert -hx + 0.1 < v[0] < hx - 0.1 and -hz + 0.1 < v[2] < hz - 0.1
+
+    rules = {name: faces_towards(inside) for name in shell}
+    rules["light"] = faces_direction((0.0, -1.0, 0.0))
+    rules["cube"] = faces_away_from(cube_centre)
+
+    b = GltfBuilder(
+        {
+            "title": "Closed room",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres",
+            "layout": "room 4 x 2.5 x 5 m (x, y, z): x in [-2, 2], y in [0, 2.5], z in [-2.5, 2.5]; "
+                      "north = -Z, south = +Z, east = +X, west = -X",
+            "light": "1 m x 1 m panel 1 cm below the ceiling centre, facing down, white emission x strength 10",
+            "cube": "0.8 m, on the floor centred at (0.8, -0.9) in x, z, turned 20 degrees about Y; "
+                    "five faces (no bottom)",
+        }
+    )
+    b.material("wall_grey", (0.7, 0.7, 0.7))
+    b.material("floor", (0.5, 0.45, 0.4))
+    b.material("cube_grey", (0.5, 0.5, 0.5))
+    b.material("light", (0.8, 0.8, 0.8), emission=(1.0, 1.0, 1.0), strength=10.0)
+
+    for name in ("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west"):
+        b.mesh_node(name, [orient_quad(shell[name], rules[name])], "floor" if name == "floor" else "wall_grey")
+    b.mesh_node("light", [orient_quad(light, rules["light"])], "light")
+    b.mesh_node("cube", [orient_quad(q, rules["cube"]) for q in cube], "cube_grey")
+
+    # Camera 20 cm in front of the south wall, at 1.4 m, looking north (-Z, glTF's default
+    # camera direction, so no rotation); the light panel, the cube and the far wall are in view.
+    cam_pos = (0.0, 1.4, hz - 0.2)
+    b.camera_node("camera", "room", 1.0, 4.0 / 3.0, 0.01, cam_pos)
+    b.write(path)
+
+    load_and_check(
+        path,
+        rules,
+        expect_camera=("camera", cam_pos, (0, 0, -1), (0, 1, 0)),
+        closed_groups=[("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west")],
+    )
+
+
+def main():
+    for name, make in (("cornell_box.gltf", make_cornell), ("closed_room.gltf", make_room)):
+        path = os.path.join(HERE, name)
+        make(path)  # writes the file, reads it back and checks it (raises AssertionError on failure)
+        print("wrote and checked", path)
+
+
+if __name__ == "__main__":
+    main()
