@@ -1,0 +1,68 @@
+// The scene as hemirad sees it: world-space triangles with their reflectance and emission,
+// the glTF mesh nodes they came from, and the cameras. Produced by scene::load (glTF 2.0).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+namespace hemirad::scene {
+
+struct Material {
+    std::string name;
+    glm::dvec3 base_color{1.0};   // baseColorFactor.rgb × base colour texture average (linear)
+    glm::dvec3 emission{0.0};     // emissiveFactor × KHR_materials_emissive_strength × emissive texture average
+    bool double_sided = false;
+};
+
+// One world-space triangle. Its front is the counter-clockwise side (after the node's
+// transform; a negative-determinant transform has already been corrected for).
+struct Triangle {
+    std::array<glm::dvec3, 3> p;
+    // Reflectance at each vertex: material base_color × COLOR_0 (1 where absent), clamped to
+    // [0, kMaxReflectance].
+    std::array<glm::dvec3, 3> rho;
+    std::uint32_t material = 0;   // index into Scene::materials
+    std::uint32_t node = 0;       // index into Scene::nodes
+    std::uint32_t primitive = 0;  // index of the source primitive instance (mesh builder pairs
+                                  // quads within one primitive only)
+};
+
+// A glTF node that holds a mesh: one entry per such node, in glTF node order.
+struct MeshNode {
+    std::string name;  // node name, else mesh name, else "node<index>"
+    int gltf_node = -1;
+};
+
+struct Camera {
+    std::string name;
+    glm::dmat4 camera_to_world{1.0};  // glTF convention: looks down local -Z, +Y up
+    double yfov = 0.8;                // radians
+    double aspect = 0.0;              // width / height; 0 when the file does not say
+    double znear = 0.01;
+};
+
+// Reflectance 1 cannot conserve energy; the loader clamps to this and warns.
+inline constexpr double kMaxReflectance = 0.9999;
+
+struct Scene {
+    std::filesystem::path path;
+    std::vector<Material> materials;
+    std::vector<Triangle> triangles;
+    std::vector<MeshNode> nodes;
+    std::vector<Camera> cameras;
+    std::vector<std::string> warnings;  // each already names the file
+    std::size_t skipped_primitives = 0; // non-triangle modes
+    glm::dvec3 bbox_min{0.0}, bbox_max{0.0};
+
+    double diagonal() const { return glm::length(bbox_max - bbox_min); }
+};
+
+// Loads a .gltf or .glb. Throws InputError("<file>: <problem>") on bad input.
+Scene load(const std::filesystem::path& file);
+
+}  // namespace hemirad::scene
