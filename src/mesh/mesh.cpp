@@ -1,0 +1,443 @@
+// Meshing: pairs coplanar triangles into convex quads, then grids every face into patches
+// (shooters) and each patch into elements (receivers), in double precision.
+#include "mesh/mesh.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <map>
+#include <utility>
+
+#include "core/error.h"
+
+namespace hemirad::mesh {
+namespace {
+
+using glm::dvec3;
+
+// A triangle is dropped when its area is at most this × (longest edge)²: a needle or a point.
+constexpr double kDegenerateArea = 1e-12;
+// Two triangles are coplanar when their unit normals' dot product exceeds this.
+constexpr double kCoplanarDot = 1.0 - 1e-9;
+// A quad is strictly convex when every corner turns left by more than this sine: a corner of
+// ~180° would make a triangle with a split edge, not a quad worth gridding.
+constexpr double kConvexSin = 1e-6;
+// An edge of exactly k × size must give k divisions even when rounding makes it a hair longer.
+constexpr double kCountSlack = 1e-9;
+// Divisions along one face edge (patches × elements); keeps lattice indices far from overflow.
+constexpr double kMaxDivisions = 1 << 15;
+
+// A face to grid: a lone triangle (n = 3) or a quad of two source triangles (n = 4), CCW.
+struct Face {
+    Polygon poly;
+    std::array<const scene::Triangle*, 2> src{};  // src[1] only for a quad
+};
+
+// A patch polygon and the polygons of its elements, before attributes are filled in.
+struct PatchCells {
+    Polygon poly;
+    std::vector<Polygon> elements;
+};
+
+// Lattice points of one face, (nu + 1) × (nv + 1); a triangle uses the half i + j <= n.
+// Every sub-polygon takes its corners from here, so neighbours share bit-identical vertices.
+struct Lattice {
+    int nu = 0, nv = 0;
+    std::vector<dvec3> p;
+
+    Lattice(int nu_, int nv_) : nu(nu_), nv(nv_), p(std::size_t(nu_ + 1) * std::size_t(nv_ + 1)) {}
+    dvec3& at(int i, int j) { return p[std::size_t(j) * std::size_t(nu + 1) + std::size_t(i)]; }
+    const dvec3& at(int i, int j) const { return p[std::size_t(j) * std::size_t(nu + 1) + std::size_t(i)]; }
+};
+
+struct Shape {
+    dvec3 normal{0.0};
+    dvec3 centroid{0.0};
+    double area = 0.0;
+};
+
+double longest_edge(const std::array<dvec3, 3>& p) {
+    return std::max({glm::length(p[1] - p[0]), glm::length(p[2] - p[1]), glm::length(p[0] - p[2])});
+}
+
+// NaN-safe: a triangle with a NaN or infinite coordinate never passes the comparison.
+bool is_degenerate(const scene::Triangle& t) {
+    const double area = 0.5 * glm::length(glm::cross(t.p[1] - t.p[0], t.p[2] - t.p[0]));
+    const double longest = longest_edge(t.p);
+    return !(area > kDegenerateArea * longest * longest);
+}
+
+dvec3 unit_normal(const scene::Triangle& t) {
+    return glm::normalize(glm::cross(t.p[1] - t.p[0], t.p[2] - t.p[0]));
+}
+
+// Divisions needed so no piece of an edge of this length is longer than size.
+int divisions(double length, double size) {
+    const double n = std::ceil(length / size - kCountSlack);
+    if (!(n <= kMaxDivisions))
+        throw InternalError(
+            fmt::format("mesh: an edge of length {} needs {} divisions of {}; the size is too small for the scene",
+                        length, n, size));
+    return std::max(1, static_cast<int>(n));
+}
+
+bool lex_less(const dvec3& a, const dvec3& b) {
+    if (a.x != b.x) return a.x < b.x;
+    if (a.y != b.y) return a.y < b.y;
+    return a.z < b.z;
+}
+
+// Point k of n along segment pq, computed the same whichever way round the segment is given,
+// so faces that share an edge and divide it equally get bit-identical points on it.
+dvec3 edge_point(dvec3 p, dvec3 q, int k, int n) {
+    if (k == 0) return p;
+    if (k == n) return q;
+    if (lex_less(q, p)) {
+        std::swap(p, q);
+        k = n - k;
+    }
+    return p + (q - p) * (double(k) / double(n));
+}
+
+// Bilinear lattice over a convex quad: u runs v0→v1, v runs v0→v3.
+Lattice quad_lattice(const Polygon& q, int nu, int nv) {
+    Lattice g(nu, nv);
+    for (int j = 0; j <= nv; ++j) {
+        for (int i = 0; i <= nu; ++i) {
+            if (j == 0) {
+                g.at(i, j) = edge_point(q.v[0], q.v[1], i, nu);
+            } else if (j == nv) {
+                g.at(i, j) = edge_point(q.v[3], q.v[2], i, nu);
+            } else if (i == 0) {
+                g.at(i, j) = edge_point(q.v[0], q.v[3], j, nv);
+            } else if (i == nu) {
+                g.at(i, j) = edge_point(q.v[1], q.v[2], j, nv);
+            } else {
+                const double u = double(i) / double(nu), v = double(j) / double(nv);
+                g.at(i, j) =
+                    (1.0 - u) * (1.0 - v) * q.v[0] + u * (1.0 - v) * q.v[1] + u * v * q.v[2] + (1.0 - u) * v * q.v[3];
+            }
+        }
+    }
+    return g;
+}
+
+// Barycentric lattice over a triangle a, b, c: i runs along a→b, j along a→c, i + j <= n.
+Lattice triangle_lattice(const Polygon& t, int n) {
+    Lattice g(n, n);
+    for (int j = 0; j <= n; ++j) {
+        for (int i = 0; i + j <= n; ++i) {
+            if (j == 0) {
+                g.at(i, j) = edge_point(t.v[0], t.v[1], i, n);
+            } else if (i == 0) {
+                g.at(i, j) = edge_point(t.v[0], t.v[2], j, n);
+            } else if (i + j == n) {
+                g.at(i, j) = edge_point(t.v[1], t.v[2], j, n);
+            } else {
+                const double wb = double(i) / double(n), wc = double(j) / double(n);
+                g.at(i, j) = double(n - i - j) / double(n) * t.v[0] + wb * t.v[1] + wc * t.v[2];
+            }
+        }
+    }
+    return g;
+}
+
+Polygon make_polygon(std::initializer_list<dvec3> corners) {
+    Polygon poly;
+    poly.n = 0;
+    for (const dvec3& c : corners) poly.v[std::size_t(poly.n++)] = c;
+    return poly;
+}
+
+// Cells of a quad face: nu × nv patches, each cut into mu × mv elements on one fine lattice.
+// The element counts are the largest any patch needs, the same for all patches of the face, so
+// elements of neighbouring patches meet vertex to vertex (no T-junctions) even on a trapezoid.
+std::vector<PatchCells> quad_cells(const Polygon& q, const Settings& s) {
+    const int nu = divisions(std::max(glm::length(q.v[1] - q.v[0]), glm::length(q.v[2] - q.v[3])), s.patch_size);
+    const int nv = divisions(std::max(glm::length(q.v[3] - q.v[0]), glm::length(q.v[2] - q.v[1])), s.patch_size);
+
+    const Lattice coarse = quad_lattice(q, nu, nv);
+    double u_edge = 0.0, v_edge = 0.0;
+    for (int j = 0; j <= nv; ++j)
+        for (int i = 0; i < nu; ++i) u_edge = std::max(u_edge, glm::length(coarse.at(i + 1, j) - coarse.at(i, j)));
+    for (int j = 0; j < nv; ++j)
+        for (int i = 0; i <= nu; ++i) v_edge = std::max(v_edge, glm::length(coarse.at(i, j + 1) - coarse.at(i, j)));
+    const int mu = divisions(u_edge, s.element_size);
+    const int mv = divisions(v_edge, s.element_size);
+    if (double(nu) * mu > kMaxDivisions || double(nv) * mv > kMaxDivisions)
+        throw InternalError("mesh: element_size is too small for the scene (too many elements per face)");
+
+    const Lattice g = quad_lattice(q, nu * mu, nv * mv);
+    auto cell = [&g](int i0, int j0, int i1, int j1) {
+        return make_polygon({g.at(i0, j0), g.at(i1, j0), g.at(i1, j1), g.at(i0, j1)});
+    };
+    std::vector<PatchCells> cells;
+    for (int pj = 0; pj < nv; ++pj) {
+        for (int pi = 0; pi < nu; ++pi) {
+            PatchCells pc;
+            pc.poly = cell(pi * mu, pj * mv, (pi + 1) * mu, (pj + 1) * mv);
+            for (int b = 0; b < mv; ++b)
+                for (int a = 0; a < mu; ++a) {
+                    const int i = pi * mu + a, j = pj * mv + b;
+                    pc.elements.push_back(cell(i, j, i + 1, j + 1));
+                }
+            cells.push_back(std::move(pc));
+        }
+    }
+    return cells;
+}
+
+// Lattice coordinates (i, j) of a triangle lattice.
+struct Node2 {
+    int i, j;
+};
+
+// The standard n² subdivision of the lattice triangle A, B, C (CCW, each side k·n lattice
+// steps long): upward triangles, and downward ones between them, row by row.
+void subdivide_triangle(const Lattice& g, Node2 A, Node2 B, Node2 C, int n, std::vector<Polygon>& out) {
+    const int bu_i = (B.i - A.i) / n, bu_j = (B.j - A.j) / n;  // one local step along A→B
+    const int cv_i = (C.i - A.i) / n, cv_j = (C.j - A.j) / n;  // one local step along A→C
+    auto at = [&](int a, int b) -> const dvec3& { return g.at(A.i + a * bu_i + b * cv_i, A.j + a * bu_j + b * cv_j); };
+    for (int b = 0; b < n; ++b) {
+        for (int a = 0; a + b < n; ++a) {
+            out.push_back(make_polygon({at(a, b), at(a + 1, b), at(a, b + 1)}));
+            if (a + b < n - 1) out.push_back(make_polygon({at(a + 1, b), at(a + 1, b + 1), at(a, b + 1)}));
+        }
+    }
+}
+
+// Cells of a lone triangle: n² congruent patches, each cut into m² congruent elements, all
+// taken from one fine lattice of n·m divisions.
+std::vector<PatchCells> triangle_cells(const Polygon& t, const Settings& s) {
+    const double longest = longest_edge({t.v[0], t.v[1], t.v[2]});
+    const int n = divisions(longest, s.patch_size);
+    const int m = divisions(longest / n, s.element_size);
+    if (double(n) * m > kMaxDivisions)
+        throw InternalError("mesh: element_size is too small for the scene (too many elements per face)");
+
+    const Lattice g = triangle_lattice(t, n * m);
+    std::vector<PatchCells> cells;
+    auto add_patch = [&](Node2 A, Node2 B, Node2 C) {
+        PatchCells pc;
+        pc.poly = make_polygon({g.at(A.i, A.j), g.at(B.i, B.j), g.at(C.i, C.j)});
+        subdivide_triangle(g, A, B, C, m, pc.elements);
+        cells.push_back(std::move(pc));
+    };
+    for (int b = 0; b < n; ++b) {
+        for (int a = 0; a + b < n; ++a) {
+            add_patch({a * m, b * m}, {(a + 1) * m, b * m}, {a * m, (b + 1) * m});
+            if (a + b < n - 1) add_patch({(a + 1) * m, b * m}, {(a + 1) * m, (b + 1) * m}, {a * m, (b + 1) * m});
+        }
+    }
+    return cells;
+}
+
+// Normal, area centroid and area of a planar convex polygon; a quad is taken as two triangles
+// so its centroid is the true area centroid, not the vertex mean.
+Shape shape_of(const Polygon& poly) {
+    Shape s;
+    if (poly.n == 3) {
+        const dvec3 c = glm::cross(poly.v[1] - poly.v[0], poly.v[2] - poly.v[0]);
+        s.area = 0.5 * glm::length(c);
+        s.normal = glm::normalize(c);
+        s.centroid = (poly.v[0] + poly.v[1] + poly.v[2]) / 3.0;
+        return s;
+    }
+    const double a1 = 0.5 * glm::length(glm::cross(poly.v[1] - poly.v[0], poly.v[2] - poly.v[0]));
+    const double a2 = 0.5 * glm::length(glm::cross(poly.v[2] - poly.v[0], poly.v[3] - poly.v[0]));
+    s.area = a1 + a2;
+    s.normal = glm::normalize(glm::cross(poly.v[2] - poly.v[0], poly.v[3] - poly.v[1]));
+    s.centroid = (a1 * (poly.v[0] + poly.v[1] + poly.v[2]) + a2 * (poly.v[0] + poly.v[2] + poly.v[3])) / (3.0 * s.area);
+    return s;
+}
+
+// Barycentric coordinates of p (in the triangle's plane) with respect to triangle t.
+dvec3 barycentric(const scene::Triangle& t, const dvec3& p) {
+    const dvec3 e0 = t.p[1] - t.p[0], e1 = t.p[2] - t.p[0], e2 = p - t.p[0];
+    const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
+    const double d20 = glm::dot(e2, e0), d21 = glm::dot(e2, e1);
+    const double denom = d00 * d11 - d01 * d01;
+    const double v = (d11 * d20 - d01 * d21) / denom;
+    const double w = (d00 * d21 - d01 * d20) / denom;
+    return {1.0 - v - w, v, w};
+}
+
+// Reflectance at a point of the face, interpolated in whichever source triangle holds it
+// (the one where the point is deepest inside, so rounding on the diagonal cannot extrapolate).
+dvec3 rho_at(const Face& face, const dvec3& p) {
+    const scene::Triangle* best = face.src[0];
+    dvec3 w = barycentric(*best, p);
+    if (face.src[1]) {
+        const dvec3 w1 = barycentric(*face.src[1], p);
+        if (std::min({w1.x, w1.y, w1.z}) > std::min({w.x, w.y, w.z})) {
+            best = face.src[1];
+            w = w1;
+        }
+    }
+    w = glm::max(w, dvec3(0.0));
+    w /= (w.x + w.y + w.z);
+    return w.x * best->rho[0] + w.y * best->rho[1] + w.z * best->rho[2];
+}
+
+Polygon reversed(const Polygon& poly) {
+    Polygon r = poly;
+    for (int k = 1; k < poly.n; ++k) r.v[std::size_t(k)] = poly.v[std::size_t(poly.n - k)];
+    return r;
+}
+
+// Appends one side of a face: its patches, each followed by its contiguous elements.
+void append_side(Mesh& mesh, const Face& face, const std::vector<PatchCells>& cells, const scene::Material& mat,
+                 bool back) {
+    const scene::Triangle& t0 = *face.src[0];
+    for (const PatchCells& pc : cells) {
+        if (mesh.patches.size() >= std::numeric_limits<std::uint32_t>::max() ||
+            mesh.elements.size() + pc.elements.size() >= std::numeric_limits<std::uint32_t>::max())
+            throw InternalError("mesh: more patches or elements than 32-bit indices can hold");
+        Patch patch;
+        const Shape ps = shape_of(pc.poly);
+        patch.poly = back ? reversed(pc.poly) : pc.poly;
+        patch.normal = back ? -ps.normal : ps.normal;
+        patch.centroid = ps.centroid;
+        patch.area = ps.area;
+        patch.node = t0.node;
+        patch.first_element = static_cast<std::uint32_t>(mesh.elements.size());
+        patch.element_count = static_cast<std::uint32_t>(pc.elements.size());
+        const auto patch_index = static_cast<std::uint32_t>(mesh.patches.size());
+
+        dvec3 emitted{0.0};
+        double area = 0.0;
+        for (const Polygon& poly : pc.elements) {
+            Element e;
+            const Shape es = shape_of(poly);
+            e.poly = back ? reversed(poly) : poly;
+            e.normal = back ? -es.normal : es.normal;
+            e.centroid = es.centroid;
+            e.area = es.area;
+            e.rho = rho_at(face, es.centroid);
+            e.emission = mat.emission;
+            e.patch = patch_index;
+            e.node = t0.node;
+            e.material = t0.material;
+            e.has_twin = mat.double_sided;
+            e.back = back;
+            emitted += e.area * e.emission;
+            area += e.area;
+            mesh.elements.push_back(e);
+        }
+        patch.emission = emitted / area;
+        mesh.patches.push_back(patch);
+    }
+}
+
+// A directed edge a→b of a triangle, qualified by what may be paired with it.
+struct EdgeKey {
+    std::uint32_t primitive, material, node;
+    std::array<double, 6> ab;
+
+    bool operator<(const EdgeKey& o) const {
+        if (primitive != o.primitive) return primitive < o.primitive;
+        if (material != o.material) return material < o.material;
+        if (node != o.node) return node < o.node;
+        return ab < o.ab;
+    }
+};
+
+EdgeKey edge_key(const scene::Triangle& t, const dvec3& a, const dvec3& b) {
+    return {t.primitive, t.material, t.node, {a.x, a.y, a.z, b.x, b.y, b.z}};
+}
+
+// The quad made by triangle t and a partner across t's edge k (t.p[k] → t.p[k+1]) whose third
+// vertex is d, starting at the shared edge's end so t is (v0, v1, v2).
+Polygon quad_across(const scene::Triangle& t, int k, const dvec3& d) {
+    return make_polygon({t.p[std::size_t((k + 1) % 3)], t.p[std::size_t((k + 2) % 3)], t.p[std::size_t(k)], d});
+}
+
+bool strictly_convex(const Polygon& q, const dvec3& normal) {
+    for (int k = 0; k < 4; ++k) {
+        const dvec3 in = q.v[std::size_t(k)] - q.v[std::size_t((k + 3) % 4)];
+        const dvec3 out = q.v[std::size_t((k + 1) % 4)] - q.v[std::size_t(k)];
+        const double turn = glm::dot(glm::cross(in, out), normal);
+        if (!(turn > kConvexSin * glm::length(in) * glm::length(out))) return false;
+    }
+    return true;
+}
+
+// Faces in input order: each kept triangle either joins a partner (pairing greedily, trying
+// its longest edge first since that is the diagonal of a split quad) or stands alone.
+std::vector<Face> make_faces(const scene::Scene& scene, Mesh& mesh) {
+    const auto& tris = scene.triangles;
+    std::vector<bool> keep(tris.size()), used(tris.size(), false);
+    std::map<EdgeKey, std::vector<std::pair<std::size_t, int>>> edges;  // directed edge → (triangle, edge)
+    for (std::size_t t = 0; t < tris.size(); ++t) {
+        keep[t] = !is_degenerate(tris[t]);
+        if (!keep[t]) {
+            ++mesh.dropped_triangles;
+            continue;
+        }
+        for (int k = 0; k < 3; ++k)
+            edges[edge_key(tris[t], tris[t].p[std::size_t(k)], tris[t].p[std::size_t((k + 1) % 3)])].push_back({t, k});
+    }
+
+    std::vector<Face> faces;
+    for (std::size_t t = 0; t < tris.size(); ++t) {
+        if (!keep[t] || used[t]) continue;
+        used[t] = true;
+        const scene::Triangle& tri = tris[t];
+        std::array<int, 3> order{0, 1, 2};
+        auto edge_len = [&tri](int k) { return glm::length(tri.p[std::size_t((k + 1) % 3)] - tri.p[std::size_t(k)]); };
+        std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return edge_len(a) > edge_len(b); });
+
+        Face face;
+        face.poly = make_polygon({tri.p[0], tri.p[1], tri.p[2]});
+        face.src[0] = &tri;
+        const dvec3 normal = unit_normal(tri);
+        for (int k : order) {
+            const auto it = edges.find(edge_key(tri, tri.p[std::size_t((k + 1) % 3)], tri.p[std::size_t(k)]));
+            if (it == edges.end()) continue;
+            for (const auto& [u, ku] : it->second) {
+                if (used[u] || glm::dot(normal, unit_normal(tris[u])) <= kCoplanarDot) continue;
+                const Polygon quad = quad_across(tri, k, tris[u].p[std::size_t((ku + 2) % 3)]);
+                if (!strictly_convex(quad, normal)) continue;
+                used[u] = true;
+                face.poly = quad;
+                face.src[1] = &tris[u];
+                ++mesh.quads;
+                break;
+            }
+            if (face.src[1]) break;
+        }
+        faces.push_back(face);
+    }
+    return faces;
+}
+
+void check_settings(const Settings& s) {
+    const bool ok = std::isfinite(s.patch_size) && std::isfinite(s.element_size) && s.patch_size > 0.0 &&
+                    s.element_size > 0.0 && s.element_size <= s.patch_size;
+    if (!ok)
+        throw InternalError(fmt::format("mesh: invalid sizes patch_size={} element_size={} (need 0 < element <= patch)",
+                                        s.patch_size, s.element_size));
+}
+
+}  // namespace
+
+Mesh build(const scene::Scene& scene, const Settings& settings) {
+    check_settings(settings);
+    Mesh mesh;
+    for (const Face& face : make_faces(scene, mesh)) {
+        const scene::Triangle& t0 = *face.src[0];
+        if (t0.material >= scene.materials.size())
+            throw InternalError(fmt::format("mesh: triangle material {} out of range", t0.material));
+        const scene::Material& mat = scene.materials[t0.material];
+        const std::vector<PatchCells> cells =
+            face.poly.n == 4 ? quad_cells(face.poly, settings) : triangle_cells(face.poly, settings);
+        append_side(mesh, face, cells, mat, false);
+        if (mat.double_sided) append_side(mesh, face, cells, mat, true);
+    }
+    return mesh;
+}
+
+}  // namespace hemirad::mesh
