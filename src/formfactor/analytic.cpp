@@ -1,0 +1,37 @@
+// Lambert's closed-form point-to-polygon form factor, with clipping at the tangent plane.
+#include "formfactor/analytic.h"
+
+#include <cmath>
+
+namespace hemirad::formfactor {
+
+double point_to_polygon(const glm::dvec3& normal, const glm::dvec3* v, int count) {
+    // F = 1/(2π) Σ γ_i n·(R_i × R_i+1)/|R_i × R_i+1|, γ_i the angle between R_i and R_i+1.
+    double sum = 0.0;
+    for (int i = 0; i < count; ++i) {
+        const glm::dvec3& a = v[i];
+        const glm::dvec3& b = v[(i + 1) % count];
+        const glm::dvec3 c = glm::cross(a, b);
+        const double len = glm::length(c);
+        if (len == 0.0) continue;  // collinear with the point: contributes nothing
+        const double gamma = std::atan2(len, glm::dot(a, b));
+        sum += gamma * glm::dot(normal, c) / len;
+    }
+    return std::abs(sum) / (2.0 * M_PI);
+}
+
+double point_to_polygon(const glm::dvec3& point, const glm::dvec3& normal, const mesh::Polygon& polygon) {
+    // Sutherland–Hodgman against the tangent plane n·r >= 0; a quad gains at most one vertex.
+    glm::dvec3 clipped[5];
+    int n = 0;
+    for (int i = 0; i < polygon.n; ++i) {
+        const glm::dvec3 a = polygon.v[i] - point;
+        const glm::dvec3 b = polygon.v[(i + 1) % polygon.n] - point;
+        const double da = glm::dot(normal, a), db = glm::dot(normal, b);
+        if (da >= 0.0) clipped[n++] = a;
+        if ((da >= 0.0) != (db >= 0.0)) clipped[n++] = a + (b - a) * (da / (da - db));
+    }
+    return n >= 3 ? point_to_polygon(normal, clipped, n) : 0.0;
+}
+
+}  // namespace hemirad::formfactor

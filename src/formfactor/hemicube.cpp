@@ -1,0 +1,81 @@
+// Delta-form-factor table, face mapping and per-shot frame shared by every hemicube engine.
+#include "formfactor/hemicube.h"
+
+#include <cmath>
+
+#include "core/rng.h"
+#include "formfactor/analytic.h"
+
+namespace hemirad::formfactor {
+
+glm::dvec3 to_face(int face, const glm::dvec3& p) {
+    switch (face) {
+        case 0: return {p.x, p.y, p.z};    // top: looks along +z
+        case 1: return {p.y, p.z, p.x};    // +x
+        case 2: return {-p.y, p.z, -p.x};  // −x
+        case 3: return {-p.x, p.z, p.y};   // +y
+        default: return {p.x, p.z, -p.y};  // −y
+    }
+}
+
+glm::dvec3 from_face(int face, const glm::dvec3& q) {
+    switch (face) {
+        case 0: return {q.x, q.y, q.z};
+        case 1: return {q.z, q.x, q.y};
+        case 2: return {-q.z, -q.x, q.y};
+        case 3: return {-q.x, q.z, q.y};
+        default: return {q.x, -q.z, q.y};
+    }
+}
+
+DeltaFormFactors::DeltaFormFactors(int n) : n_(n), table_(3u * static_cast<std::size_t>(n) * n) {
+    const double cell = 2.0 / n;  // cell size on the unit-distance face plane
+    const glm::dvec3 up{0.0, 0.0, 1.0};
+    for (int face = 0; face < kFaces; ++face) {
+        const double t0 = face == 0 ? -1.0 : 0.0;  // side faces start at the base plane
+        for (int j = 0; j < rows(face); ++j) {
+            for (int i = 0; i < n; ++i) {
+                const double s_lo = -1.0 + i * cell, s_hi = -1.0 + (i + 1) * cell;
+                const double t_lo = t0 + j * cell, t_hi = t0 + (j + 1) * cell;
+                const glm::dvec3 corners[4] = {
+                    from_face(face, {s_lo, t_lo, 1.0}), from_face(face, {s_hi, t_lo, 1.0}),
+                    from_face(face, {s_hi, t_hi, 1.0}), from_face(face, {s_lo, t_hi, 1.0})};
+                table_[offset(face) + static_cast<std::size_t>(j) * n + i] = point_to_polygon(up, corners, 4);
+            }
+        }
+    }
+}
+
+double DeltaFormFactors::sum() const {
+    // Kahan summation: the table has millions of tiny terms at large N.
+    double s = 0.0, c = 0.0;
+    for (double x : table_) {
+        const double y = x - c;
+        const double t = s + y;
+        c = (t - s) - y;
+        s = t;
+    }
+    return s;
+}
+
+Frame make_frame(const mesh::Patch& shooter, std::uint64_t seed, std::uint64_t shot) {
+    // Orthonormal basis from the normal (Duff et al. 2017, branchless), then a seeded rotation
+    // about the normal: the same (seed, shot) gives the same frame in every engine.
+    const glm::dvec3 n = shooter.normal;
+    const double sign = std::copysign(1.0, n.z);
+    const double a = -1.0 / (sign + n.z);
+    const double b = n.x * n.y * a;
+    const glm::dvec3 t1{1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x};
+    const glm::dvec3 t2{b, sign + n.y * n.y * a, -n.y};
+    constexpr std::uint64_t kRotationStream = 0x68656d6963756265ull;  // "hemicube"
+    const double angle = 2.0 * M_PI * uniform01(seed, kRotationStream, shot);
+    const double c = std::cos(angle), s = std::sin(angle);
+    Frame f;
+    f.origin = shooter.centroid;
+    f.u = c * t1 + s * t2;
+    f.v = -s * t1 + c * t2;
+    f.w = n;
+    return f;
+}
+
+}  // namespace hemirad::formfactor

@@ -1,0 +1,54 @@
+// What every hemicube engine shares: the delta-form-factor table and the per-shot frame.
+// Algorithm code (clipping, rasterization) is deliberately not shared: the reference is a check.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "mesh/mesh.h"
+
+namespace hemirad::formfactor {
+
+// Face order: 0 top (+z), 1 +x, 2 −x, 3 +y, 4 −y in the hemicube frame.
+inline constexpr int kFaces = 5;
+
+// Maps hemicube-frame coordinates (x, y, z; z along the normal) to face coordinates (u, v, d):
+// d is depth along the face's axis, (u/d, v/d) the position on the face, v/d ∈ [0, 1] on the
+// side faces (height above the base plane).
+glm::dvec3 to_face(int face, const glm::dvec3& frame_point);
+glm::dvec3 from_face(int face, const glm::dvec3& face_point);
+
+// Exact delta form factors: each cell's value is the differential-area-to-polygon form factor
+// of the cell's square (Lambert's formula), in double precision. They sum to 1 to rounding.
+class DeltaFormFactors {
+public:
+    explicit DeltaFormFactors(int n);  // n even, >= 2
+    int n() const { return n_; }
+    // Cell (i, j) of a face: i along u (0..n−1), j along v (0..n−1 on top, 0..n/2−1 on sides).
+    int rows(int face) const { return face == 0 ? n_ : n_ / 2; }
+    double at(int face, int i, int j) const { return table_[offset(face) + static_cast<std::size_t>(j) * n_ + i]; }
+    std::size_t offset(int face) const { return face == 0 ? 0 : static_cast<std::size_t>(n_) * n_ + static_cast<std::size_t>(face - 1) * n_ * (n_ / 2); }
+    std::size_t cells() const { return 3u * static_cast<std::size_t>(n_) * n_; }
+    const std::vector<double>& table() const { return table_; }
+    double sum() const;
+
+private:
+    int n_;
+    std::vector<double> table_;
+};
+
+// Orthonormal frame of one shot: origin at the shooter's centroid, w its normal, (u, v)
+// rotated about w by an angle drawn from (seed, shot) so that aliasing becomes noise.
+struct Frame {
+    glm::dvec3 origin{0.0};
+    glm::dvec3 u{1, 0, 0}, v{0, 1, 0}, w{0, 0, 1};
+    glm::dvec3 to_local(const glm::dvec3& p) const {
+        const glm::dvec3 d = p - origin;
+        return {glm::dot(d, u), glm::dot(d, v), glm::dot(d, w)};
+    }
+};
+Frame make_frame(const mesh::Patch& shooter, std::uint64_t seed, std::uint64_t shot);
+
+}  // namespace hemirad::formfactor

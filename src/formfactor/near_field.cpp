@@ -1,0 +1,50 @@
+// Near-field correction: collocation at the receiver for receivers close to the shooter.
+#include "formfactor/near_field.h"
+
+#include <algorithm>
+
+#include "formfactor/analytic.h"
+
+namespace hemirad::formfactor {
+
+NearFieldEngine::NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine> inner, double reach)
+    : mesh_(mesh), inner_(std::move(inner)), reach_(reach) {}
+
+void NearFieldEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
+    inner_->shoot(patch, shot, out);
+    const mesh::Patch& shooter = mesh_.patches[patch];
+    double radius = 0.0;
+    for (int i = 0; i < shooter.poly.n; ++i) radius = std::max(radius, glm::length(shooter.poly.v[i] - shooter.centroid));
+    const double reach2 = (reach_ * radius) * (reach_ * radius);
+
+    // Correct the near receivers, then rescale the far ones so the shot keeps its total: the
+    // hemicube's ΣF is exact (the cells tile the hemisphere), and the flux books and the
+    // measured hit fraction (to which the ambient term is very sensitive as ρ → 1) rely on it.
+    double near_before = 0.0, near_after = 0.0, far = 0.0;
+    near_.clear();
+    for (std::size_t k = 0; k < out.F.size(); ++k) {
+        if (out.F[k] == 0.0) continue;  // unseen: occluded, behind, or coplanar
+        const mesh::Element& e = mesh_.elements[k];
+        const glm::dvec3 d = e.centroid - shooter.centroid;
+        // What the hemicube would have measured with nothing in the way, from the same point.
+        const double unoccluded = glm::dot(d, d) < reach2 ? point_to_polygon(shooter.centroid, shooter.normal, e.poly) : 0.0;
+        if (unoccluded <= 0.0) {
+            far += out.F[k];
+            continue;
+        }
+        const double visible = out.F[k] / unoccluded;  // not clamped: aliasing noise stays unbiased
+        near_before += out.F[k];
+        out.F[k] = visible * point_to_polygon(e.centroid, e.normal, shooter.poly) * e.area / shooter.area;
+        near_after += out.F[k];
+        near_.push_back(k);
+    }
+    const double far_scale = far > 0.0 ? (far + near_before - near_after) / far : -1.0;
+    if (far_scale >= 0.0) {
+        for (std::size_t k = 0; k < out.F.size(); ++k)
+            if (out.F[k] != 0.0 && !std::binary_search(near_.begin(), near_.end(), k)) out.F[k] *= far_scale;
+    } else if (near_after > 0.0) {
+        for (std::size_t k : near_) out.F[k] *= near_before / near_after;
+    }
+}
+
+}  // namespace hemirad::formfactor

@@ -1,0 +1,32 @@
+// The scalar reference hemicube: single-threaded, simple, obviously right. Every other
+// engine is verified against it.
+#pragma once
+
+#include "formfactor/engine.h"
+#include "formfactor/hemicube.h"
+
+namespace hemirad::formfactor {
+
+class ReferenceEngine final : public Engine {
+public:
+    ReferenceEngine(const mesh::Mesh& mesh, const Settings& settings);
+    std::string name() const override { return "ref"; }
+    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+
+    // The id buffer of the last shot, face by face (row-major, as DeltaFormFactors): element
+    // index, kEmpty where nothing was hit, kBlocker for the back of a one-sided surface.
+    static constexpr std::int32_t kEmpty = -1;
+    static constexpr std::int32_t kBlocker = -2;
+    const std::vector<std::int32_t>& ids() const { return ids_; }
+    const DeltaFormFactors& delta() const { return delta_; }
+
+private:
+    const mesh::Mesh& mesh_;
+    Settings settings_;
+    DeltaFormFactors delta_;
+    double eps_;  // base-plane clip distance, relative to the scene's size
+    std::vector<std::int32_t> ids_;
+    std::vector<double> depth_;  // 1/d per cell, larger is nearer
+};
+
+}  // namespace hemirad::formfactor

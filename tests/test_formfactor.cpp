@@ -1,0 +1,232 @@
+// The scalar reference hemicube against closed-form form factors (shared/REFERENCES.md).
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "formfactor/analytic.h"
+#include "formfactor/hemicube.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "test_scenes.h"
+
+using namespace hemirad;
+using Catch::Matchers::WithinAbs;
+using Catch::Matchers::WithinRel;
+
+namespace {
+
+// Area-weighted form factor from every patch of node `from` to all elements of node `to`:
+// F(A_from → A_to) = Σ_p A_p F(p → A_to) / A_from, one hemicube per patch.
+double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::uint32_t from, std::uint32_t to,
+                        std::uint64_t first_shot = 0) {
+    formfactor::ShotResult r;
+    double weighted = 0.0, area = 0.0;
+    std::uint64_t shot = first_shot;
+    for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
+        if (m.patches[p].node != from) continue;
+        engine.shoot(p, shot++, r);
+        double f = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k)
+            if (m.elements[k].node == to) f += r.F[k];
+        weighted += m.patches[p].area * f;
+        area += m.patches[p].area;
+    }
+    return weighted / area;
+}
+
+scene::Scene with_materials(std::uint32_t& grey) {
+    scene::Scene s;
+    grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    return s;
+}
+
+}  // namespace
+
+TEST_CASE("delta form factors of the five faces sum to 1", "[formfactor]") {
+    for (int n : {8, 16, 64, 256}) {
+        const formfactor::DeltaFormFactors delta(n);
+        CAPTURE(n);
+        CHECK_THAT(delta.sum(), WithinAbs(1.0, 1e-12));
+        // The centre of the top face sees straight up: its cells carry the largest values.
+        const double centre = delta.at(0, n / 2, n / 2);
+        CHECK(centre > delta.at(0, 0, 0));
+        CHECK(centre > delta.at(1, n / 2, 0));
+        // The pixel-centre approximation ΔA cos²/(π r⁴) must agree to second order.
+        const double cell = 2.0 / n, s = -1.0 + (n / 2 + 0.5) * cell, t = s;
+        const double approx = cell * cell / (M_PI * std::pow(s * s + t * t + 1.0, 2.0));
+        CHECK_THAT(centre, WithinRel(approx, 2.0 / (n * n) + 1e-12));
+    }
+}
+
+TEST_CASE("point-to-polygon form factor matches the tabulated values", "[formfactor]") {
+    const glm::dvec3 up{0, 0, 1};
+    const glm::dvec3 centred[4] = {{-0.5, -0.5, 1}, {0.5, -0.5, 1}, {0.5, 0.5, 1}, {-0.5, 0.5, 1}};
+    CHECK_THAT(formfactor::point_to_polygon(up, centred, 4), WithinAbs(0.2394564705, 1e-9));
+    const glm::dvec3 corner[4] = {{0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+    CHECK_THAT(formfactor::point_to_polygon(up, corner, 4), WithinAbs(0.1385316060, 1e-9));
+}
+
+TEST_CASE("closed-form references reproduce REFERENCES.md", "[formfactor]") {
+    CHECK_THAT(test::parallel_rectangles_ff(1, 1, 1), WithinAbs(0.1998248957, 1e-9));
+    CHECK_THAT(test::parallel_rectangles_ff(2, 2, 1), WithinAbs(0.4152532836, 1e-9));
+    CHECK_THAT(test::parallel_rectangles_ff(1, 1, 2), WithinAbs(0.0685895888, 1e-9));
+    CHECK_THAT(test::perpendicular_rectangles_ff(1, 1, 1), WithinAbs(0.2000437761, 1e-9));
+    CHECK_THAT(test::perpendicular_rectangles_ff(1, 1, 2), WithinAbs(0.2328526028, 1e-9));
+    CHECK_THAT(test::perpendicular_rectangles_ff(1, 2, 1), WithinAbs(0.1164263014, 1e-9));
+}
+
+TEST_CASE("hemicube: point to a centred square converges with N and rotations average out", "[formfactor]") {
+    // A tiny shooter at the origin under a unit square at height 1: F → 0.2394564705.
+    std::uint32_t grey = 0;
+    scene::Scene s = with_materials(grey);
+    const double h = 1e-3;
+    test::add_quad(s, {-h, -h, 0}, {h, -h, 0}, {h, h, 0}, {-h, h, 0}, grey, "shooter");
+    test::add_quad(s, {-0.5, -0.5, 1}, {-0.5, 0.5, 1}, {0.5, 0.5, 1}, {0.5, -0.5, 1}, grey, "square");
+    test::finish(s);
+    const mesh::Mesh m = mesh::build(s, {1.0, 0.25});
+    REQUIRE(m.patches.size() == 2);
+    const double exact = 0.2394564705;
+
+    double previous_error = 1.0, worst_at_32 = 0.0;
+    for (int n : {32, 128, 512}) {
+        formfactor::ReferenceEngine engine(m, {n, 7});
+        // Worst case over rotations: the error of one shot is edge aliasing, ~ perimeter cells.
+        double worst = 0.0;
+        for (std::uint64_t shot = 0; shot < 8; ++shot) {
+            formfactor::ShotResult r;
+            engine.shoot(0, shot, r);
+            double f = 0.0;
+            for (std::size_t k = 0; k < m.elements.size(); ++k)
+                if (m.elements[k].node == 1) f += r.F[k];
+            worst = std::max(worst, std::abs(f - exact));
+        }
+        CAPTURE(n, worst);
+        CHECK(worst < 0.1 / n);  // edge aliasing shrinks at least like 1/N
+        CHECK(worst < previous_error);
+        previous_error = worst;
+        if (n == 32) worst_at_32 = worst;
+    }
+    // The rotation turns aliasing into zero-mean noise: the mean of many shots beats one shot.
+    formfactor::ReferenceEngine engine(m, {32, 11});
+    double mean = 0.0;
+    const int shots = 64;
+    for (int shot = 0; shot < shots; ++shot) {
+        formfactor::ShotResult r;
+        engine.shoot(0, static_cast<std::uint64_t>(shot), r);
+        for (std::size_t k = 0; k < m.elements.size(); ++k)
+            if (m.elements[k].node == 1) mean += r.F[k] / shots;
+    }
+    CAPTURE(worst_at_32, mean);
+    CHECK(std::abs(mean - exact) < 0.5 * worst_at_32);
+}
+
+TEST_CASE("hemicube: parallel squares error shrinks with subdivision", "[formfactor]") {
+    std::uint32_t grey = 0;
+    scene::Scene base = with_materials(grey);
+    const scene::Scene s = test::parallel_rectangles(1, 1, 1, grey, grey, base);
+    const double exact = 0.1998248957;
+    double previous = 1.0;
+    for (double patch : {0.5, 0.25, 0.125}) {
+        const mesh::Mesh m = mesh::build(s, {patch, patch / 2});
+        formfactor::ReferenceEngine engine(m, {256, 1});
+        const double f = area_form_factor(m, engine, 0, 1);
+        const double err = std::abs(f - exact) / exact;
+        CAPTURE(patch, f, err);
+        CHECK(err < previous);
+        previous = err;
+    }
+    CHECK(previous < 0.005);
+}
+
+TEST_CASE("hemicube: perpendicular rectangles and reciprocity", "[formfactor]") {
+    std::uint32_t grey = 0;
+    scene::Scene base = with_materials(grey);
+    SECTION("unit squares sharing an edge") {
+        const scene::Scene s = test::perpendicular_rectangles(1, 1, 1, grey, grey, base);
+        const mesh::Mesh m = mesh::build(s, {1.0 / 16, 1.0 / 32});
+        formfactor::ReferenceEngine engine(m, {256, 3});
+        const double f = area_form_factor(m, engine, 0, 1);
+        CHECK_THAT(f, WithinRel(0.2000437761, 0.005));
+    }
+    SECTION("1×1 floor, 1×2 wall: A_i F_ij = A_j F_ji and both match the closed form") {
+        const scene::Scene s = test::perpendicular_rectangles(1, 1, 2, grey, grey, base);
+        const mesh::Mesh m = mesh::build(s, {1.0 / 16, 1.0 / 32});
+        formfactor::ReferenceEngine engine(m, {256, 5});
+        const double f_floor_wall = area_form_factor(m, engine, 0, 1);
+        const double f_wall_floor = area_form_factor(m, engine, 1, 0, 1000);
+        CHECK_THAT(f_floor_wall, WithinRel(0.2328526028, 0.005));
+        CHECK_THAT(f_wall_floor, WithinRel(0.1164263014, 0.005));
+        CHECK_THAT(1.0 * f_floor_wall, WithinRel(2.0 * f_wall_floor, 0.005));
+    }
+}
+
+TEST_CASE("hemicube: a closed box sees everything exactly once", "[formfactor]") {
+    // No gaps and no double counting between elements that share edges: from inside a closed
+    // box every cell is owned by exactly one element, so ΣF equals the table's sum.
+    std::uint32_t grey = 0;
+    scene::Scene base = with_materials(grey);
+    const scene::Scene s = test::closed_box({1.0, 0.7, 1.3}, [&](int) { return grey; }, base);
+    const mesh::Mesh m = mesh::build(s, {0.3, 0.1});
+    formfactor::ReferenceEngine engine(m, {64, 9});
+    for (std::uint32_t p : {0u, 5u, static_cast<std::uint32_t>(m.patches.size() - 1)}) {
+        formfactor::ShotResult r;
+        engine.shoot(p, p, r);
+        double sum = 0.0;
+        for (double f : r.F) sum += f;
+        CAPTURE(p);
+        CHECK_THAT(sum, WithinAbs(engine.delta().sum(), 1e-12));
+        CHECK(r.blocked == 0.0);
+        for (std::int32_t id : engine.ids()) REQUIRE(id >= 0);
+    }
+}
+
+TEST_CASE("hemicube: occluders hide and backs of one-sided surfaces block", "[formfactor]") {
+    std::uint32_t grey = 0;
+    scene::Scene s = with_materials(grey);
+    // Shooter at z = 0 facing up, receiver at z = 2 facing down, a blocker at z = 1.
+    test::add_quad(s, {-0.1, -0.1, 0}, {0.1, -0.1, 0}, {0.1, 0.1, 0}, {-0.1, 0.1, 0}, grey, "shooter");
+    test::add_quad(s, {-1, -1, 2}, {-1, 1, 2}, {1, 1, 2}, {1, -1, 2}, grey, "receiver");
+    SECTION("a blocker facing the shooter takes what it covers") {
+        test::add_quad(s, {-5, -5, 1}, {-5, 5, 1}, {5, 5, 1}, {5, -5, 1}, grey, "blocker");
+        test::finish(s);
+        const mesh::Mesh m = mesh::build(s, {1.0, 0.5});
+        formfactor::ReferenceEngine engine(m, {64, 1});
+        formfactor::ShotResult r;
+        engine.shoot(0, 0, r);
+        double to_receiver = 0.0, to_blocker = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k) {
+            if (m.elements[k].node == 1) to_receiver += r.F[k];
+            if (m.elements[k].node == 2) to_blocker += r.F[k];
+        }
+        CHECK(to_receiver == 0.0);
+        // Point to a centred 10×10 square at height 1 (Lambert's formula).
+        const glm::dvec3 sq[4] = {{-5, -5, 1}, {5, -5, 1}, {5, 5, 1}, {-5, 5, 1}};
+        CHECK_THAT(to_blocker, WithinRel(formfactor::point_to_polygon({0, 0, 1}, sq, 4), 0.01));
+    }
+    SECTION("the back of a one-sided blocker is opaque and receives nothing") {
+        test::add_quad(s, {-5, -5, 1}, {5, -5, 1}, {5, 5, 1}, {-5, 5, 1}, grey, "blocker");  // faces +z
+        test::finish(s);
+        const mesh::Mesh m = mesh::build(s, {1.0, 0.5});
+        formfactor::ReferenceEngine engine(m, {64, 1});
+        formfactor::ShotResult r;
+        engine.shoot(0, 0, r);
+        for (std::size_t k = 0; k < m.elements.size(); ++k)
+            if (m.elements[k].node != 0) CHECK(r.F[k] == 0.0);
+        const glm::dvec3 sq[4] = {{-5, -5, 1}, {5, -5, 1}, {5, 5, 1}, {-5, 5, 1}};
+        CHECK_THAT(r.blocked, WithinRel(formfactor::point_to_polygon({0, 0, 1}, sq, 4), 0.01));
+    }
+}
+
+TEST_CASE("hemicube: the same seed and shot give the same bits", "[formfactor]") {
+    std::uint32_t grey = 0;
+    scene::Scene base = with_materials(grey);
+    const scene::Scene s = test::perpendicular_rectangles(1, 1, 1, grey, grey, base);
+    const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
+    formfactor::ReferenceEngine a(m, {64, 42}), b(m, {64, 42}), c(m, {64, 43});
+    formfactor::ShotResult ra, rb, rc;
+    a.shoot(3, 17, ra);
+    b.shoot(3, 17, rb);
+    c.shoot(3, 17, rc);
+    CHECK(ra.F == rb.F);
+    CHECK(ra.F != rc.F);  // another seed rotates the hemicube differently
+}

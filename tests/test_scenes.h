@@ -1,0 +1,80 @@
+// Analytic test scenes built in code: quads, parallel and perpendicular rectangles, closed boxes.
+#pragma once
+
+#include <glm/glm.hpp>
+
+#include "scene/scene.h"
+
+namespace hemirad::test {
+
+inline std::uint32_t add_material(scene::Scene& s, glm::dvec3 rho, glm::dvec3 emission, bool double_sided = false) {
+    scene::Material m;
+    m.name = "m" + std::to_string(s.materials.size());
+    m.base_color = rho;
+    m.emission = emission;
+    m.double_sided = double_sided;
+    s.materials.push_back(m);
+    return static_cast<std::uint32_t>(s.materials.size() - 1);
+}
+
+// A planar quad p0..p3, counter-clockwise seen from its front, as two triangles sharing p0–p2.
+inline void add_quad(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, glm::dvec3 p3,
+                     std::uint32_t material, const std::string& node_name) {
+    const std::uint32_t node = static_cast<std::uint32_t>(s.nodes.size());
+    s.nodes.push_back({node_name, static_cast<int>(node)});
+    const glm::dvec3 rho = s.materials[material].base_color;
+    const std::uint32_t prim = node;
+    s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, prim});
+    s.triangles.push_back({{p0, p2, p3}, {rho, rho, rho}, material, node, prim});
+}
+
+inline void finish(scene::Scene& s) {
+    s.bbox_min = glm::dvec3(1e300);
+    s.bbox_max = glm::dvec3(-1e300);
+    for (const auto& t : s.triangles)
+        for (const auto& p : t.p) {
+            s.bbox_min = glm::min(s.bbox_min, p);
+            s.bbox_max = glm::max(s.bbox_max, p);
+        }
+}
+
+// Two a×b rectangles facing each other at distance c: the lower (z = 0) faces +z, the upper
+// (z = c) faces −z. Node 0 "lower", node 1 "upper".
+inline scene::Scene parallel_rectangles(double a, double b, double c, std::uint32_t lower_material,
+                                        std::uint32_t upper_material, scene::Scene s) {
+    add_quad(s, {0, 0, 0}, {a, 0, 0}, {a, b, 0}, {0, b, 0}, lower_material, "lower");
+    add_quad(s, {0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}, upper_material, "upper");
+    finish(s);
+    return s;
+}
+
+// Rectangles sharing the edge x ∈ [0, l] on the x axis: "floor" w deep (y ∈ [0, w], facing +z)
+// and "wall" h high (z ∈ [0, h], facing +y).
+inline scene::Scene perpendicular_rectangles(double l, double w, double h, std::uint32_t floor_material,
+                                             std::uint32_t wall_material, scene::Scene s) {
+    add_quad(s, {0, 0, 0}, {l, 0, 0}, {l, w, 0}, {0, w, 0}, floor_material, "floor");
+    add_quad(s, {0, 0, 0}, {0, 0, h}, {l, 0, h}, {l, 0, 0}, wall_material, "wall");
+    finish(s);
+    return s;
+}
+
+// An axis-aligned closed box [0, size]³ whose six faces look inwards, node per face.
+// `material_of(face)` gives each face's material (faces: −x, +x, −y, +y, −z, +z walls).
+template <class MaterialOf>
+scene::Scene closed_box(glm::dvec3 size, MaterialOf material_of, scene::Scene s) {
+    const double X = size.x, Y = size.y, Z = size.z;
+    add_quad(s, {0, 0, 0}, {0, Y, 0}, {0, Y, Z}, {0, 0, Z}, material_of(0), "x0");  // normal +x
+    add_quad(s, {X, 0, 0}, {X, 0, Z}, {X, Y, Z}, {X, Y, 0}, material_of(1), "x1");  // normal −x
+    add_quad(s, {0, 0, 0}, {0, 0, Z}, {X, 0, Z}, {X, 0, 0}, material_of(2), "y0");  // normal +y
+    add_quad(s, {0, Y, 0}, {X, Y, 0}, {X, Y, Z}, {0, Y, Z}, material_of(3), "y1");  // normal −y
+    add_quad(s, {0, 0, 0}, {X, 0, 0}, {X, Y, 0}, {0, Y, 0}, material_of(4), "z0");  // normal +z
+    add_quad(s, {0, 0, Z}, {0, Y, Z}, {X, Y, Z}, {X, 0, Z}, material_of(5), "z1");  // normal −z
+    finish(s);
+    return s;
+}
+
+// Analytic form factors of ../shared/REFERENCES.md.
+double parallel_rectangles_ff(double a, double b, double c);
+double perpendicular_rectangles_ff(double l, double w, double h);
+
+}  // namespace hemirad::test
