@@ -1,0 +1,187 @@
+// Progressive refinement: shoot the patch with the most unshot flux, let elements receive and
+// send what they reflect up to their patch, keep exact flux books, and estimate how much of
+// the final answer the ambient term cannot yet place.
+#include "solve/progressive.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace hemirad::solve {
+namespace {
+
+double mean(const glm::dvec3& v) { return (v.x + v.y + v.z) / 3.0; }
+double sum(const glm::dvec3& v) { return v.x + v.y + v.z; }
+
+}  // namespace
+
+Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings)
+    : mesh_(mesh), engine_(engine), settings_(settings), H_(mesh.elements.size(), glm::dvec3(0.0)) {
+    unshot_.reserve(mesh.patches.size());
+    for (const auto& p : mesh.patches) {
+        unshot_.push_back(p.emission);
+        emitted_ += p.emission * p.area;
+    }
+    glm::dvec3 rho_area{0.0};
+    for (const auto& e : mesh.elements) {
+        total_area_ += e.area;
+        rho_area += e.rho * e.area;
+    }
+    if (total_area_ > 0.0) rho_area_mean_ = rho_area / total_area_;
+    snapshot_ = irradiance(/*ambient=*/true);
+    round_change_ = std::numeric_limits<double>::infinity();
+    update_convergence();
+}
+
+bool Progressive::done() const {
+    return converged_ || (settings_.max_passes > 0 && passes_ >= settings_.max_passes);
+}
+
+bool Progressive::step() {
+    if (done()) return false;
+
+    // The patch with the most unshot flux; ties go to the lower index.
+    std::size_t best = 0;
+    double best_flux = -1.0;
+    for (std::size_t p = 0; p < unshot_.size(); ++p) {
+        const double flux = sum(unshot_[p]) * mesh_.patches[p].area;
+        if (flux > best_flux) {
+            best_flux = flux;
+            best = p;
+        }
+    }
+    if (best_flux <= 0.0) {
+        converged_ = true;
+        return false;
+    }
+
+    const mesh::Patch& shooter = mesh_.patches[best];
+    engine_.shoot(static_cast<std::uint32_t>(best), static_cast<std::uint64_t>(passes_), shot_);
+    const glm::dvec3 u = unshot_[best];
+    const glm::dvec3 flux = u * shooter.area;
+    unshot_[best] = glm::dvec3(0.0);
+
+    // ΔH_j = ΔB_i F_ij A_i / A_j; what element j reflects, ρ_j ΔH_j A_j, joins its patch's pool.
+    glm::dvec3 hit{0.0}, reflected{0.0};
+    double f_sum = 0.0;
+    for (std::size_t k = 0; k < shot_.F.size(); ++k) {
+        const double f = shot_.F[k];
+        if (f == 0.0) continue;
+        const mesh::Element& e = mesh_.elements[k];
+        const glm::dvec3 received = flux * f;  // flux arriving at element k
+        H_[k] += received / e.area;
+        const glm::dvec3 back = e.rho * received;
+        const mesh::Patch& parent = mesh_.patches[e.patch];
+        unshot_[e.patch] += back / parent.area;
+        absorbed_ += received - back;
+        hit += received;
+        reflected += back;
+        f_sum += f;
+    }
+    absorbed_ += flux * shot_.blocked;
+    escaped_ += flux * (1.0 - f_sum - shot_.blocked);  // may be −1e-16: books stay exact
+    hit += flux * shot_.blocked;
+
+    // Recent behaviour of the scene, flux-weighted, forgetting over about one round of patches.
+    const double keep = 1.0 - 1.0 / std::max<double>(16.0, static_cast<double>(mesh_.patches.size()));
+    recent_shot_ = recent_shot_ * keep + flux;
+    recent_reflected_ = recent_reflected_ * keep + reflected;
+    recent_hit_ = recent_hit_ * keep + hit;
+
+    ++passes_;
+    update_convergence();
+    return true;
+}
+
+glm::dvec3 Progressive::effective_reflectance() const {
+    // Share of shot flux that comes back into the unshot pool, per channel: reflectance of
+    // what is hit, times the share that hits anything. Before any shot: the area mean.
+    glm::dvec3 r = rho_area_mean_;
+    for (int c = 0; c < 3; ++c)
+        if (recent_shot_[c] > 0.0) r[c] = recent_reflected_[c] / recent_shot_[c];
+    return glm::clamp(r, glm::dvec3(0.0), glm::dvec3(scene::kMaxReflectance));
+}
+
+double Progressive::hit_fraction() const {
+    const double shot = sum(recent_shot_);
+    return shot > 0.0 ? std::min(1.0, sum(recent_hit_) / shot) : 1.0;
+}
+
+glm::dvec3 Progressive::ambient() const {
+    // Cohen et al. 1988, with the measured reflectance: the unshot flux, spread evenly, hits
+    // h·ū per unit area and comes back with factor ρ_eff every bounce: H_amb = h·ū/(1 − ρ_eff).
+    if (total_area_ <= 0.0) return glm::dvec3(0.0);
+    const glm::dvec3 unshot_flux = unshot_total();
+    const glm::dvec3 u_mean = unshot_flux / total_area_;
+    return hit_fraction() * u_mean / (glm::dvec3(1.0) - effective_reflectance());
+}
+
+void Progressive::update_convergence() {
+    // A round is one pass per patch: by then every patch that holds light has had its turn.
+    const long round = std::max<long>(1, static_cast<long>(mesh_.patches.size()));
+    if (passes_ - snapshot_pass_ >= round) {
+        std::vector<glm::dvec3> now = irradiance(/*ambient=*/true);
+        glm::dvec3 change{0.0}, total{0.0};
+        for (std::size_t k = 0; k < now.size(); ++k) {
+            change += glm::abs(now[k] - snapshot_[k]) * mesh_.elements[k].area;
+            total += now[k] * mesh_.elements[k].area;
+        }
+        round_change_ = 0.0;
+        for (int c = 0; c < 3; ++c)
+            if (total[c] > 0.0) round_change_ = std::max(round_change_, change[c] / total[c]);
+        snapshot_ = std::move(now);
+        snapshot_pass_ = passes_;
+    }
+    converged_ = sum(unshot_total()) <= 0.0 || error() <= settings_.threshold;
+}
+
+double Progressive::ambient_share() const {
+    // Incident light, not radiosity: with ρ = 0 radiosity is just E, yet the irradiance the
+    // report gives still needs every lamp shot. Flux-weighted per channel.
+    const glm::dvec3 amb = ambient();
+    glm::dvec3 ambient_flux{0.0}, total{0.0};
+    for (std::size_t k = 0; k < mesh_.elements.size(); ++k) {
+        const double area = mesh_.elements[k].area;
+        ambient_flux += amb * area;
+        total += (H_[k] + amb) * area;
+    }
+    double share = 0.0;
+    for (int c = 0; c < 3; ++c)
+        if (total[c] > 0.0) share = std::max(share, ambient_flux[c] / total[c]);
+    return share;
+}
+
+double Progressive::unshot_fraction() const {
+    const glm::dvec3 unshot_flux = unshot_total();
+    const double emitted = mean(emitted_);
+    return emitted > 0.0 ? mean(unshot_flux) / emitted : 0.0;
+}
+
+std::vector<glm::dvec3> Progressive::irradiance(bool with_ambient) const {
+    const glm::dvec3 amb = with_ambient ? ambient() : glm::dvec3(0.0);
+    std::vector<glm::dvec3> out(H_.size());
+    for (std::size_t k = 0; k < H_.size(); ++k) out[k] = H_[k] + amb;
+    return out;
+}
+
+std::vector<glm::dvec3> Progressive::radiosity(bool with_ambient) const {
+    std::vector<glm::dvec3> out = irradiance(with_ambient);
+    for (std::size_t k = 0; k < out.size(); ++k) {
+        const mesh::Element& e = mesh_.elements[k];
+        out[k] = e.emission + e.rho * out[k];
+    }
+    return out;
+}
+
+glm::dvec3 Progressive::unshot_total() const {
+    glm::dvec3 flux{0.0};
+    for (std::size_t p = 0; p < unshot_.size(); ++p) flux += unshot_[p] * mesh_.patches[p].area;
+    return flux;
+}
+
+Energy Progressive::energy() const {
+    const glm::dvec3 unshot_flux = unshot_total();
+    return {mean(emitted_), mean(absorbed_), mean(escaped_), mean(unshot_flux)};
+}
+
+}  // namespace hemirad::solve

@@ -1,0 +1,91 @@
+// Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988): each pass shoots
+// the patch with the most unshot flux; elements receive, their reflected flux goes up to the
+// parent patch. An ambient term stands in for the flux not yet shot.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "formfactor/engine.h"
+#include "mesh/mesh.h"
+
+namespace hemirad::solve {
+
+struct Settings {
+    // Stop when the ambient term's share of the incident light, or the change of the
+    // ambient-corrected incident light over the last round, falls below this (flux-weighted).
+    double threshold = 1e-3;
+    long max_passes = 0;       // 0: no limit but the threshold
+};
+
+// Flux bookkeeping, as radiosity × area summed over elements, averaged over r, g, b.
+// emitted = absorbed + escaped + unshot, to rounding, at every pass.
+struct Energy {
+    double emitted = 0.0;
+    double absorbed = 0.0;
+    double escaped = 0.0;
+    double unshot = 0.0;
+};
+
+class Progressive {
+public:
+    Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings);
+
+    // Shoots one patch. Returns false (and does nothing) once converged or out of passes.
+    bool step();
+    bool done() const;
+    bool converged() const { return converged_; }
+    long passes() const { return passes_; }
+
+    // The convergence measure compared against `threshold`: the smaller of ambient_share()
+    // and round_change(). unshot_fraction() is the raw unshot share of the emitted flux.
+    double error() const { return std::min(ambient_share(), round_change_); }
+    // Share of the incident flux Σ H·A that is still the ambient estimate, not shot light.
+    double ambient_share() const;
+    // Flux-weighted change Σ|ΔH|·A / Σ H·A of the ambient-corrected incident light over the
+    // last round (one pass per patch); infinite until a round has passed.
+    double round_change() const { return round_change_; }
+    double unshot_fraction() const;
+
+    // Radiosity B = E + ρ·H and incident H per element; with `ambient`, the ambient term
+    // (the unshot flux spread as if the scene were closed, with the measured reflectance
+    // of the scene) is added to H.
+    std::vector<glm::dvec3> radiosity(bool ambient) const;
+    std::vector<glm::dvec3> irradiance(bool ambient) const;
+    glm::dvec3 ambient() const;
+
+    Energy energy() const;
+    const formfactor::ShotResult& last_shot() const { return shot_; }
+
+private:
+    const mesh::Mesh& mesh_;
+    formfactor::Engine& engine_;
+    Settings settings_;
+    formfactor::ShotResult shot_;
+
+    std::vector<glm::dvec3> H_;        // incident per element, shot so far
+    std::vector<glm::dvec3> unshot_;   // unshot radiosity per patch
+    glm::dvec3 emitted_{0.0};          // flux per channel
+    glm::dvec3 absorbed_{0.0};
+    glm::dvec3 escaped_{0.0};
+    double total_area_ = 0.0;
+    glm::dvec3 rho_area_mean_{0.0};    // prior for the scene's reflectance before any shot
+    // Recent shots: flux shot, flux sent back into the unshot pool, flux hitting any surface.
+    glm::dvec3 recent_shot_{0.0}, recent_reflected_{0.0}, recent_hit_{0.0};
+    long passes_ = 0;
+    bool converged_ = false;
+
+    glm::dvec3 effective_reflectance() const;
+    double hit_fraction() const;
+    glm::dvec3 unshot_total() const;  // unshot flux per channel
+    void update_convergence();
+
+    std::vector<glm::dvec3> snapshot_;  // ambient-corrected incident light at the last round's start
+    long snapshot_pass_ = 0;
+    double round_change_ = 0.0;
+};
+
+}  // namespace hemirad::solve

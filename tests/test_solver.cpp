@@ -1,0 +1,129 @@
+// Progressive shooting against analytic answers: furnaces, flux balance, parallel squares.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "formfactor/near_field.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "solve/progressive.h"
+#include "test_scenes.h"
+
+using namespace hemirad;
+using Catch::Matchers::WithinAbs;
+using Catch::Matchers::WithinRel;
+
+namespace {
+
+struct Solved {
+    std::vector<glm::dvec3> B, H;
+    long passes = 0;
+    bool converged = false;
+    solve::Energy energy;
+};
+
+Solved solve_scene(const scene::Scene& s, mesh::Settings ms, int hemicube, double threshold, std::uint64_t seed = 1) {
+    const mesh::Mesh m = mesh::build(s, ms);
+    formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{hemicube, seed}));
+    solve::Progressive solver(m, engine, {threshold, 200000});
+    while (solver.step()) {
+    }
+    return {solver.radiosity(true), solver.irradiance(true), solver.passes(), solver.converged(), solver.energy()};
+}
+
+}  // namespace
+
+TEST_CASE("furnace: a closed box with uniform rho and E reaches B = E/(1 - rho)", "[solver]") {
+    for (double rho : {0.5, 0.9, 0.99, 0.999}) {
+        scene::Scene s;
+        const auto mat = test::add_material(s, glm::dvec3(rho), glm::dvec3(1.0, 0.5, 0.25));
+        s = test::closed_box({1.0, 1.0, 1.0}, [&](int) { return mat; }, s);
+        const Solved r = solve_scene(s, {0.25, 0.125}, 64, 1e-4);
+        CAPTURE(rho, r.passes);
+        REQUIRE(r.converged);
+        const glm::dvec3 expected = glm::dvec3(1.0, 0.5, 0.25) / (1.0 - rho);
+        for (const auto& b : r.B)
+            for (int c = 0; c < 3; ++c) REQUIRE_THAT(b[c], WithinRel(expected[c], 0.01));
+    }
+}
+
+TEST_CASE("furnace lit by one wall: total radiosity flux is emitted/(1 - rho) even at rho = 0.999", "[solver]") {
+    // In a closed box every unit of light bounces until absorbed: Σ B A = Φ_E / (1 − ρ).
+    for (double rho : {0.9, 0.999}) {
+        scene::Scene s;
+        const auto wall = test::add_material(s, glm::dvec3(rho), glm::dvec3(0.0));
+        const auto light = test::add_material(s, glm::dvec3(rho), glm::dvec3(2.0));
+        s = test::closed_box({1.0, 0.8, 1.2}, [&](int face) { return face == 3 ? light : wall; }, s);
+        const mesh::Mesh m = mesh::build(s, {0.2, 0.1});
+        formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{64, 1}));
+        solve::Progressive solver(m, engine, {1e-3, 200000});
+        while (solver.step()) {
+        }
+        CAPTURE(rho, solver.passes());
+        REQUIRE(solver.converged());
+        CHECK(solver.passes() < 5000);  // not the ~7000 rounds plain shooting would need
+        const auto B = solver.radiosity(true);
+        double flux = 0.0, light_flux = 0.0;
+        for (std::size_t k = 0; k < B.size(); ++k) {
+            flux += B[k].x * m.elements[k].area;
+            light_flux += m.elements[k].emission.x * m.elements[k].area;
+        }
+        CHECK_THAT(flux, WithinRel(light_flux / (1.0 - rho), 0.01));
+    }
+}
+
+TEST_CASE("energy: emitted = absorbed + escaped + unshot at every pass", "[solver]") {
+    scene::Scene s;
+    const auto white = test::add_material(s, glm::dvec3(0.8, 0.7, 0.6), glm::dvec3(0.0));
+    const auto light = test::add_material(s, glm::dvec3(0.5), glm::dvec3(3.0, 2.0, 1.0));
+    // An open box: five walls, one lit, the sixth side missing so light escapes.
+    s = test::closed_box({1.0, 1.0, 1.0}, [&](int face) { return face == 3 ? light : white; }, s);
+    s.triangles.resize(s.triangles.size() - 2);
+    const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
+    formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{64, 1}));
+    solve::Progressive solver(m, engine, {1e-4, 0});
+    int checked = 0;
+    while (solver.step()) {
+        const solve::Energy e = solver.energy();
+        REQUIRE_THAT(e.absorbed + e.escaped + e.unshot, WithinRel(e.emitted, 1e-6));
+        ++checked;
+    }
+    const solve::Energy e = solver.energy();
+    CHECK(checked > 50);
+    CHECK(e.escaped > 0.05 * e.emitted);  // the open side lets light out
+    CHECK(e.absorbed > 0.05 * e.emitted);
+    CHECK(e.unshot < 1e-3 * e.emitted);
+}
+
+TEST_CASE("parallel squares: received light matches the analytic form factor", "[solver]") {
+    // Emitter (E = 1, ρ = 0) under a grey receiver 1 apart: mean irradiance on the receiver is
+    // F(receiver → emitter) · E = 0.1998248957 (unit squares, reciprocity).
+    for (double scale : {1e-3, 1.0, 1e3}) {
+        scene::Scene s;
+        const auto emitter = test::add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
+        const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+        s = test::parallel_rectangles(scale, scale, scale, emitter, grey, s);
+        const double patch = s.diagonal() / 24.0;
+        const Solved r = solve_scene(s, {patch, patch / 3}, 256, 1e-3);
+        const mesh::Mesh m = mesh::build(s, {patch, patch / 3});
+        double h = 0.0, area = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k)
+            if (m.elements[k].node == 1) {
+                h += r.H[k].x * m.elements[k].area;
+                area += m.elements[k].area;
+            }
+        CAPTURE(scale);
+        CHECK_THAT(h / area, WithinRel(0.1998248957, 0.01));
+    }
+}
+
+TEST_CASE("solver: the same scene and seed give identical radiosity", "[solver]") {
+    scene::Scene s;
+    const auto white = test::add_material(s, glm::dvec3(0.7), glm::dvec3(0.0));
+    const auto light = test::add_material(s, glm::dvec3(0.5), glm::dvec3(1.0));
+    s = test::closed_box({1.0, 1.0, 1.0}, [&](int face) { return face == 3 ? light : white; }, s);
+    const Solved a = solve_scene(s, {0.25, 0.125}, 64, 1e-3, 5);
+    const Solved b = solve_scene(s, {0.25, 0.125}, 64, 1e-3, 5);
+    CHECK(a.passes == b.passes);
+    CHECK(a.B == b.B);
+}
