@@ -1,0 +1,92 @@
+// Image files: linear half-float EXR, tone-mapped sRGB PNG, and the exposure that suits them.
+#include <OpenImageIO/imageio.h>
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include "core/error.h"
+#include "output/output.h"
+
+namespace hemirad::output {
+namespace {
+
+// Exposure puts this luminance percentile at 1: bright walls, not the few emitter pixels.
+constexpr double kExposurePercentile = 0.9;
+// Tone curve: identity up to the knee, then a Reinhard shoulder that approaches 1 smoothly
+// (continuous slope), so mid-tones keep their ratios and emitters roll off instead of clipping.
+constexpr double kKnee = 0.8;
+
+double luminance(const float* rgb) {  // Rec. 709 / sRGB primaries
+    return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+}
+
+double tone(double x) {
+    if (!(x > 0.0)) return 0.0;  // NaN too: a broken pixel shows black, not garbage
+    if (x <= kKnee) return x;
+    if (std::isinf(x)) return 1.0;
+    const double t = (x - kKnee) / (1.0 - kKnee);
+    return kKnee + (1.0 - kKnee) * t / (1.0 + t);
+}
+
+double srgb_oetf(double linear) {  // IEC 61966-2-1
+    return linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
+}
+
+// Opens `file` for writing in `format` (named, so a temporary file name's extension does not
+// matter), writes `pixels` (3 channels of `pixel_type`), closes; throws with OIIO's message.
+void write_image(const std::filesystem::path& file, const char* format, const OIIO::ImageSpec& spec,
+                 OIIO::TypeDesc pixel_type, const void* pixels) {
+    const std::string name = file.string();
+    auto out = OIIO::ImageOutput::create(format);
+    if (!out) {
+        throw InternalError(fmt::format("{}: cannot write {}: {}", name, format, OIIO::geterror()));
+    }
+    const bool ok = out->open(name, spec) && out->write_image(pixel_type, pixels) && out->close();
+    if (!ok) throw InternalError(fmt::format("{}: {}", name, out->geterror()));
+}
+
+void check_size(const Image& image, const std::filesystem::path& file) {
+    const std::size_t expected = std::size_t(std::max(image.width, 0)) * std::max(image.height, 0) * 3;
+    if (image.width <= 0 || image.height <= 0 || image.rgb.size() != expected) {
+        throw InternalError(fmt::format("{}: invalid {}x{} image with {} values", file.string(), image.width,
+                                        image.height, image.rgb.size()));
+    }
+}
+
+}  // namespace
+
+double auto_exposure(const Image& image) {
+    std::vector<double> lit;
+    lit.reserve(image.rgb.size() / 3);
+    for (std::size_t i = 0; i + 2 < image.rgb.size(); i += 3) {
+        const double y = luminance(&image.rgb[i]);
+        if (y > 0.0 && std::isfinite(y)) lit.push_back(y);  // background does not count
+    }
+    if (lit.empty()) return 1.0;
+    const auto nth = lit.begin() + std::ptrdiff_t(kExposurePercentile * double(lit.size() - 1));
+    std::nth_element(lit.begin(), nth, lit.end());
+    return 1.0 / *nth;
+}
+
+void write_exr(const Image& image, const std::filesystem::path& file) {
+    check_size(image, file);
+    OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::HALF);
+    spec.attribute("compression", "zip");
+    write_image(file, "openexr", spec, OIIO::TypeDesc::FLOAT, image.rgb.data());
+}
+
+void write_png(const Image& image, const std::filesystem::path& file, double exposure) {
+    check_size(image, file);
+    // Per channel, so a saturated emitter rolls off towards white as film and eyes do.
+    std::vector<std::uint8_t> bytes(image.rgb.size());
+    for (std::size_t i = 0; i < bytes.size(); ++i) {
+        const double display = srgb_oetf(tone(exposure * double(image.rgb[i])));
+        bytes[i] = static_cast<std::uint8_t>(std::lround(std::clamp(display, 0.0, 1.0) * 255.0));
+    }
+    OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
+    write_image(file, "png", spec, OIIO::TypeDesc::UINT8, bytes.data());
+}
+
+}  // namespace hemirad::output

@@ -1,0 +1,65 @@
+// Everything a bake writes besides report.json: per-node summaries, the baked glTF, images.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+
+namespace hemirad::output {
+
+// Area-weighted averages over one scene mesh node's front-face elements (report.json "meshes").
+struct NodeSummary {
+    std::string name;
+    double area = 0.0;
+    glm::dvec3 radiosity{0.0};
+    glm::dvec3 irradiance{0.0};
+};
+std::vector<NodeSummary> summarize(const scene::Scene& scene, const mesh::Mesh& mesh,
+                                   const std::vector<glm::dvec3>& radiosity,
+                                   const std::vector<glm::dvec3>& irradiance);
+
+// Per-vertex radiosity: vertices shared between elements of one node and side are welded and
+// get the area-weighted average of the elements around them (no cracks, no seams).
+// Writes `file` (.gltf) and its buffer beside it (same stem, .bin). One glTF node per scene
+// mesh node, named as in the scene; COLOR_0 holds linear radiosity; materials are unlit
+// (KHR_materials_unlit) so any viewer shows the baked light.
+void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene,
+                      const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity);
+
+// A linear RGB image, row 0 at the top.
+struct Image {
+    int width = 0, height = 0;
+    std::vector<float> rgb;  // width × height × 3
+};
+
+struct View {
+    glm::dmat4 camera_to_world{1.0};  // looks down local −Z, +Y up (glTF)
+    double yfov = 0.8;                // radians
+    double aspect = 1.0;              // width / height
+    std::string name;                 // camera name, or "framing" for the generated one
+};
+
+// The named camera, else the scene's first camera, else one framing the scene's bounds.
+// Throws InputError naming the scene file when `camera_name` is given but not found.
+View choose_view(const scene::Scene& scene, const std::string& camera_name);
+
+// Rasterizes the element mesh (welded, smooth per-vertex radiosity as in the baked glTF) from
+// `view`: z-buffered, perspective-correct, supersampled. Back faces of one-sided surfaces are
+// black; nothing hit is black.
+Image render(const scene::Scene& scene, const mesh::Mesh& mesh,
+             const std::vector<glm::dvec3>& radiosity, const View& view, int width, int height);
+
+// Exposure that maps the image's bright-but-not-emitter level to display white.
+double auto_exposure(const Image& image);
+
+// Linear half-float EXR, and a tone-mapped (exposure, then filmic-free Reinhard-style
+// shoulder, then sRGB) 8-bit PNG. Both through OpenImageIO; throw InternalError on failure.
+void write_exr(const Image& image, const std::filesystem::path& file);
+void write_png(const Image& image, const std::filesystem::path& file, double exposure);
+
+}  // namespace hemirad::output

@@ -1,0 +1,37 @@
+// The element mesh as triangles with shared vertices and per-vertex radiosity: what both the
+// baked glTF and the preview renderer draw, built once so the two always agree.
+#pragma once
+
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <vector>
+
+#include "mesh/mesh.h"
+
+namespace hemirad::output {
+
+// One scene mesh node's triangles, both sides (a doubleSided back face has its own vertices).
+struct WeldedNode {
+    std::vector<glm::dvec3> positions;
+    std::vector<glm::dvec3> normals;     // unit, area-weighted mean of the elements' around it
+    std::vector<glm::dvec3> radiosity;   // area-weighted mean of the elements around the vertex
+    std::vector<std::uint32_t> indices;  // 3 per triangle, counter-clockwise seen from its front
+    // Per triangle: its element has a twin facing the other way, so its back is never seen
+    // (the twin's front is drawn there instead).
+    std::vector<std::uint8_t> has_twin;
+
+    std::size_t triangle_count() const { return indices.size() / 3; }
+};
+
+// Index = scene node index.
+struct WeldedMesh {
+    std::vector<WeldedNode> nodes;
+};
+
+// Welds within one node and one side: vertices at bit-identical positions whose element
+// normals are within a crease angle (40°) become one vertex, so tessellated curves shade
+// smoothly but nothing blurs across a crease such as a box edge. Quads become two triangles. Throws InternalError when
+// `radiosity` is not one value per element or an element names a node that does not exist.
+WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity);
+
+}  // namespace hemirad::output
