@@ -1,0 +1,104 @@
+// The command line: parses options, runs the bake pipeline, and is the one catch point that
+// maps errors to exit codes (0 done, 2 bad input or usage, 1 internal failure).
+#include "cli/app.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <iostream>
+#include <optional>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+
+#include "cli/bake.h"
+#include "core/error.h"
+
+namespace hemirad::cli {
+namespace {
+
+void add_bake_options(CLI::App& bake, BakeOptions& o) {
+    bake.add_option("scene", o.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
+    bake.add_option("-o,--output", o.output, "output directory (created if missing)")->capture_default_str();
+    bake.add_option("--device", o.device, "form-factor engine: auto|ref (OpenCL engines come with the kernels)")
+        ->capture_default_str();
+    bake.add_option("--hemicube", o.hemicube, "hemicube resolution N: top face N×N plus four N×N/2 half faces")
+        ->check(CLI::Range(8, 4096))->capture_default_str();
+    bake.add_option("--patch-size", o.patch_size, "maximum patch edge, scene units (default: scene diagonal / 24)")
+        ->check(CLI::PositiveNumber);
+    bake.add_option("--element-size", o.element_size, "maximum element edge, scene units (default: patch size / 3)")
+        ->check(CLI::PositiveNumber);
+    bake.add_option("--threshold", o.threshold, "stop when the share of final flux not yet placed is below this")
+        ->check(CLI::Range(0.0, 1.0))->capture_default_str();
+    bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
+        ->check(CLI::NonNegativeNumber)->capture_default_str();
+    bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")->capture_default_str();
+    bake.add_flag("--verify", o.verify, "check every shot of an OpenCL engine against the reference");
+    bake.add_option("--camera", o.camera, "render from the camera with this name");
+    bake.add_option("--preview-every", o.preview_every, "write DIR/preview/pass_NNNNNN.png every K passes")
+        ->check(CLI::NonNegativeNumber);
+    bake.add_option("--image-width", o.image_width, "width of render.exr/png; height follows the camera's aspect")
+        ->check(CLI::Range(16, 16384))->capture_default_str();
+    bake.add_flag("--quiet", o.quiet, "no progress line");
+}
+
+std::atomic<bool> g_interrupted{false};
+extern "C" void on_interrupt(int) { g_interrupted = true; }
+
+}  // namespace
+
+int run(int argc, char** argv) {
+    CLI::App app{"hemirad: radiosity baker with a hemicube form-factor engine"};
+    app.set_version_flag("--version", HEMIRAD_VERSION);
+    app.require_subcommand(1);
+    BakeOptions bake_options;
+    CLI::App* bake = app.add_subcommand("bake", "bake diffuse global illumination into a glTF scene");
+    add_bake_options(*bake, bake_options);
+    bool devices_json = false;
+    CLI::App* devices = app.add_subcommand("devices", "list the form-factor engines this build can use");
+    devices->add_flag("--json", devices_json, "machine-readable output");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        std::cerr << "hemirad: " << e.what() << " (see hemirad --help)\n";
+        return 2;
+    }
+
+    try {
+        if (*devices) {
+            list_devices(std::cout, devices_json);
+            return 0;
+        }
+        std::signal(SIGINT, on_interrupt);
+        std::signal(SIGTERM, on_interrupt);
+        bake_options.interrupted = &g_interrupted;
+        bake_options.progress = !bake_options.quiet && isatty(fileno(stderr));
+        run_bake(bake_options);
+        return 0;
+    } catch (const InputError& e) {
+        std::cerr << "hemirad: " << e.what() << "\n";
+        return 2;
+    } catch (const Interrupted&) {
+        std::cerr << "\nhemirad: interrupted; no output written\n";
+        return 130;
+    } catch (const std::bad_alloc&) {
+        std::cerr << "hemirad: out of memory\n";
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << "hemirad: internal error: " << e.what() << "\n";
+        return 1;
+    }
+}
+
+}  // namespace hemirad::cli

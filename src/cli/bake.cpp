@@ -1,0 +1,314 @@
+// `hemirad bake`: load → mesh → progressive solve → report.json, baked.gltf, render.exr/.png.
+// Final files are written to a temporary directory and renamed into place only when all exist.
+#include "cli/bake.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <system_error>
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "output/output.h"
+#include "scene/scene.h"
+#include "solve/progressive.h"
+
+namespace hemirad::cli {
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using ordered_json = nlohmann::ordered_json;
+
+namespace {
+
+double seconds_since(Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Times every shot of the engine it wraps, so the report can split form factors from solving.
+class TimedEngine final : public formfactor::Engine {
+public:
+    explicit TimedEngine(formfactor::Engine& inner) : inner_(inner) {}
+    std::string name() const override { return inner_.name(); }
+    void shoot(std::uint32_t patch, std::uint64_t shot, formfactor::ShotResult& out) override {
+        const auto t0 = Clock::now();
+        inner_.shoot(patch, shot, out);
+        seconds_ += seconds_since(t0);
+    }
+    double seconds() const { return seconds_; }
+
+private:
+    formfactor::Engine& inner_;
+    double seconds_ = 0.0;
+};
+
+// Everything this run creates under the output directory; removed unless commit() is reached.
+class OutputTransaction {
+public:
+    explicit OutputTransaction(const fs::path& dir) : dir_(dir) {
+        std::error_code ec;
+        created_dir_ = !fs::exists(dir_, ec);
+        fs::create_directories(dir_, ec);
+        if (ec || !fs::is_directory(dir_))
+            throw InputError(fmt::format("{}: cannot create output directory: {}", dir_.string(), ec ? ec.message() : "not a directory"));
+        staging_ = dir_ / fmt::format(".hemirad-tmp-{}", static_cast<long>(getpid()));
+        fs::remove_all(staging_, ec);
+        fs::create_directories(staging_, ec);
+        if (ec) throw InputError(fmt::format("{}: cannot write: {}", dir_.string(), ec.message()));
+    }
+    OutputTransaction(const OutputTransaction&) = delete;
+    OutputTransaction& operator=(const OutputTransaction&) = delete;
+    ~OutputTransaction() {
+        if (committed_) return;
+        std::error_code ec;  // destructors never throw
+        fs::remove_all(staging_, ec);
+        for (const auto& f : previews_) fs::remove(f, ec);
+        if (created_preview_dir_) fs::remove(dir_ / "preview", ec);
+        if (created_dir_) fs::remove(dir_, ec);  // only if now empty
+    }
+
+    fs::path staged(const std::string& name) const { return staging_ / name; }
+
+    // Previews are visible while the bake runs (so a user can watch), each written atomically.
+    fs::path preview_path(long pass) {
+        const fs::path dir = dir_ / "preview";
+        std::error_code ec;
+        if (!fs::exists(dir, ec)) created_preview_dir_ = fs::create_directories(dir, ec);
+        const fs::path file = dir / fmt::format("pass_{:06d}.png", pass);
+        previews_.push_back(file);
+        return file;
+    }
+
+    // Renames the staged files into place; report.json last, so its presence means complete.
+    void commit(const std::vector<std::string>& names) {
+        for (const auto& name : names) fs::rename(staging_ / name, dir_ / name);
+        std::error_code ec;
+        fs::remove_all(staging_, ec);
+        committed_ = true;
+    }
+
+private:
+    fs::path dir_, staging_;
+    bool created_dir_ = false, created_preview_dir_ = false, committed_ = false;
+    std::vector<fs::path> previews_;
+};
+
+ordered_json vec3(const glm::dvec3& v) { return ordered_json::array({v.x, v.y, v.z}); }
+
+bool all_finite(const std::vector<glm::dvec3>& values) {
+    for (const auto& v : values)
+        if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) return false;
+    return true;
+}
+
+void check_scene(const scene::Scene& scene) {
+    if (scene.triangles.empty())
+        throw InputError(fmt::format("{}: no triangles to bake (no mesh with TRIANGLES primitives)", scene.path.string()));
+    bool emits = false;
+    for (const auto& t : scene.triangles) {
+        const glm::dvec3& e = scene.materials[t.material].emission;
+        emits = emits || e.x > 0.0 || e.y > 0.0 || e.z > 0.0;
+    }
+    if (!emits)
+        throw InputError(fmt::format("{}: nothing emits light (no triangle's material has emission > 0)", scene.path.string()));
+}
+
+void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const solve::Progressive& solver,
+                       const output::View& view, int width, int height, const fs::path& file) {
+    const output::Image image = output::render(scene, mesh, solver.radiosity(/*ambient=*/true), view, width, height);
+    const fs::path tmp = file.parent_path() / (".tmp-" + file.filename().string());
+    output::write_png(image, tmp, output::auto_exposure(image));
+    fs::rename(tmp, file);
+}
+
+class ProgressLine {
+public:
+    explicit ProgressLine(bool on) : on_(on), start_(Clock::now()) {}
+    void update(const solve::Progressive& solver, double threshold) {
+        if (!on_) return;
+        const double elapsed = seconds_since(start_);
+        if (elapsed - last_ < 0.2 && !solver.done()) return;
+        last_ = elapsed;
+        const double err = solver.error();
+        if (first_error_ <= 0.0 && std::isfinite(err) && err > 0.0) {
+            first_error_ = err;
+            first_time_ = elapsed;
+        }
+        // The error falls roughly exponentially with time: extrapolate log(error) linearly.
+        std::string eta = "?";
+        if (first_error_ > 0.0 && err > threshold && err < first_error_ && elapsed > first_time_) {
+            const double rate = std::log(first_error_ / err) / (elapsed - first_time_);
+            eta = fmt::format("~{:.0f} s", std::log(err / threshold) / rate);
+        } else if (solver.done()) {
+            eta = "0 s";
+        }
+        std::fprintf(stderr, "\r\033[Kpass %ld  unshot %.2e  error %.2e  %.1f s  left %s", solver.passes(),
+                     solver.unshot_fraction(), err, elapsed, eta.c_str());
+        std::fflush(stderr);
+    }
+    void finish() {
+        if (on_) std::fprintf(stderr, "\n");
+    }
+
+private:
+    bool on_;
+    Clock::time_point start_;
+    double last_ = -1.0, first_error_ = 0.0, first_time_ = 0.0;
+};
+
+}  // namespace
+
+void list_devices(std::ostream& out, bool json) {
+    if (json) {
+        ordered_json j = ordered_json::array();
+        j.push_back({{"id", "ref"}, {"backend", "ref"}, {"platform", "host"},
+                     {"name", "scalar reference hemicube (1 thread)"}});
+        out << j.dump(2) << "\n";
+    } else {
+        out << "ref   scalar reference hemicube (host, 1 thread)\n";
+    }
+}
+
+void run_bake(const BakeOptions& o) {
+    const auto t_total = Clock::now();
+    if (o.device != "auto" && o.device != "ref")
+        throw InputError(fmt::format("--device {}: this build has only the reference engine (ref)", o.device));
+    if (o.verify) throw InputError("--verify: needs an OpenCL engine to check; this build has only the reference");
+    if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
+
+    auto t0 = Clock::now();
+    const scene::Scene scene = scene::load(o.scene);
+    check_scene(scene);
+    const double t_load = seconds_since(t0);
+    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
+
+    mesh::Settings mesh_settings;
+    const double diagonal = scene.diagonal();
+    if (!(diagonal > 0.0) || !std::isfinite(diagonal))
+        throw InputError(fmt::format("{}: the scene has no extent (all vertices coincide)", o.scene));
+    mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : diagonal * kDefaultPatchFraction;
+    mesh_settings.element_size = o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / kDefaultElementsPerPatchEdge;
+    if (mesh_settings.element_size > mesh_settings.patch_size)
+        throw InputError(fmt::format("--element-size {} is larger than the patch size {}", mesh_settings.element_size, mesh_settings.patch_size));
+    const output::View view = output::choose_view(scene, o.camera);  // fails early on a bad --camera
+    const int width = o.image_width;
+    const int height = std::max(1, static_cast<int>(std::lround(width / view.aspect)));
+
+    t0 = Clock::now();
+    const mesh::Mesh mesh = mesh::build(scene, mesh_settings);
+    const double t_mesh = seconds_since(t0);
+    if (mesh.patches.empty())
+        throw InputError(fmt::format("{}: every triangle has zero area; nothing to bake", o.scene));
+
+    OutputTransaction out(o.output);
+    formfactor::Settings ff_settings;
+    ff_settings.hemicube = o.hemicube;
+    ff_settings.seed = o.seed;
+    formfactor::ReferenceEngine reference(mesh, ff_settings);
+    TimedEngine engine(reference);
+    solve::Settings solve_settings;
+    solve_settings.threshold = o.threshold;
+    solve_settings.max_passes = o.max_passes;
+
+    t0 = Clock::now();
+    solve::Progressive solver(mesh, engine, solve_settings);
+    ProgressLine progress(o.progress);
+    while (solver.step()) {
+        if (o.interrupted && *o.interrupted) throw Interrupted();
+        progress.update(solver, o.threshold);
+        if (o.preview_every > 0 && solver.passes() % o.preview_every == 0)
+            write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
+    }
+    progress.update(solver, o.threshold);
+    progress.finish();
+    const double t_solve = seconds_since(t0) - engine.seconds();
+    if (!solver.converged() && !o.quiet)
+        std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
+                                 o.max_passes, o.threshold, solver.error());
+
+    t0 = Clock::now();
+    const auto radiosity = solver.radiosity(/*ambient=*/true);
+    const auto irradiance = solver.irradiance(/*ambient=*/true);
+    if (!all_finite(radiosity) || !all_finite(irradiance))
+        throw InternalError("the solution has a non-finite value; nothing written");
+    output::write_baked_gltf(out.staged("baked.gltf"), scene, mesh, radiosity);
+    const output::Image image = output::render(scene, mesh, radiosity, view, width, height);
+    output::write_exr(image, out.staged("render.exr"));
+    output::write_png(image, out.staged("render.png"), output::auto_exposure(image));
+    const double t_output_files = seconds_since(t0);
+
+    const solve::Energy energy = solver.energy();
+    const glm::dvec3 ambient = solver.ambient();
+    ordered_json report;
+    report["version"] = HEMIRAD_VERSION;
+    report["scene"] = o.scene;
+    report["device"] = {{"backend", "ref"}, {"platform", "host"}, {"name", "scalar reference hemicube (1 thread)"}};
+    report["settings"] = {
+        {"hemicube", o.hemicube},
+        {"patch_size", mesh_settings.patch_size},
+        {"element_size", mesh_settings.element_size},
+        {"threshold", o.threshold},
+        {"max_passes", o.max_passes},
+        {"seed", o.seed},
+        {"verify", o.verify},
+        {"solver", "progressive"},
+        {"camera", view.name},
+        {"image", {width, height}},
+        {"preview_every", o.preview_every},
+    };
+    report["counts"] = {{"triangles", scene.triangles.size()},
+                        {"patches", mesh.patches.size()},
+                        {"elements", mesh.elements.size()},
+                        {"quads", mesh.quads},
+                        {"dropped_triangles", mesh.dropped_triangles},
+                        {"skipped_primitives", scene.skipped_primitives}};
+    report["passes"] = solver.passes();
+    report["converged"] = solver.converged();
+    report["error"] = solver.error();
+    report["energy"] = {{"emitted", energy.emitted},
+                        {"absorbed", energy.absorbed},
+                        {"escaped", energy.escaped},
+                        {"unshot", energy.unshot},
+                        {"unshot_fraction", solver.unshot_fraction()},
+                        {"ambient_irradiance", vec3(ambient)}};
+    report["effects"] = {
+        {"occlusion", {{"on", true}, {"why", "hemicube z-buffer; per-scene planning is not implemented yet"}}},
+        {"colour", {{"on", true}, {"why", "three channels solved; per-scene planning is not implemented yet"}}},
+        {"interreflection", {{"on", true}, {"why", "progressive shooting until the threshold"}}},
+        {"ambient", {{"on", true}, {"why", "the unshot flux is added as an ambient term (Cohen et al. 1988) with the measured reflectance"}}},
+        {"two_sided", {{"on", std::any_of(scene.materials.begin(), scene.materials.end(), [](const auto& m) { return m.double_sided; })},
+                       {"why", "doubleSided materials get patches on both sides"}}},
+        {"refinement", {{"on", false}, {"why", "adaptive subdivision is not implemented yet"}}},
+    };
+    report["timings_s"] = ordered_json::object();  // filled below, after the report is sized
+    ordered_json meshes = ordered_json::array();
+    for (const auto& s : output::summarize(scene, mesh, radiosity, irradiance))
+        meshes.push_back({{"name", s.name}, {"area", s.area}, {"radiosity", vec3(s.radiosity)}, {"irradiance", vec3(s.irradiance)}});
+    report["meshes"] = meshes;
+    report["warnings"] = scene.warnings;
+    report["timings_s"] = {{"load", t_load},
+                           {"mesh", t_mesh},
+                           {"formfactors", engine.seconds()},
+                           {"solve", t_solve},
+                           {"output", t_output_files},
+                           {"total", seconds_since(t_total)}};
+    {
+        std::ofstream f(out.staged("report.json"));
+        f << report.dump(2) << "\n";
+        if (!f) throw InternalError("cannot write report.json");
+    }
+    out.commit({"baked.gltf", "baked.bin", "render.exr", "render.png", "report.json"});
+    if (!o.quiet)
+        std::cerr << fmt::format("hemirad: {} passes, error {:.2e}, wrote {}/report.json, baked.gltf, render.exr, render.png\n",
+                                 solver.passes(), solver.error(), o.output);
+}
+
+}  // namespace hemirad::cli
