@@ -28,7 +28,7 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->capture_default_str();
     bake.add_option("--hemicube", o.hemicube, "hemicube resolution N: top face N×N plus four N×N/2 half faces")
         ->check(CLI::Range(8, 4096))->capture_default_str();
-    bake.add_option("--patch-size", o.patch_size, "maximum patch edge, scene units (default: scene diagonal / 24)")
+    bake.add_option("--patch-size", o.patch_size, "maximum patch edge, scene units (default: scene diagonal / 16)")
         ->check(CLI::PositiveNumber);
     bake.add_option("--element-size", o.element_size, "maximum element edge, scene units (default: patch size / 3)")
         ->check(CLI::PositiveNumber);

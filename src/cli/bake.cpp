@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/error.h"
+#include "formfactor/near_field.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
 #include "output/output.h"
@@ -212,8 +213,8 @@ void run_bake(const BakeOptions& o) {
     formfactor::Settings ff_settings;
     ff_settings.hemicube = o.hemicube;
     ff_settings.seed = o.seed;
-    formfactor::ReferenceEngine reference(mesh, ff_settings);
-    TimedEngine engine(reference);
+    formfactor::NearFieldEngine near_field(mesh, std::make_unique<formfactor::ReferenceEngine>(mesh, ff_settings));
+    TimedEngine engine(near_field);
     solve::Settings solve_settings;
     solve_settings.threshold = o.threshold;
     solve_settings.max_passes = o.max_passes;
@@ -283,6 +284,7 @@ void run_bake(const BakeOptions& o) {
         {"occlusion", {{"on", true}, {"why", "hemicube z-buffer; per-scene planning is not implemented yet"}}},
         {"colour", {{"on", true}, {"why", "three channels solved; per-scene planning is not implemented yet"}}},
         {"interreflection", {{"on", true}, {"why", "progressive shooting until the threshold"}}},
+        {"near_field", {{"on", true}, {"why", fmt::format("receivers within {} shooter radii get the exact form factor at their centroid, scaled by the visible share the hemicube measured", formfactor::NearFieldEngine::kDefaultReach)}}},
         {"ambient", {{"on", true}, {"why", "the unshot flux is added as an ambient term (Cohen et al. 1988) with the measured reflectance"}}},
         {"two_sided", {{"on", std::any_of(scene.materials.begin(), scene.materials.end(), [](const auto& m) { return m.double_sided; })},
                        {"why", "doubleSided materials get patches on both sides"}}},

@@ -28,7 +28,7 @@ struct BakeOptions {
     const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT/SIGTERM
 };
 
-inline constexpr double kDefaultPatchFraction = 1.0 / 24.0;
+inline constexpr double kDefaultPatchFraction = 1.0 / 16.0;
 inline constexpr double kDefaultElementsPerPatchEdge = 3.0;
 
 // Thrown when the user interrupts a bake; nothing has been written (or it was removed).

@@ -45,6 +45,19 @@ void clip(ClipPolygon& poly, Plane plane) {
     poly = out;
 }
 
+// Clips only where the plane cuts the polygon; false when it is wholly outside.
+template <class Plane>
+bool clip_if_needed(ClipPolygon& poly, Plane plane) {
+    bool any_in = false, any_out = false;
+    for (int i = 0; i < poly.n; ++i) {
+        const bool in = plane(poly.v[i]) >= 0.0;
+        any_in = any_in || in;
+        any_out = any_out || !in;
+    }
+    if (any_out && any_in) clip(poly, plane);
+    return any_in && poly.n >= 3;
+}
+
 // Top-left rule for a counter-clockwise polygon: a cell centre exactly on an edge belongs to
 // the polygon only for edges going down, or going right along a horizontal; the neighbour
 // that shares the edge walks it the other way, so exactly one of the two owns the centre.
@@ -59,6 +72,12 @@ double edge_function(double ax, double ay, double bx, double by, double x, doubl
 }
 
 }  // namespace
+
+bool ReferenceEngine::above_base_plane(const mesh::Polygon& poly, const Frame& frame) const {
+    for (int i = 0; i < poly.n; ++i)
+        if (frame.to_local(poly.v[i]).z > eps_) return true;
+    return false;
+}
 
 ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& settings)
     : mesh_(mesh), settings_(settings), delta_(settings.hemicube) {
@@ -87,6 +106,10 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
     for (std::size_t k = 0; k < mesh_.elements.size(); ++k) {
         const mesh::Element& e = mesh_.elements[k];
         if (e.patch == patch) continue;  // the shooter's own elements lie in its base plane
+        if (k == mesh_.patches[e.patch].first_element && !above_base_plane(mesh_.patches[e.patch].poly, frame)) {
+            k += mesh_.patches[e.patch].element_count - 1;  // elements tile their patch: all are below
+            continue;
+        }
         const double facing = glm::dot(e.normal, frame.origin - e.centroid);
         const bool is_back = facing < 0.0;
         if (is_back && e.has_twin) continue;  // the twin draws this surface from this side
@@ -103,15 +126,19 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
         for (int face = 0; face < kFaces; ++face) {
             ClipPolygon poly;
             for (int i = 0; i < e.poly.n; ++i) poly.v[poly.n++] = to_face(face, local[i]);
-            // Frustum of the face, and the base plane z >= eps (z is d on top, v on the sides).
+            // The face's frustum: the base plane z >= eps (z is d on top, v on the sides), then
+            // |u| <= d and |v| <= d (v <= d only on the sides). Clipping is skipped for planes
+            // no vertex crosses, and the face for a plane every vertex is outside of.
             const double eps = eps_;
-            if (face == 0) clip(poly, [eps](const glm::dvec3& p) { return p.z - eps; });
-            else clip(poly, [eps](const glm::dvec3& p) { return p.y - eps; });
-            clip(poly, [](const glm::dvec3& p) { return p.z - p.x; });
-            clip(poly, [](const glm::dvec3& p) { return p.z + p.x; });
-            clip(poly, [](const glm::dvec3& p) { return p.z - p.y; });
-            if (face == 0) clip(poly, [](const glm::dvec3& p) { return p.z + p.y; });
-            if (poly.n < 3) continue;
+            const auto base_plane = [eps, face](const glm::dvec3& p) { return (face == 0 ? p.z : p.y) - eps; };
+            const auto right = [](const glm::dvec3& p) { return p.z - p.x; };
+            const auto left = [](const glm::dvec3& p) { return p.z + p.x; };
+            const auto top = [](const glm::dvec3& p) { return p.z - p.y; };
+            const auto bottom = [](const glm::dvec3& p) { return p.z + p.y; };
+            const bool visible = clip_if_needed(poly, base_plane) && clip_if_needed(poly, right) &&
+                                 clip_if_needed(poly, left) && clip_if_needed(poly, top) &&
+                                 (face != 0 || clip_if_needed(poly, bottom));
+            if (!visible) continue;
 
             // The element's plane n·p = c in face coordinates gives depth exactly:
             // with s = u/d, t = v/d, 1/d = (n_u s + n_v t + n_d) / c.

@@ -27,6 +27,8 @@ private:
     double eps_;  // base-plane clip distance, relative to the scene's size
     std::vector<std::int32_t> ids_;
     std::vector<double> depth_;  // 1/d per cell, larger is nearer
+
+    bool above_base_plane(const mesh::Polygon& poly, const Frame& frame) const;
 };
 
 }  // namespace hemirad::formfactor

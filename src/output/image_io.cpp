@@ -14,6 +14,8 @@ namespace {
 
 // Exposure puts this luminance percentile at 1: bright walls, not the few emitter pixels.
 constexpr double kExposurePercentile = 0.9;
+// Where that percentile lands on the display, linear: ~0.8 after sRGB, so lit walls keep detail.
+constexpr double kExposureTarget = 0.6;
 // Tone curve: identity up to the knee, then a Reinhard shoulder that approaches 1 smoothly
 // (continuous slope), so mid-tones keep their ratios and emitters roll off instead of clipping.
 constexpr double kKnee = 0.8;
@@ -67,7 +69,7 @@ double auto_exposure(const Image& image) {
     if (lit.empty()) return 1.0;
     const auto nth = lit.begin() + std::ptrdiff_t(kExposurePercentile * double(lit.size() - 1));
     std::nth_element(lit.begin(), nth, lit.end());
-    return 1.0 / *nth;
+    return kExposureTarget / *nth;
 }
 
 void write_exr(const Image& image, const std::filesystem::path& file) {
