@@ -90,7 +90,7 @@ int run(int argc, char** argv) {
         std::cerr << "hemirad: " << e.what() << "\n";
         return 2;
     } catch (const Interrupted&) {
-        std::cerr << "\nhemirad: interrupted; no output written\n";
+        std::cerr << (bake_options.progress ? "\n" : "") << "hemirad: interrupted; no output written\n";
         return 130;
     } catch (const std::bad_alloc&) {
         std::cerr << "hemirad: out of memory\n";

@@ -55,8 +55,12 @@ private:
 class OutputTransaction {
 public:
     explicit OutputTransaction(const fs::path& dir) : dir_(dir) {
+        // Remember every directory this run creates (parents too), to remove them on failure.
         std::error_code ec;
-        created_dir_ = !fs::exists(dir_, ec);
+        for (fs::path p = fs::absolute(dir_, ec); !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
+            created_dirs_.push_back(p);
+            if (p == p.parent_path()) break;
+        }
         fs::create_directories(dir_, ec);
         if (ec || !fs::is_directory(dir_))
             throw InputError(fmt::format("{}: cannot create output directory: {}", dir_.string(), ec ? ec.message() : "not a directory"));
@@ -73,7 +77,7 @@ public:
         fs::remove_all(staging_, ec);
         for (const auto& f : previews_) fs::remove(f, ec);
         if (created_preview_dir_) fs::remove(dir_ / "preview", ec);
-        if (created_dir_) fs::remove(dir_, ec);  // only if now empty
+        for (const auto& d : created_dirs_) fs::remove(d, ec);  // deepest first; only if empty
     }
 
     fs::path staged(const std::string& name) const { return staging_ / name; }
@@ -89,8 +93,18 @@ public:
     }
 
     // Renames the staged files into place; report.json last, so its presence means complete.
+    // Should a rename fail part-way, the files already moved are taken out again.
     void commit(const std::vector<std::string>& names) {
-        for (const auto& name : names) fs::rename(staging_ / name, dir_ / name);
+        std::vector<fs::path> moved;
+        for (const auto& name : names) {
+            std::error_code ec;
+            fs::rename(staging_ / name, dir_ / name, ec);
+            if (ec) {
+                for (const auto& f : moved) fs::remove(f, ec);
+                throw InternalError(fmt::format("{}: cannot move {} into place: {}", dir_.string(), name, ec.message()));
+            }
+            moved.push_back(dir_ / name);
+        }
         std::error_code ec;
         fs::remove_all(staging_, ec);
         committed_ = true;
@@ -98,8 +112,8 @@ public:
 
 private:
     fs::path dir_, staging_;
-    bool created_dir_ = false, created_preview_dir_ = false, committed_ = false;
-    std::vector<fs::path> previews_;
+    bool created_preview_dir_ = false, committed_ = false;
+    std::vector<fs::path> previews_, created_dirs_;
 };
 
 ordered_json vec3(const glm::dvec3& v) { return ordered_json::array({v.x, v.y, v.z}); }
@@ -189,7 +203,6 @@ void run_bake(const BakeOptions& o) {
     const scene::Scene scene = scene::load(o.scene);
     check_scene(scene);
     const double t_load = seconds_since(t0);
-    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
 
     mesh::Settings mesh_settings;
     const double diagonal = scene.diagonal();
@@ -210,6 +223,8 @@ void run_bake(const BakeOptions& o) {
         throw InputError(fmt::format("{}: every triangle has zero area; nothing to bake", o.scene));
 
     OutputTransaction out(o.output);
+    // Only now, so that bad input is always exactly one line on stderr.
+    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
     formfactor::Settings ff_settings;
     ff_settings.hemicube = o.hemicube;
     ff_settings.seed = o.seed;
@@ -290,7 +305,7 @@ void run_bake(const BakeOptions& o) {
                        {"why", "doubleSided materials get patches on both sides"}}},
         {"refinement", {{"on", false}, {"why", "adaptive subdivision is not implemented yet"}}},
     };
-    report["timings_s"] = ordered_json::object();  // filled below, after the report is sized
+    report["timings_s"] = ordered_json::object();  // keeps the contract's key order; filled last
     ordered_json meshes = ordered_json::array();
     for (const auto& s : output::summarize(scene, mesh, radiosity, irradiance))
         meshes.push_back({{"name", s.name}, {"area", s.area}, {"radiosity", vec3(s.radiosity)}, {"irradiance", vec3(s.irradiance)}});

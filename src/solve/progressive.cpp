@@ -1,6 +1,6 @@
 // Progressive refinement: shoot the patch with the most unshot flux, let elements receive and
-// send what they reflect up to their patch, keep exact flux books, and estimate how much of
-// the final answer the ambient term cannot yet place.
+// send what they reflect up to their patch, keep exact flux books, stand in for the unshot
+// flux with a measured ambient term, and stop once that estimate or a round's change is small.
 #include "solve/progressive.h"
 
 #include <algorithm>

@@ -1,0 +1,818 @@
+// End-to-end tests of the hemirad executable: every test runs the real binary through
+// /bin/sh in a fresh temporary directory and checks its files, report and exit code against
+// facts computed here, independently of the library (DESIGN.md "Interface").
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+#include <OpenImageIO/imageio.h>
+#include <tiny_gltf.h>
+
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+const fs::path kSourceDir = HEMIRAD_SOURCE_DIR;
+const fs::path kClosedRoom = kSourceDir / "scenes" / "closed_room.gltf";
+const fs::path kCornellBox = kSourceDir / "scenes" / "cornell_box.gltf";
+
+// closed_room is about 6.7 m across: large patches keep every bake well under a second.
+const std::vector<std::string> kFast = {"--hemicube", "32",           "--patch-size", "1.0",
+                                        "--element-size", "0.5",      "--max-passes", "200",
+                                        "--image-width", "64",        "--quiet"};
+
+std::string shell_quote(const std::string& s) {
+    std::string q = "'";
+    for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return q + "'";
+}
+
+std::string read_text(const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+void write_text(const fs::path& file, const std::string& text) {
+    std::ofstream out(file, std::ios::binary);
+    out << text;
+    REQUIRE(out.good());
+}
+
+json read_json(const fs::path& file) { return json::parse(read_text(file)); }
+
+void write_json(const fs::path& file, const json& j) { write_text(file, j.dump(2)); }
+
+// A fresh, empty directory of this test's own, removed with everything in it at the end.
+class TempDir {
+public:
+    TempDir() {
+        static std::atomic<int> counter{0};
+        const auto now = std::chrono::steady_clock::now().time_since_epoch().count();
+        path_ = fs::temp_directory_path() /
+                ("hemirad-cli-test-" + std::to_string(getpid()) + "-" + std::to_string(counter++) + "-" +
+                 std::to_string(now));
+        fs::create_directories(path_);
+    }
+    TempDir(const TempDir&) = delete;
+    TempDir& operator=(const TempDir&) = delete;
+    ~TempDir() {
+        std::error_code ec;
+        fs::remove_all(path_, ec);
+    }
+    const fs::path& path() const { return path_; }
+    fs::path operator/(const std::string& name) const { return path_ / name; }
+
+private:
+    fs::path path_;
+};
+
+struct RunResult {
+    int code = -1;
+    std::string out, err;
+};
+
+// Runs `sh -c "<script>"` in `cwd`, stdout and stderr captured to files beside (not in) any
+// output directory the script names.
+RunResult run_shell(const TempDir& dir, const std::string& script) {
+    static std::atomic<int> counter{0};
+    const int n = counter++;
+    const fs::path out = dir / ("stdout-" + std::to_string(n) + ".txt");
+    const fs::path err = dir / ("stderr-" + std::to_string(n) + ".txt");
+    const std::string command = "cd " + shell_quote(dir.path().string()) + " && { " + script + " ; } >" +
+                                shell_quote(out.string()) + " 2>" + shell_quote(err.string());
+    const int status = std::system(command.c_str());  // std::system runs /bin/sh -c "command"
+    RunResult r;
+    REQUIRE(status != -1);
+    REQUIRE(WIFEXITED(status));
+    r.code = WEXITSTATUS(status);
+    r.out = read_text(out);
+    r.err = read_text(err);
+    fs::remove(out);
+    fs::remove(err);
+    return r;
+}
+
+// Runs the hemirad executable with `args` (each quoted), working directory `dir`.
+RunResult hemirad(const TempDir& dir, const std::vector<std::string>& args) {
+    std::string script = shell_quote(HEMIRAD_EXE);
+    for (const auto& a : args) script += " " + shell_quote(a);
+    return run_shell(dir, script);
+}
+
+std::vector<std::string> concat(std::vector<std::string> a, const std::vector<std::string>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+}
+
+std::vector<std::string> bake_args(const fs::path& scene, const fs::path& out,
+                                   const std::vector<std::string>& extra = kFast) {
+    return concat({"bake", scene.string(), "-o", out.string()}, extra);
+}
+
+// Runs a bake that must succeed.
+json bake_ok(const TempDir& dir, const fs::path& scene, const fs::path& out,
+             const std::vector<std::string>& extra = kFast) {
+    const RunResult r = hemirad(dir, bake_args(scene, out, extra));
+    INFO("stderr: " << r.err);
+    REQUIRE(r.code == 0);
+    REQUIRE(fs::is_regular_file(out / "report.json"));
+    return read_json(out / "report.json");
+}
+
+std::set<std::string> listing(const fs::path& dir) {
+    std::set<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir)) names.insert(e.path().filename().string());
+    return names;
+}
+
+// Names of the file's nodes that hold a mesh, as DESIGN.md defines them: node name, else mesh
+// name, else node<index>; in node order, reached from the default scene through children.
+std::vector<std::string> expected_mesh_names(const json& gltf) {
+    const json& nodes = gltf.at("nodes");
+    std::vector<bool> reached(nodes.size(), false);
+    const int scene = gltf.value("scene", 0);
+    std::vector<int> stack;
+    for (const auto& n : gltf.at("scenes").at(scene).at("nodes")) stack.push_back(n.get<int>());
+    while (!stack.empty()) {
+        const int n = stack.back();
+        stack.pop_back();
+        reached.at(std::size_t(n)) = true;
+        if (nodes[std::size_t(n)].contains("children"))
+            for (const auto& c : nodes[std::size_t(n)]["children"]) stack.push_back(c.get<int>());
+    }
+    std::vector<std::string> names;
+    for (std::size_t i = 0; i < nodes.size(); ++i) {
+        const json& node = nodes[i];
+        if (!reached[i] || !node.contains("mesh")) continue;
+        std::string name = node.value("name", "");
+        if (name.empty()) name = gltf.at("meshes").at(node["mesh"].get<std::size_t>()).value("name", "");
+        if (name.empty()) name = "node" + std::to_string(i);
+        names.push_back(name);
+    }
+    return names;
+}
+
+std::vector<std::string> sorted(std::vector<std::string> v) {
+    std::sort(v.begin(), v.end());
+    return v;
+}
+
+std::vector<std::string> report_mesh_names(const json& report) {
+    std::vector<std::string> names;
+    for (const auto& m : report.at("meshes")) names.push_back(m.at("name").get<std::string>());
+    return names;
+}
+
+// Every number anywhere in `j` is finite.
+bool all_numbers_finite(const json& j) {
+    if (j.is_number()) return std::isfinite(j.get<double>());
+    if (j.is_array() || j.is_object()) {
+        for (const auto& v : j)
+            if (!all_numbers_finite(v)) return false;
+    }
+    return true;
+}
+
+int count_lines(const std::string& text) { return int(std::count(text.begin(), text.end(), '\n')); }
+
+// The error message is one line (ending in '\n', no other newline, not blank).
+void check_one_line(const std::string& err) {
+    INFO("stderr: [" << err << "]");
+    CHECK(count_lines(err) == 1);
+    CHECK(!err.empty());
+    CHECK(err.back() == '\n');
+    CHECK(err.find_first_not_of(" \t\r\n") != std::string::npos);
+}
+
+// A bad-input run: exit 2, one line on stderr naming `token`, and `out` not created.
+RunResult expect_bad_input(const TempDir& dir, const std::vector<std::string>& args, const fs::path& out,
+                           const std::string& token) {
+    REQUIRE(!fs::exists(out));
+    const RunResult r = hemirad(dir, args);
+    INFO("stderr: [" << r.err << "]");
+    CHECK(r.code == 2);
+    check_one_line(r.err);
+    CHECK(r.err.find(token) != std::string::npos);
+    CHECK(!fs::exists(out));
+    CHECK(r.out.empty());
+    return r;
+}
+
+// closed_room.gltf scaled by `s` about the origin: a new root node with scale [s, s, s] whose
+// children are the scene's old roots; the scene holds only the new node.
+json scaled_scene(const json& original, double s) {
+    json g = original;
+    json root = {{"name", "scale_root"}, {"scale", {s, s, s}}, {"children", g["scenes"][0]["nodes"]}};
+    g["nodes"].push_back(root);
+    g["scenes"][0]["nodes"] = json::array({g["nodes"].size() - 1});
+    return g;
+}
+
+struct ImageData {
+    int width = 0, height = 0, channels = 0;
+    std::vector<float> pixels;
+};
+
+ImageData read_image(const fs::path& file) {
+    ImageData image;
+    auto in = OIIO::ImageInput::open(file.string());
+    INFO("OpenImageIO: " << OIIO::geterror());
+    REQUIRE(in);
+    const OIIO::ImageSpec& spec = in->spec();
+    image.width = spec.width;
+    image.height = spec.height;
+    image.channels = spec.nchannels;
+    image.pixels.resize(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(spec.nchannels));
+    REQUIRE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data()));
+    in->close();
+    return image;
+}
+
+// The camera's aspect ratio from the .gltf JSON (closed_room has one perspective camera).
+double camera_aspect(const json& gltf) {
+    return gltf.at("cameras").at(0).at("perspective").at("aspectRatio").get<double>();
+}
+
+}  // namespace
+
+TEST_CASE("bake writes exactly the five output files and a complete report", "[cli]") {
+    TempDir dir;
+    const fs::path out = dir / "out";
+    const json report = bake_ok(dir, kClosedRoom, out, concat(kFast, {"--threshold", "0.002", "--seed", "3"}));
+
+    CHECK(listing(out) == std::set<std::string>{"report.json", "baked.gltf", "baked.bin", "render.exr", "render.png"});
+    CHECK(all_numbers_finite(report));
+
+    for (const char* key : {"version", "scene", "device", "settings", "counts", "passes", "converged", "energy",
+                            "effects", "timings_s", "meshes"}) {
+        INFO("key " << key);
+        CHECK(report.contains(key));
+    }
+    CHECK(report.at("version").is_string());
+    CHECK(!report.at("version").get<std::string>().empty());
+    CHECK(report.at("scene").get<std::string>().find("closed_room.gltf") != std::string::npos);
+
+    const json& device = report.at("device");
+    CHECK(device.at("backend") == "ref");
+    CHECK(device.at("platform").is_string());
+    CHECK(device.at("name").is_string());
+
+    const json& settings = report.at("settings");
+    CHECK(settings.at("hemicube").get<int>() == 32);
+    CHECK(settings.at("patch_size").get<double>() == Approx(1.0));
+    CHECK(settings.at("element_size").get<double>() == Approx(0.5));
+    CHECK(settings.at("threshold").get<double>() == Approx(0.002));
+    CHECK(settings.at("seed").get<std::uint64_t>() == 3u);
+
+    const json& counts = report.at("counts");
+    CHECK(counts.at("triangles").get<long>() > 0);
+    CHECK(counts.at("patches").get<long>() > 0);
+    CHECK(counts.at("elements").get<long>() >= counts.at("patches").get<long>());
+
+    CHECK(report.at("passes").is_number_integer());
+    CHECK(report.at("passes").get<long>() > 0);
+    CHECK(report.at("passes").get<long>() <= 200);
+    CHECK(report.at("converged").is_boolean());
+
+    const json& energy = report.at("energy");
+    const double emitted = energy.at("emitted").get<double>();
+    const double absorbed = energy.at("absorbed").get<double>();
+    const double escaped = energy.at("escaped").get<double>();
+    const double unshot = energy.at("unshot").get<double>();
+    CHECK(emitted > 0.0);
+    CHECK(absorbed > 0.0);
+    CHECK(unshot >= 0.0);
+    CHECK(std::abs(emitted - (absorbed + escaped + unshot)) <= 1e-6 * std::abs(emitted));
+    // closed_room's light: a 1 m x 1 m panel of radiance 10 (emissiveFactor 1 x strength 10),
+    // so the emitted power, in the report's radiosity-times-area units, is 10 x 1 m^2.
+    CHECK(emitted == Approx(10.0).epsilon(1e-6));
+
+    const json& effects = report.at("effects");
+    REQUIRE(effects.is_object());
+    CHECK(effects.at("occlusion").at("on").is_boolean());
+    CHECK(effects.at("occlusion").at("why").is_string());
+    for (const auto& [name, effect] : effects.items()) {
+        INFO("effect " << name);
+        CHECK(effect.at("on").is_boolean());
+        CHECK(effect.at("why").is_string());
+    }
+
+    const json& timings = report.at("timings_s");
+    for (const char* key : {"load", "mesh", "formfactors", "solve", "output", "total"}) {
+        INFO("timing " << key);
+        REQUIRE(timings.contains(key));
+        CHECK(timings.at(key).get<double>() >= 0.0);
+    }
+
+    const json gltf = read_json(kClosedRoom);
+    const std::vector<std::string> expected = expected_mesh_names(gltf);
+    REQUIRE(expected.size() == 8);  // closed_room: floor, ceiling, four walls, light, cube
+    CHECK(sorted(report_mesh_names(report)) == sorted(expected));
+    double total_area = 0.0;
+    for (const auto& m : report.at("meshes")) {
+        INFO("mesh " << m.at("name"));
+        CHECK(m.at("area").get<double>() > 0.0);
+        total_area += m.at("area").get<double>();
+        REQUIRE(m.at("radiosity").size() == 3);
+        REQUIRE(m.at("irradiance").size() == 3);
+        for (int c = 0; c < 3; ++c) {
+            CHECK(m.at("radiosity")[c].get<double>() >= 0.0);
+            CHECK(m.at("irradiance")[c].get<double>() >= 0.0);
+        }
+        if (m.at("name") == "light") CHECK(m.at("radiosity")[0].get<double>() >= 10.0);
+        if (m.at("name") == "floor") CHECK(m.at("area").get<double>() == Approx(4.0 * 5.0).epsilon(1e-9));
+    }
+    // Room 4 x 2.5 x 5 m: floor + ceiling 40, walls 2 x 10 + 2 x 12.5, light 1, cube 5 faces of 0.64.
+    CHECK(total_area == Approx(40.0 + 20.0 + 25.0 + 1.0 + 5 * 0.64).epsilon(1e-6));
+}
+
+TEST_CASE("baked.gltf is a valid glTF with one node per mesh node and finite COLOR_0", "[cli]") {
+    TempDir dir;
+    const fs::path out = dir / "out";
+    bake_ok(dir, kClosedRoom, out);
+
+    const std::string baked_text = read_text(out / "baked.gltf");
+    CHECK(baked_text.find(".hemirad-tmp") == std::string::npos);  // no staging path leaked
+
+    tinygltf::TinyGLTF loader;
+    tinygltf::Model model;
+    std::string err, warn;
+    const bool ok = loader.LoadASCIIFromFile(&model, &err, &warn, (out / "baked.gltf").string());
+    INFO("tinygltf error: " << err << " warning: " << warn);
+    REQUIRE(ok);
+    CHECK(err.empty());
+    CHECK(model.asset.version == "2.0");
+    REQUIRE(model.buffers.size() == 1);
+    CHECK(model.buffers[0].uri == "baked.bin");
+
+    const std::vector<std::string> expected = expected_mesh_names(read_json(kClosedRoom));
+    std::vector<std::string> names;
+    for (const auto& node : model.nodes) {
+        CHECK(node.mesh >= 0);
+        names.push_back(node.name);
+    }
+    CHECK(sorted(names) == sorted(expected));
+
+    int colour_accessors = 0;
+    for (const auto& mesh : model.meshes) {
+        for (const auto& prim : mesh.primitives) {
+            REQUIRE(prim.attributes.count("POSITION") == 1);
+            REQUIRE(prim.attributes.count("COLOR_0") == 1);
+            const tinygltf::Accessor& pos = model.accessors.at(std::size_t(prim.attributes.at("POSITION")));
+            const tinygltf::Accessor& col = model.accessors.at(std::size_t(prim.attributes.at("COLOR_0")));
+            CHECK(col.componentType == TINYGLTF_COMPONENT_TYPE_FLOAT);
+            CHECK(col.type == TINYGLTF_TYPE_VEC3);
+            CHECK(col.count == pos.count);
+            CHECK(col.count > 0);
+            CHECK(!col.sparse.isSparse);
+            REQUIRE(col.bufferView >= 0);
+            const tinygltf::BufferView& view = model.bufferViews.at(std::size_t(col.bufferView));
+            const tinygltf::Buffer& buffer = model.buffers.at(std::size_t(view.buffer));
+            const std::size_t stride = view.byteStride != 0 ? view.byteStride : 3 * sizeof(float);
+            const std::size_t start = view.byteOffset + col.byteOffset;
+            REQUIRE(start + (col.count - 1) * stride + 3 * sizeof(float) <= view.byteOffset + view.byteLength);
+            REQUIRE(view.byteOffset + view.byteLength <= buffer.data.size());
+            bool finite = true, non_negative = true, some_light = false;
+            for (std::size_t i = 0; i < col.count; ++i) {
+                float rgb[3];
+                std::memcpy(rgb, buffer.data.data() + start + i * stride, sizeof rgb);
+                for (float v : rgb) {
+                    finite = finite && std::isfinite(v);
+                    non_negative = non_negative && v >= 0.0f;
+                    some_light = some_light || v > 0.0f;
+                }
+            }
+            INFO("mesh " << mesh.name);
+            CHECK(finite);
+            CHECK(non_negative);
+            CHECK(some_light);
+            ++colour_accessors;
+        }
+    }
+    CHECK(colour_accessors >= int(expected.size()));
+}
+
+TEST_CASE("render.png and render.exr have the requested size and the camera aspect", "[cli]") {
+    TempDir dir;
+    const fs::path out = dir / "out";
+    const json report = bake_ok(dir, kClosedRoom, out);
+
+    const json gltf = read_json(kClosedRoom);
+    const double aspect = camera_aspect(gltf);
+    REQUIRE(aspect == Approx(4.0 / 3.0));
+    const int width = 64;
+    const int height = int(std::lround(width / aspect));
+    REQUIRE(height == 48);
+
+    const ImageData png = read_image(out / "render.png");
+    CHECK(png.width == width);
+    CHECK(png.height == height);
+    REQUIRE(png.channels >= 3);
+    float brightest = 0.0f;
+    for (std::size_t p = 0; p < png.pixels.size(); p += std::size_t(png.channels))
+        for (int c = 0; c < 3; ++c) brightest = std::max(brightest, png.pixels[p + std::size_t(c)]);
+    CHECK(brightest > 0.0f);  // not all black
+
+    const ImageData exr = read_image(out / "render.exr");
+    CHECK(exr.width == width);
+    CHECK(exr.height == height);
+    REQUIRE(exr.channels >= 3);
+    bool finite = true, non_negative = true;
+    float exr_brightest = 0.0f;
+    for (float v : exr.pixels) {
+        finite = finite && std::isfinite(v);
+        non_negative = non_negative && v >= 0.0f;
+        exr_brightest = std::max(exr_brightest, v);
+    }
+    CHECK(finite);
+    CHECK(non_negative);
+    CHECK(exr_brightest > 0.0f);
+
+    // The report states the size it rendered at.
+    CHECK(report.at("settings").at("image") == json::array({width, height}));
+
+    SECTION("the Cornell box camera is square") {
+        const fs::path out2 = dir / "cornell";
+        bake_ok(dir, kCornellBox, out2,
+                {"--hemicube", "32", "--patch-size", "0.15", "--element-size", "0.075", "--max-passes", "200",
+                 "--image-width", "40", "--quiet"});
+        const double cornell_aspect = camera_aspect(read_json(kCornellBox));
+        const ImageData cornell = read_image(out2 / "render.png");
+        CHECK(cornell.width == 40);
+        CHECK(cornell.height == int(std::lround(40 / cornell_aspect)));
+    }
+}
+
+TEST_CASE("bakes are deterministic and the seed changes the result", "[cli]") {
+    TempDir dir;
+    const json a = bake_ok(dir, kClosedRoom, dir / "a");
+    const json b = bake_ok(dir, kClosedRoom, dir / "b");
+    const std::vector<std::string> seed7 = concat(kFast, {"--seed", "7"});
+    const json c = bake_ok(dir, kClosedRoom, dir / "c", seed7);
+
+    const std::string bin_a = read_text(dir / "a" / "baked.bin");
+    const std::string bin_b = read_text(dir / "b" / "baked.bin");
+    const std::string bin_c = read_text(dir / "c" / "baked.bin");
+    REQUIRE(!bin_a.empty());
+    CHECK(bin_a == bin_b);
+    CHECK(a.at("meshes") == b.at("meshes"));
+    CHECK(a.at("energy") == b.at("energy"));
+    CHECK(a.at("passes") == b.at("passes"));
+
+    CHECK(c.at("settings").at("seed").get<std::uint64_t>() == 7u);
+    CHECK(bin_c.size() == bin_a.size());  // same mesh
+    CHECK(bin_c != bin_a);                // different hemicube rotations
+}
+
+TEST_CASE("bad input exits 2 with one line on stderr and no output directory", "[cli]") {
+    TempDir dir;
+    const fs::path out = dir / "never";
+    const json room = read_json(kClosedRoom);
+
+    SECTION("missing scene file") {
+        expect_bad_input(dir, bake_args(dir / "no_such_scene.gltf", out), out, "no_such_scene.gltf");
+    }
+    SECTION("truncated JSON") {
+        const std::string text = read_text(kClosedRoom);
+        const fs::path file = dir / "truncated.gltf";
+        write_text(file, text.substr(0, text.size() / 2));
+        expect_bad_input(dir, bake_args(file, out), out, "truncated.gltf");
+    }
+    SECTION("not JSON at all") {
+        const fs::path file = dir / "garbage.gltf";
+        write_text(file, "this is not a glTF file\n");
+        expect_bad_input(dir, bake_args(file, out), out, "garbage.gltf");
+    }
+    SECTION("glTF 1.0") {
+        json g = room;
+        g["asset"]["version"] = "1.0";
+        const fs::path file = dir / "old_version.gltf";
+        write_json(file, g);
+        expect_bad_input(dir, bake_args(file, out), out, "old_version.gltf");
+    }
+    SECTION("baseColorFactor above 1") {
+        // One material only, emissive (so emission is not the problem), with red at 1.5.
+        json g = room;
+        json material = room["materials"][3];
+        REQUIRE(material.contains("emissiveFactor"));
+        material["pbrMetallicRoughness"]["baseColorFactor"] = {1.5, 0.5, 0.5, 1.0};
+        g["materials"] = json::array({material});
+        for (auto& mesh : g["meshes"])
+            for (auto& prim : mesh["primitives"]) prim["material"] = 0;
+        const fs::path file = dir / "too_bright.gltf";
+        write_json(file, g);
+        const RunResult r = expect_bad_input(dir, bake_args(file, out), out, "too_bright.gltf");
+        CHECK(r.err.find("baseColorFactor") != std::string::npos);
+    }
+    SECTION("nothing emits") {
+        json g = room;
+        int zeroed = 0;
+        for (auto& material : g["materials"]) {
+            if (material.contains("emissiveFactor")) {
+                material["emissiveFactor"] = {0.0, 0.0, 0.0};
+                ++zeroed;
+            }
+        }
+        REQUIRE(zeroed > 0);
+        const fs::path file = dir / "dark.gltf";
+        write_json(file, g);
+        expect_bad_input(dir, bake_args(file, out), out, "dark.gltf");
+    }
+    SECTION("no triangles") {
+        json g = room;
+        g["scenes"][0]["nodes"] = json::array({8});  // only the camera node
+        const fs::path file = dir / "empty.gltf";
+        write_json(file, g);
+        expect_bad_input(dir, bake_args(file, out), out, "empty.gltf");
+    }
+    SECTION("wrong file extension") {
+        const fs::path file = dir / "scene.txt";
+        write_text(file, read_text(kClosedRoom));
+        expect_bad_input(dir, bake_args(file, out), out, "scene.txt");
+    }
+    SECTION("unknown camera") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--camera", "no_such_camera"})), out,
+                         "no_such_camera");
+    }
+    SECTION("unknown option") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--no-such-flag"})), out,
+                         "--no-such-flag");
+    }
+    SECTION("hemicube below the range") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--hemicube", "7"})), out, "--hemicube");
+    }
+    SECTION("odd hemicube") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--hemicube", "33"})), out, "--hemicube");
+    }
+    SECTION("opencl device in a reference-only build") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--device", "opencl"})), out, "--device");
+    }
+    SECTION("element size larger than the patch size") {
+        expect_bad_input(dir,
+                         bake_args(kClosedRoom, out,
+                                   {"--hemicube", "32", "--patch-size", "0.5", "--element-size", "1.0", "--quiet"}),
+                         out, "--element-size");
+    }
+    SECTION("negative patch size") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--patch-size", "-1"})), out,
+                         "--patch-size");
+    }
+    SECTION("output path is an existing file") {
+        const fs::path file = dir / "a_file";
+        write_text(file, "keep me\n");
+        const RunResult r = hemirad(dir, bake_args(kClosedRoom, file));
+        INFO("stderr: " << r.err);
+        CHECK(r.code == 2);
+        check_one_line(r.err);
+        CHECK(r.err.find("a_file") != std::string::npos);
+        CHECK(read_text(file) == "keep me\n");
+    }
+}
+
+TEST_CASE("an existing output directory keeps the user's files", "[cli]") {
+    TempDir dir;
+    const fs::path out = dir / "mine";
+    fs::create_directories(out);
+    const std::string notes = "my notes, not hemirad's\n";
+    write_text(out / "notes.txt", notes);
+
+    SECTION("a failed bake") {
+        const RunResult r = hemirad(dir, bake_args(kClosedRoom, out, concat(kFast, {"--camera", "no_such_camera"})));
+        CHECK(r.code == 2);
+        check_one_line(r.err);
+        REQUIRE(fs::is_directory(out));
+        CHECK(listing(out) == std::set<std::string>{"notes.txt"});
+        CHECK(read_text(out / "notes.txt") == notes);
+    }
+    SECTION("a successful bake") {
+        bake_ok(dir, kClosedRoom, out);
+        CHECK(listing(out) ==
+              std::set<std::string>{"notes.txt", "report.json", "baked.gltf", "baked.bin", "render.exr", "render.png"});
+        CHECK(read_text(out / "notes.txt") == notes);
+    }
+}
+
+TEST_CASE("previews are written every K passes", "[cli]") {
+    TempDir dir;
+    const fs::path out = dir / "out";
+    const json report = bake_ok(dir, kClosedRoom, out,
+                                {"--hemicube", "32", "--patch-size", "1.0", "--element-size", "0.5", "--max-passes",
+                                 "120", "--preview-every", "50", "--image-width", "32", "--quiet"});
+    REQUIRE(report.at("passes").get<long>() == 120);  // closed_room does not converge in 120 passes
+    REQUIRE(fs::is_directory(out / "preview"));
+    CHECK(listing(out / "preview") == std::set<std::string>{"pass_000050.png", "pass_000100.png"});
+    CHECK(listing(out) ==
+          std::set<std::string>{"preview", "report.json", "baked.gltf", "baked.bin", "render.exr", "render.png"});
+    const ImageData preview = read_image(out / "preview" / "pass_000100.png");
+    CHECK(preview.width == 32);
+    CHECK(preview.height == 24);
+}
+
+TEST_CASE("devices and help and a missing subcommand", "[cli]") {
+    TempDir dir;
+    SECTION("devices --json") {
+        const RunResult r = hemirad(dir, {"devices", "--json"});
+        CHECK(r.code == 0);
+        const json devices = json::parse(r.out);
+        REQUIRE(devices.is_array());
+        REQUIRE(!devices.empty());
+        bool has_ref = false;
+        for (const auto& d : devices) {
+            REQUIRE(d.contains("backend"));
+            CHECK(d.at("backend").is_string());
+            has_ref = has_ref || d.at("backend") == "ref";
+        }
+        CHECK(has_ref);
+    }
+    SECTION("devices") {
+        const RunResult r = hemirad(dir, {"devices"});
+        CHECK(r.code == 0);
+        CHECK(r.out.find("ref") != std::string::npos);
+    }
+    SECTION("--help") {
+        const RunResult r = hemirad(dir, {"--help"});
+        CHECK(r.code == 0);
+        CHECK(r.out.find("bake") != std::string::npos);
+        CHECK(r.out.find("devices") != std::string::npos);
+    }
+    SECTION("bake --help") {
+        const RunResult r = hemirad(dir, {"bake", "--help"});
+        CHECK(r.code == 0);
+        for (const char* option : {"--hemicube", "--patch-size", "--element-size", "--threshold", "--max-passes",
+                                   "--seed", "--device", "--camera", "--preview-every", "--quiet", "--verify"}) {
+            INFO("option " << option);
+            CHECK(r.out.find(option) != std::string::npos);
+        }
+    }
+    SECTION("no subcommand") {
+        const RunResult r = hemirad(dir, {});
+        CHECK(r.code == 2);
+        check_one_line(r.err);
+        CHECK(listing(dir.path()).empty());
+    }
+    SECTION("bake without a scene") {
+        const RunResult r = hemirad(dir, {"bake"});
+        CHECK(r.code == 2);
+        check_one_line(r.err);
+        CHECK(!fs::exists(dir / "out"));
+    }
+}
+
+TEST_CASE("the default output directory is out/", "[cli]") {
+    TempDir dir;
+    const RunResult r = hemirad(dir, concat({"bake", kClosedRoom.string()}, kFast));
+    INFO("stderr: " << r.err);
+    REQUIRE(r.code == 0);
+    CHECK(fs::is_regular_file(dir / "out" / "report.json"));
+    CHECK(fs::is_regular_file(dir / "out" / "baked.gltf"));
+}
+
+TEST_CASE("mesh names fall back to the mesh name then node index", "[cli]") {
+    TempDir dir;
+    json g = read_json(kClosedRoom);
+    // cube node: no name, so its mesh's name; ceiling node: no name and a nameless mesh.
+    std::size_t cube = 0, ceiling = 0;
+    for (std::size_t i = 0; i < g["nodes"].size(); ++i) {
+        if (g["nodes"][i].value("name", "") == "cube") cube = i;
+        if (g["nodes"][i].value("name", "") == "ceiling") ceiling = i;
+    }
+    REQUIRE(cube != ceiling);
+    g["nodes"][cube].erase("name");
+    g["meshes"][g["nodes"][cube]["mesh"].get<std::size_t>()]["name"] = "box_mesh";
+    g["nodes"][ceiling].erase("name");
+    g["meshes"][g["nodes"][ceiling]["mesh"].get<std::size_t>()].erase("name");
+    const fs::path file = dir / "renamed.gltf";
+    write_json(file, g);
+
+    const std::vector<std::string> expected = expected_mesh_names(g);
+    CHECK(std::count(expected.begin(), expected.end(), "box_mesh") == 1);
+    CHECK(std::count(expected.begin(), expected.end(), "node" + std::to_string(ceiling)) == 1);
+
+    const json report = bake_ok(dir, file, dir / "out");
+    CHECK(sorted(report_mesh_names(report)) == sorted(expected));
+}
+
+TEST_CASE("results are scale invariant end to end", "[cli]") {
+    TempDir dir;
+    const json room = read_json(kClosedRoom);
+    // Default patch and element sizes: relative to the scene's size, so each bake meshes alike.
+    // Scaling by 1e-3 or 1e3 rounds every vertex, which flips near-ties in the choice of the
+    // next shooter; a different shooting order draws different hemicube rotations, i.e. acts
+    // like another seed. At N = 32 that noise alone is ~0.7% per mesh (about what --seed 2
+    // changes), at N = 128 ~0.25%, so N = 128 keeps the 0.5% check meaningful; it costs
+    // about 1 s per bake.
+    const std::vector<std::string> args = {"--hemicube", "128", "--max-passes", "300", "--image-width", "32", "--quiet"};
+    const json base = bake_ok(dir, kClosedRoom, dir / "base", args);
+
+    std::map<std::string, json> base_meshes;
+    for (const auto& m : base.at("meshes")) base_meshes[m.at("name").get<std::string>()] = m;
+    REQUIRE(base_meshes.size() == 8);
+
+    for (const double s : {1e-3, 1e3}) {
+        INFO("scale " << s);
+        const fs::path file = dir / (s < 1.0 ? "room_milli.gltf" : "room_kilo.gltf");
+        write_json(file, scaled_scene(room, s));
+        const json scaled = bake_ok(dir, file, dir / (s < 1.0 ? "milli" : "kilo"), args);
+
+        CHECK(scaled.at("counts") == base.at("counts"));
+        CHECK(scaled.at("settings").at("patch_size").get<double>() ==
+              Approx(base.at("settings").at("patch_size").get<double>() * s).epsilon(1e-9));
+        REQUIRE(scaled.at("meshes").size() == base.at("meshes").size());
+        for (const auto& m : scaled.at("meshes")) {
+            const std::string name = m.at("name").get<std::string>();
+            INFO("mesh " << name);
+            REQUIRE(base_meshes.count(name) == 1);
+            const json& b = base_meshes[name];
+            CHECK(m.at("area").get<double>() == Approx(b.at("area").get<double>() * s * s).epsilon(1e-9));
+            for (int c = 0; c < 3; ++c) {
+                const double x = m.at("radiosity")[c].get<double>();
+                const double y = b.at("radiosity")[c].get<double>();
+                INFO("channel " << c << ": " << x << " vs unscaled " << y);
+                CHECK(std::abs(x - y) <= 5e-3 * std::abs(y) + 1e-9);
+            }
+        }
+    }
+}
+
+namespace {
+
+// Starts a long bake with a preview every pass, waits until the second preview is on disk (so
+// the solver loop is running and files exist), sends SIGINT, and returns hemirad's exit code.
+RunResult interrupted_bake(const TempDir& dir, const std::string& out) {
+    const std::string preview = out + "/preview/pass_000002.png";
+    std::string script = shell_quote(HEMIRAD_EXE);
+    for (const std::string& a : {std::string("bake"), kClosedRoom.string(), std::string("-o"), out,
+                                 std::string("--hemicube"), std::string("256"), std::string("--threshold"),
+                                 std::string("1e-7"), std::string("--preview-every"), std::string("1"),
+                                 std::string("--image-width"), std::string("32"), std::string("--quiet")})
+        script += " " + shell_quote(a);
+    script += " & pid=$!; i=0; while [ ! -e " + shell_quote(preview) +
+              " ] && [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; kill -INT $pid; wait $pid";
+    return run_shell(dir, script);
+}
+
+}  // namespace
+
+TEST_CASE("an interrupted bake leaves no output behind", "[cli]") {
+    TempDir dir;
+    fs::create_directories(dir / "mine");
+    write_text(dir / "mine" / "notes.txt", "keep\n");
+
+    SECTION("a new output directory") {
+        const RunResult r = interrupted_bake(dir, "out");
+        INFO("stderr: " << r.err);
+        CHECK(r.code != 0);
+        CHECK(r.code != 2);  // not bad input
+        CHECK(r.err.find("interrupted") != std::string::npos);
+        CHECK(!fs::exists(dir / "out"));
+    }
+    SECTION("an existing output directory") {
+        const RunResult r = interrupted_bake(dir, "mine");
+        INFO("stderr: " << r.err);
+        CHECK(r.code != 0);
+        REQUIRE(fs::is_directory(dir / "mine"));
+        CHECK(listing(dir / "mine") == std::set<std::string>{"notes.txt"});
+        CHECK(read_text(dir / "mine" / "notes.txt") == "keep\n");
+    }
+}
+
+// Known bug (reported, not fixed here): OutputTransaction creates missing parent directories
+// with create_directories but on failure removes only the last one, so a/b stays behind.
+TEST_CASE("an interrupted bake into a new nested directory removes every directory it made", "[cli]") {
+    TempDir dir;
+    const RunResult r = interrupted_bake(dir, "a/b/out");
+    INFO("stderr: " << r.err);
+    CHECK(r.code != 0);
+    CHECK(!fs::exists(dir / "a" / "b" / "out"));
+    CHECK(!fs::exists(dir / "a"));
+}
+
+// Known bug (reported, not fixed here): scene warnings are printed before the checks that
+// follow loading (--camera, --element-size), so a bad-input run prints more than one line.
+TEST_CASE("bad input after a scene warning is still one line on stderr", "[cli]") {
+    TempDir dir;
+    json g = read_json(kClosedRoom);
+    g["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1.0, 1.0, 1.0, 1.0};  // clamped, warned
+    const fs::path file = dir / "white_walls.gltf";
+    write_json(file, g);
+    const fs::path out = dir / "never";
+    expect_bad_input(dir, bake_args(file, out, concat(kFast, {"--camera", "no_such_camera"})), out,
+                     "no_such_camera");
+}
