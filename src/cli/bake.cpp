@@ -15,6 +15,7 @@
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
 
+#include "cl/runtime.h"
 #include "core/error.h"
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
@@ -182,14 +183,25 @@ private:
 }  // namespace
 
 void list_devices(std::ostream& out, bool json) {
+    const std::vector<ocl::DeviceInfo> devices = ocl::list_devices();
     if (json) {
         ordered_json j = ordered_json::array();
         j.push_back({{"id", "ref"}, {"backend", "ref"}, {"platform", "host"},
                      {"name", "scalar reference hemicube (1 thread)"}});
+        for (const auto& d : devices)
+            j.push_back({{"id", d.id()}, {"backend", "opencl"}, {"platform", d.platform_name}, {"name", d.name},
+                         {"vendor", d.vendor}, {"version", d.version}, {"driver", d.driver},
+                         {"type", d.type}, {"compute_units", d.compute_units},
+                         {"global_memory_bytes", d.global_memory}, {"fp64", d.fp64},
+                         {"int64_atomics", d.int64_atomics}});
         out << j.dump(2) << "\n";
-    } else {
-        out << "ref   scalar reference hemicube (host, 1 thread)\n";
+        return;
     }
+    out << "ref          scalar reference hemicube (host, 1 thread)\n";
+    for (const auto& d : devices)
+        out << fmt::format("{:<12} {} | {} | {} | {} compute units | fp64 {}\n", d.id(), d.name, d.platform_name,
+                           d.type, d.compute_units, d.fp64 ? "yes" : "no");
+    if (devices.empty()) out << "(no OpenCL platform or device found)\n";
 }
 
 void run_bake(const BakeOptions& o) {

@@ -31,6 +31,9 @@ public:
     // Form factors from patch `patch` to every element. `shot` is the global shot counter:
     // with the seed it fixes the hemicube's rotation, so any engine reproduces the same shot.
     virtual void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) = 0;
+    // The id buffer of the last shot (element index, −1 empty, −2 blocker; cells in
+    // DeltaFormFactors order), for engines that keep one; used by verification.
+    virtual const std::vector<std::int32_t>* last_ids() const { return nullptr; }
 };
 
 }  // namespace hemirad::formfactor

@@ -18,6 +18,7 @@ public:
     static constexpr std::int32_t kEmpty = -1;
     static constexpr std::int32_t kBlocker = -2;
     const std::vector<std::int32_t>& ids() const { return ids_; }
+    const std::vector<std::int32_t>* last_ids() const override { return &ids_; }
     const DeltaFormFactors& delta() const { return delta_; }
 
 private:

@@ -1,0 +1,98 @@
+// OpenCL device discovery and per-context program cache (see runtime.h).
+#include "cl/runtime.h"
+
+#include <cstdlib>
+#include <iostream>
+
+#include <fmt/core.h>
+
+namespace hemirad::ocl {
+namespace {
+
+bool has_extension(const cl::Device& d, const char* name) {
+    const std::string ext = d.getInfo<CL_DEVICE_EXTENSIONS>();
+    return ext.find(name) != std::string::npos;
+}
+
+std::string trimmed(std::string s) {
+    while (!s.empty() && (s.back() == '\0' || s.back() == ' ' || s.back() == '\n')) s.pop_back();
+    return s;
+}
+
+}  // namespace
+
+std::vector<DeviceInfo> list_devices() {
+    std::vector<DeviceInfo> out;
+    std::vector<cl::Platform> platforms;
+    try {
+        cl::Platform::get(&platforms);
+    } catch (const cl::Error&) {
+        return out;  // no ICD loader configuration or no platform: no devices
+    }
+    for (std::size_t p = 0; p < platforms.size(); ++p) {
+        std::vector<cl::Device> devices;
+        try {
+            platforms[p].getDevices(CL_DEVICE_TYPE_ALL, &devices);
+        } catch (const cl::Error&) {
+            continue;  // CL_DEVICE_NOT_FOUND on this platform
+        }
+        for (std::size_t d = 0; d < devices.size(); ++d) {
+            const cl::Device& dev = devices[d];
+            DeviceInfo info;
+            info.platform = static_cast<int>(p);
+            info.device = static_cast<int>(d);
+            info.platform_name = trimmed(platforms[p].getInfo<CL_PLATFORM_NAME>());
+            info.name = trimmed(dev.getInfo<CL_DEVICE_NAME>());
+            info.vendor = trimmed(dev.getInfo<CL_DEVICE_VENDOR>());
+            info.version = trimmed(dev.getInfo<CL_DEVICE_VERSION>());
+            info.driver = trimmed(dev.getInfo<CL_DRIVER_VERSION>());
+            const cl_device_type type = dev.getInfo<CL_DEVICE_TYPE>();
+            info.type = (type & CL_DEVICE_TYPE_GPU)           ? "gpu"
+                        : (type & CL_DEVICE_TYPE_CPU)         ? "cpu"
+                        : (type & CL_DEVICE_TYPE_ACCELERATOR) ? "accelerator"
+                                                              : "other";
+            info.fp64 = has_extension(dev, "cl_khr_fp64");
+            info.int64_atomics = has_extension(dev, "cl_khr_int64_base_atomics");
+            info.compute_units = static_cast<int>(dev.getInfo<CL_DEVICE_MAX_COMPUTE_UNITS>());
+            info.max_work_group = dev.getInfo<CL_DEVICE_MAX_WORK_GROUP_SIZE>();
+            info.global_memory = static_cast<std::size_t>(dev.getInfo<CL_DEVICE_GLOBAL_MEM_SIZE>());
+            out.push_back(info);
+        }
+    }
+    return out;
+}
+
+Context::Context(const DeviceInfo& device) : info_(device) {
+    std::vector<cl::Platform> platforms;
+    cl::Platform::get(&platforms);
+    std::vector<cl::Device> devices;
+    platforms.at(static_cast<std::size_t>(device.platform)).getDevices(CL_DEVICE_TYPE_ALL, &devices);
+    device_ = devices.at(static_cast<std::size_t>(device.device));
+    context_ = cl::Context(device_);
+    queue_ = cl::CommandQueue(context_, device_, CL_QUEUE_PROFILING_ENABLE);
+}
+
+cl::Program& Context::program(const std::string& source, const std::string& options) {
+    const std::string key = options + '\0' + source;
+    if (auto it = programs_.find(key); it != programs_.end()) return it->second;
+    const char* show = std::getenv("HEMIRAD_SHOW_KERNELS");
+    if (show && std::string(show) == "1")
+        std::cerr << fmt::format("hemirad: building for {} ({}) with options '{}':\n{}\n", info_.name, info_.id(), options, source);
+
+    cl::Program program(context_, source);
+    try {
+        program.build(std::vector<cl::Device>{device_}, options.c_str());
+    } catch (const cl::Error&) {
+        std::string log;
+        try {
+            log = program.getBuildInfo<CL_PROGRAM_BUILD_LOG>(device_);
+        } catch (const cl::Error&) {
+            log = "(no build log)";
+        }
+        throw BuildError(fmt::format("OpenCL kernel build failed on {} ({}) with options '{}':\n{}", info_.name, info_.id(),
+                                     options, trimmed(log)));
+    }
+    return programs_.emplace(key, std::move(program)).first->second;
+}
+
+}  // namespace hemirad::ocl

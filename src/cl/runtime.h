@@ -1,0 +1,65 @@
+// OpenCL runtime: device discovery, selection, and per-context program caching with build logs.
+// Namespace `ocl` (not `cl`) so the Khronos C++ bindings' `cl::` stays unambiguous.
+#pragma once
+
+#include <CL/opencl.hpp>
+
+#include <cstddef>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace hemirad::ocl {
+
+struct DeviceInfo {
+    int platform = 0, device = 0;     // indices as `opencl:P.D`
+    std::string platform_name, name, vendor, version, driver;
+    std::string type;                 // "cpu", "gpu", "accelerator" or "other"
+    bool fp64 = false;                // cl_khr_fp64
+    bool int64_atomics = false;       // cl_khr_int64_base_atomics
+    int compute_units = 0;
+    std::size_t max_work_group = 0;
+    std::size_t global_memory = 0;    // bytes
+    std::string id() const { return "opencl:" + std::to_string(platform) + "." + std::to_string(device); }
+};
+
+// Every OpenCL device of every platform; empty (never throws) when there is no ICD or platform.
+std::vector<DeviceInfo> list_devices();
+
+// A program failed to build. what() holds the device, the options and the full build log.
+class BuildError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+// One device, its context and an in-order queue with profiling. Programs are built once per
+// (source, options) and kept for the life of the context: the cache belongs to the context,
+// never to a global, so tests and engines cannot interfere.
+class Context {
+public:
+    explicit Context(const DeviceInfo& device);
+    const DeviceInfo& info() const { return info_; }
+    cl::Context& context() { return context_; }
+    cl::Device& device() { return device_; }
+    cl::CommandQueue& queue() { return queue_; }
+
+    // Builds (or returns the cached) program from `source` with `options`. With
+    // HEMIRAD_SHOW_KERNELS=1 the exact source and options are printed to stderr first.
+    // Throws BuildError with the build log on failure.
+    cl::Program& program(const std::string& source, const std::string& options);
+
+private:
+    DeviceInfo info_;
+    cl::Device device_;
+    cl::Context context_;
+    cl::CommandQueue queue_;
+    std::map<std::string, cl::Program> programs_;  // key: options + '\0' + source
+};
+
+// The embedded text of kernels/<name> with its includes of the shared layout header inlined.
+// Throws std::out_of_range for an unknown name.
+std::string_view kernel_source(std::string_view name);
+
+}  // namespace hemirad::ocl

@@ -1,0 +1,47 @@
+// --verify: runs the scalar reference beside another engine on every K-th shot and compares
+// the id buffers (mismatched cells counted) and the per-element form factors (absolute near
+// zero, relative elsewhere). A violation throws VerifyError with the numbers.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "formfactor/engine.h"
+
+namespace hemirad::formfactor {
+
+class VerifyError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+struct VerifySummary {
+    long shots_checked = 0;
+    long cells_compared = 0;
+    long cells_mismatched = 0;       // id differs from the reference (edges and depth ties)
+    double max_abs_error = 0.0;      // over all per-element form factors checked
+    double max_rel_error = 0.0;      // where the reference value is above kAbsoluteTolerance
+};
+
+class VerifyingEngine final : public Engine {
+public:
+    static constexpr double kAbsoluteTolerance = 1e-6;
+    static constexpr double kRelativeTolerance = 1e-4;
+
+    // `every`: check shots 0, K, 2K, … (K >= 1). Both engines must see the same mesh and settings.
+    VerifyingEngine(std::unique_ptr<Engine> engine, std::unique_ptr<Engine> reference, long every);
+    std::string name() const override { return engine_->name(); }
+    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    const std::vector<std::int32_t>* last_ids() const override { return engine_->last_ids(); }
+    const VerifySummary& summary() const { return summary_; }
+
+private:
+    std::unique_ptr<Engine> engine_, reference_;
+    long every_;
+    ShotResult expected_;
+    VerifySummary summary_;
+};
+
+}  // namespace hemirad::formfactor
