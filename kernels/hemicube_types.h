@@ -1,0 +1,75 @@
+// Layout of every struct that crosses the host/kernel boundary of kernels/hemicube.cl. Included
+// by the kernel (inlined at embedding) and by the host (src/formfactor/opencl_engine.cpp), so the
+// two cannot drift: scalar double and 32-bit int fields only, doubles first, sizes a multiple of
+// 8 bytes. The host static_asserts sizes and offsets.
+#ifndef HEMIRAD_HEMICUBE_TYPES_H
+#define HEMIRAD_HEMICUBE_TYPES_H
+
+// Device compilers define __OPENCL_VERSION__ (the spec requires it); plain clang only the C version.
+#if defined(__OPENCL_VERSION__) || defined(__OPENCL_C_VERSION__)
+typedef double hr_double;
+typedef int hr_int;
+typedef uint hr_uint;
+typedef long hr_long;
+#else
+#include <cstdint>
+typedef double hr_double;
+typedef std::int32_t hr_int;
+typedef std::uint32_t hr_uint;
+typedef std::int64_t hr_long;
+#endif
+
+#define HR_FACES 5        // top (+z), +x, -x, +y, -y: the order of formfactor::to_face
+#define HR_MAX_CLIPPED 9  // a convex quad clipped by 5 planes has at most 9 vertices
+#define HR_EMPTY (-1)     // id of a cell nothing covers
+#define HR_BLOCKER (-2)   // id of a cell won by the back of a one-sided surface
+// Delta form factors are summed in 64-bit fixed point (integer addition is associative, so
+// the atomic sums are bit-identical run to run): one unit of form factor is 2^62.
+#define HR_FIXED_SHIFT 62
+
+// One receiver element: a planar convex triangle or quad, counter-clockwise from its front.
+typedef struct {
+    hr_double v[12];      // up to 4 vertices, x y z each, world space
+    hr_double normal[3];  // unit, front side
+    hr_double centroid[3];
+    hr_int n;         // 3 or 4
+    hr_int patch;     // parent patch
+    hr_int has_twin;  // 1: a doubleSided twin draws this surface's back
+    hr_int pad;
+} HrElement;
+
+// One patch: its polygon decides whether all of its elements lie below the base plane.
+typedef struct {
+    hr_double v[12];
+    hr_int n;
+    hr_int pad[3];
+} HrPatch;
+
+// Everything one shot needs besides the buffers: the frame (from formfactor::make_frame on the
+// host), the clip distance and the tiling of the five faces.
+typedef struct {
+    hr_double origin[3], u[3], v[3], w[3];  // frame: w the shooter's normal
+    hr_double eps;                          // base-plane clip distance, scene units
+    hr_int n;                               // hemicube resolution N (top NxN, sides NxN/2)
+    hr_int shooter;                         // patch index of the shooter
+    hr_int elements;                        // element count
+    hr_int tiles_x;                         // tiles across a face: ceil(N / TILE)
+    hr_int tile_base[HR_FACES + 1];         // first tile of each face, then the tile count
+    hr_uint list_capacity;                  // entries the per-tile record lists can hold
+    hr_int pad;
+} HrShot;
+
+// One element seen on one face: its clipped polygon in cell coordinates (x in [0, N), y in
+// [0, rows)), counter-clockwise, its plane for the depth, and the cells it may cover.
+typedef struct {
+    hr_double x[HR_MAX_CLIPPED], y[HR_MAX_CLIPPED];
+    hr_double nf[3];  // element normal in face coordinates
+    hr_double c;      // plane offset: nf.p = c
+    hr_int element;   // element index
+    hr_int back;      // 1: the back of a one-sided surface (a blocker)
+    hr_int n;         // vertex count; 0: not visible on this face
+    hr_int face;
+    hr_int i0, i1, j0, j1;  // cell bounding box, inclusive; empty when i0 > i1
+} HrRecord;
+
+#endif

@@ -1,0 +1,73 @@
+// The OpenCL hemicube engine: kernels/hemicube.cl on one device, giving the scalar reference's
+// result cell for cell (double precision, the same operations in the same order).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "cl/runtime.h"
+#include "formfactor/engine.h"
+#include "formfactor/hemicube.h"
+
+namespace hemirad::formfactor {
+
+// The tuning knobs of kernels/hemicube.cl, passed to the build as -D options.
+struct OpenCLTuning {
+    int tile = 16;                    // raster tile edge in cells; a raster work-group is tile×tile items
+    int work_group = 64;              // work-group size of the per-element and per-record kernels
+    int scan_work_group = 256;        // the one work-group of the tile-offset scan, a power of two
+    std::string extra_options;        // appended to the build options (more -D overrides)
+    std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
+};
+
+// The knobs for a device, from a small hand-edited table.
+OpenCLTuning default_tuning(const ocl::DeviceInfo& device);
+
+class OpenCLEngine final : public Engine {
+public:
+    // Builds the kernels (cached by the context) and uploads the mesh and the delta-form-factor
+    // table. Throws InternalError when the device lacks cl_khr_fp64 or
+    // cl_khr_int64_base_atomics, ocl::BuildError when the kernels do not build.
+    OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings);
+    OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings, const OpenCLTuning& tuning);
+
+    std::string name() const override { return "opencl"; }
+    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+
+    // The id buffer of the last shot with the reference's conventions: face by face, cell
+    // (i, j) at DeltaFormFactors::offset(face) + j·N + i; the element index, kEmpty where nothing
+    // was hit, kBlocker for the back of a one-sided surface. Read from the device on first use.
+    static constexpr std::int32_t kEmpty = -1;
+    static constexpr std::int32_t kBlocker = -2;
+    const std::vector<std::int32_t>& ids() const;
+    const std::vector<std::int32_t>* last_ids() const override { return &ids(); }
+    const DeltaFormFactors& delta() const { return delta_; }
+    const std::string& build_options() const { return options_; }
+
+private:
+    const mesh::Mesh& mesh_;
+    ocl::Context& context_;
+    Settings settings_;
+    OpenCLTuning tuning_;
+    std::string options_;
+    DeltaFormFactors delta_;
+    double eps_;                      // base-plane clip distance, as the reference computes it
+    std::array<int, 6> tile_base_{};  // first tile of each face, then the tile count
+    int tiles_x_ = 0;
+    std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
+
+    cl::Kernel setup_, scan_, scatter_, raster_;
+    cl::Buffer shot_, elements_, patches_, records_, tile_counts_, offsets_, cursors_, lists_, delta_fixed_,
+        ids_buffer_, sums_;
+    std::vector<std::int64_t> sums_host_;  // per element, then blocked; fixed point
+
+    mutable std::vector<std::int32_t> ids_;
+    mutable bool ids_stale_ = false;
+
+    void bind_arguments();
+    std::uint32_t run_shot(std::uint32_t patch, const Frame& frame);  // returns the list entries needed
+};
+
+}  // namespace hemirad::formfactor

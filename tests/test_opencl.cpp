@@ -1,0 +1,304 @@
+// The OpenCL hemicube engine against the scalar reference (cell for cell) and analytic answers.
+// Runs on the first OpenCL device (PoCL in CI); every test warns and skips without one.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cl/runtime.h"
+#include "formfactor/near_field.h"
+#include "formfactor/opencl_engine.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+#include "solve/progressive.h"
+#include "test_scenes.h"
+
+using namespace hemirad;
+using Catch::Matchers::WithinAbs;
+using Catch::Matchers::WithinRel;
+
+namespace {
+
+// The first device's context, or nothing (after a visible warning) when there is none.
+std::optional<ocl::Context> first_device() {
+    const auto devices = ocl::list_devices();
+    if (devices.empty()) return std::nullopt;
+    return std::optional<ocl::Context>(std::in_place, devices.front());
+}
+
+#define HEMIRAD_REQUIRE_DEVICE(ctx)        \
+    auto ctx = first_device();             \
+    if (!ctx) {                            \
+        WARN("no OpenCL device: skipped"); \
+        return;                            \
+    }
+
+// An axis-aligned block [lo, hi] standing on its base: the top and four sides, facing out.
+void add_block(scene::Scene& s, glm::dvec3 lo, glm::dvec3 hi, std::uint32_t material, const std::string& name) {
+    const double x0 = lo.x, y0 = lo.y, z0 = lo.z, x1 = hi.x, y1 = hi.y, z1 = hi.z;
+    test::add_quad(s, {x0, y0, z1}, {x1, y0, z1}, {x1, y1, z1}, {x0, y1, z1}, material, name + "_top");  // +z
+    test::add_quad(s, {x0, y0, z0}, {x1, y0, z0}, {x1, y0, z1}, {x0, y0, z1}, material, name + "_y0");   // -y
+    test::add_quad(s, {x1, y1, z0}, {x0, y1, z0}, {x0, y1, z1}, {x1, y1, z1}, material, name + "_y1");   // +y
+    test::add_quad(s, {x0, y1, z0}, {x0, y0, z0}, {x0, y0, z1}, {x0, y1, z1}, material, name + "_x0");   // -x
+    test::add_quad(s, {x1, y0, z0}, {x1, y1, z0}, {x1, y1, z1}, {x1, y0, z1}, material, name + "_x1");   // +x
+}
+
+struct Case {
+    std::string name;
+    scene::Scene scene;
+    mesh::Settings mesh;
+};
+
+// The scenes the engines are compared on: enclosures, a shared edge, one-sided occluders seen
+// from behind (blockers), a doubleSided occluder (twins), a Cornell-like box with blocks.
+std::vector<Case> comparison_cases() {
+    std::vector<Case> cases;
+    {
+        scene::Scene s;
+        const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+        cases.push_back({"closed box",
+                         test::closed_box(
+                             {1.0, 0.8, 1.2}, [&](int) { return grey; }, s),
+                         {0.25, 0.125}});
+    }
+    {
+        scene::Scene s;
+        const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+        cases.push_back(
+            {"perpendicular rectangles", test::perpendicular_rectangles(1, 1, 1, grey, grey, s), {0.25, 0.125}});
+    }
+    {
+        scene::Scene s;
+        const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+        const auto two_sided = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0), true);
+        s = test::parallel_rectangles(1, 1, 1, grey, grey, s);
+        // Facing up: the lower rectangle sees its back (a blocker), the upper its front.
+        test::add_quad(s, {0.2, 0.2, 0.4}, {0.6, 0.2, 0.4}, {0.6, 0.6, 0.4}, {0.2, 0.6, 0.4}, grey, "one_sided");
+        // Both sides are surfaces: no blocker, the twin is drawn instead.
+        test::add_quad(s, {0.4, 0.4, 0.6}, {0.4, 0.8, 0.6}, {0.8, 0.8, 0.6}, {0.8, 0.4, 0.6}, two_sided, "two_sided");
+        // The same quad twice (z-fighting): every cell is a genuine depth tie, won by the lower index.
+        for (const char* name : {"copy_a", "copy_b"})
+            test::add_quad(s, {0.1, 0.5, 0.8}, {0.1, 0.9, 0.8}, {0.5, 0.9, 0.8}, {0.5, 0.5, 0.8}, grey, name);
+        test::finish(s);
+        cases.push_back({"occluders", s, {0.2, 0.1}});
+    }
+    {
+        scene::Scene s;
+        const auto white = test::add_material(s, glm::dvec3(0.7), glm::dvec3(0.0));
+        const auto light = test::add_material(s, glm::dvec3(0.5), glm::dvec3(5.0));
+        s = test::closed_box(
+            {1.0, 1.0, 1.0}, [&](int) { return white; }, s);
+        test::add_quad(s, {0.4, 0.4, 0.99}, {0.4, 0.6, 0.99}, {0.6, 0.6, 0.99}, {0.6, 0.4, 0.99}, light, "light");
+        add_block(s, {0.15, 0.2, 0.0}, {0.45, 0.5, 0.6}, white, "tall");
+        add_block(s, {0.55, 0.5, 0.0}, {0.85, 0.8, 0.3}, white, "short");
+        test::finish(s);
+        cases.push_back({"cornell-like box", s, {0.2, 0.1}});
+    }
+    return cases;
+}
+
+struct Comparison {
+    std::size_t mismatched_cells = 0, cells = 0, shots = 0;
+    std::size_t hit_cells = 0, blocker_cells = 0;  // in the reference: the comparison is not vacuous
+    double worst_f = 0.0;      // largest relative error among the F (and blocked) off by more than 1e-6
+    double worst_total = 0.0;  // largest |(ΣF + blocked)_cl − (ΣF + blocked)_ref|
+};
+
+// Shoots `shots` patches spread over the mesh with both engines and compares everything.
+Comparison compare(const mesh::Mesh& m, formfactor::ReferenceEngine& ref, formfactor::OpenCLEngine& cl, int shots) {
+    Comparison c;
+    formfactor::ShotResult a, b;
+    const std::size_t patches = m.patches.size();
+    for (int i = 0; i < shots; ++i) {
+        const auto patch = static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u + 3u) % patches);
+        const std::uint64_t shot = 1000u + static_cast<std::uint64_t>(i);
+        ref.shoot(patch, shot, a);
+        cl.shoot(patch, shot, b);
+        const auto& ids_ref = ref.ids();
+        const auto& ids_cl = cl.ids();
+        REQUIRE(ids_ref.size() == ids_cl.size());
+        for (std::size_t cell = 0; cell < ids_ref.size(); ++cell) {
+            c.mismatched_cells += ids_ref[cell] != ids_cl[cell];
+            c.hit_cells += ids_ref[cell] >= 0;
+            c.blocker_cells += ids_ref[cell] == formfactor::ReferenceEngine::kBlocker;
+        }
+        c.cells += ids_ref.size();
+        ++c.shots;
+        REQUIRE(a.F.size() == b.F.size());
+        const auto note = [&c](double expected, double got) {
+            const double err = std::abs(expected - got);
+            if (err > 1e-6) c.worst_f = std::max(c.worst_f, err / std::max(std::abs(expected), 1e-300));
+        };
+        double total_a = a.blocked, total_b = b.blocked;
+        note(a.blocked, b.blocked);
+        for (std::size_t k = 0; k < a.F.size(); ++k) {
+            note(a.F[k], b.F[k]);
+            total_a += a.F[k];
+            total_b += b.F[k];
+        }
+        c.worst_total = std::max(c.worst_total, std::abs(total_a - total_b));
+    }
+    return c;
+}
+
+// Area-weighted form factor from the patches of node `from` to the elements of node `to`.
+double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::uint32_t from, std::uint32_t to) {
+    formfactor::ShotResult r;
+    double weighted = 0.0, area = 0.0;
+    std::uint64_t shot = 0;
+    for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
+        if (m.patches[p].node != from) continue;
+        engine.shoot(p, shot++, r);
+        double f = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k)
+            if (m.elements[k].node == to) f += r.F[k];
+        weighted += m.patches[p].area * f;
+        area += m.patches[p].area;
+    }
+    return weighted / area;
+}
+
+}  // namespace
+
+TEST_CASE("opencl: id buffers and form factors match the reference cell for cell", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    for (const Case& c : comparison_cases()) {
+        const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+        // 8 and 40: faces that do not fill whole tiles.
+        for (int n : {8, 32, 40, 64, 256}) {
+            formfactor::ReferenceEngine ref(m, {n, 42});
+            formfactor::OpenCLEngine cl(m, *ctx, {n, 42});
+            const int shots = n == 256 ? 20 : 30;
+            const Comparison r = compare(m, ref, cl, shots);
+            INFO(c.name << ": " << m.patches.size() << " patches, " << m.elements.size() << " elements, N = " << n);
+            CAPTURE(r.shots, r.cells, r.hit_cells, r.blocker_cells, r.mismatched_cells, r.worst_f, r.worst_total);
+            CHECK(r.hit_cells > r.cells / 10);
+            if (c.name == "occluders") CHECK(r.blocker_cells > 0);
+            // The same double operations in the same order and a total order on (depth, index):
+            // not even a genuine depth tie can differ, so no cell may.
+            CHECK(r.mismatched_cells == 0);
+            CHECK(r.worst_f <= 1e-4);
+            CHECK(r.worst_total <= 1e-12);
+        }
+    }
+}
+
+TEST_CASE("opencl: any tile size gives the reference's result", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const Case c = comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    for (int tile : {5, 16}) {  // 5: tiles straddle every face edge
+        formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+        tuning.tile = tile;
+        for (int n : {40, 64}) {
+            formfactor::ReferenceEngine ref(m, {n, 5});
+            formfactor::OpenCLEngine cl(m, *ctx, {n, 5}, tuning);
+            const Comparison r = compare(m, ref, cl, 10);
+            CAPTURE(tile, n, r.mismatched_cells, r.worst_f);
+            CHECK(r.mismatched_cells == 0);
+            CHECK(r.worst_f <= 1e-4);
+        }
+    }
+}
+
+TEST_CASE("opencl: lists that overflow grow and the shot is redone", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const Case c = comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+    tuning.list_capacity = 16;  // far too small for any shot
+    formfactor::ReferenceEngine ref(m, {64, 3});
+    formfactor::OpenCLEngine cl(m, *ctx, {64, 3}, tuning);
+    const Comparison r = compare(m, ref, cl, 10);
+    CAPTURE(r.mismatched_cells, r.worst_f);
+    CHECK(r.mismatched_cells == 0);
+    CHECK(r.worst_f <= 1e-4);
+}
+
+TEST_CASE("opencl: the same shot twice gives bit-identical results", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const Case c = comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    formfactor::OpenCLEngine a(m, *ctx, {128, 9});
+    formfactor::OpenCLEngine b(m, *ctx, {128, 9});
+    formfactor::ShotResult ra, rb, rc;
+    for (std::uint32_t patch : {0u, 7u, static_cast<std::uint32_t>(m.patches.size() - 1)}) {
+        a.shoot(patch, 17, ra);
+        const std::vector<std::int32_t> ids_a = a.ids();
+        a.shoot(patch, 17, rb);  // the same engine again
+        b.shoot(patch, 17, rc);  // a second engine
+        CAPTURE(patch);
+        CHECK(ra.F == rb.F);
+        CHECK(ra.F == rc.F);
+        CHECK(ra.blocked == rb.blocked);
+        CHECK(ra.blocked == rc.blocked);
+        CHECK(ids_a == a.ids());
+        CHECK(ids_a == b.ids());
+    }
+}
+
+TEST_CASE("opencl: parallel unit squares match the analytic form factor", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    scene::Scene s;
+    const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    s = test::parallel_rectangles(1, 1, 1, grey, grey, s);
+    const mesh::Mesh m = mesh::build(s, {0.125, 0.0625});
+    formfactor::OpenCLEngine engine(m, *ctx, {256, 1});
+    const double f = area_form_factor(m, engine, 0, 1);
+    CAPTURE(f);
+    CHECK_THAT(f, WithinRel(0.1998248957, 0.005));
+}
+
+TEST_CASE("opencl: a uniform closed-box furnace reaches B = E/(1 - rho)", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const double rho = 0.9;
+    scene::Scene s;
+    const auto mat = test::add_material(s, glm::dvec3(rho), glm::dvec3(1.0, 0.5, 0.25));
+    s = test::closed_box(
+        {1.0, 1.0, 1.0}, [&](int) { return mat; }, s);
+    const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
+    formfactor::NearFieldEngine engine(
+        m, std::make_unique<formfactor::OpenCLEngine>(m, *ctx, formfactor::Settings{64, 1}));
+    REQUIRE(engine.name() == "opencl");
+    solve::Progressive solver(m, engine, {1e-4, 200000});
+    while (solver.step()) {
+    }
+    CAPTURE(solver.passes());
+    REQUIRE(solver.converged());
+    const glm::dvec3 expected = glm::dvec3(1.0, 0.5, 0.25) / (1.0 - rho);
+    for (const auto& b : solver.radiosity(true))
+        for (int c = 0; c < 3; ++c) REQUIRE_THAT(b[c], WithinRel(expected[c], 0.01));
+}
+
+TEST_CASE("opencl: kernel build failures throw BuildError with the device and the log", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const std::string device = ctx->info().name;
+    try {
+        ctx->program("this is not OpenCL C", "");
+        FAIL("a program that cannot compile was built");
+    } catch (const ocl::BuildError& e) {
+        const std::string what = e.what();
+        CAPTURE(what);
+        CHECK(what.find(device) != std::string::npos);
+        CHECK(what.find("error") != std::string::npos);  // the compiler's own diagnostics
+    }
+
+    scene::Scene s;
+    const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    s = test::parallel_rectangles(1, 1, 1, grey, grey, s);
+    const mesh::Mesh m = mesh::build(s, {0.5, 0.25});
+    formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+    tuning.extra_options = "-DClipPolygon=42";  // turns a typedef into nonsense
+    CHECK_THROWS_AS(formfactor::OpenCLEngine(m, *ctx, {32, 1}, tuning), ocl::BuildError);
+    // The context survives a failed build.
+    formfactor::OpenCLEngine engine(m, *ctx, {32, 1});
+    formfactor::ShotResult r;
+    engine.shoot(0, 0, r);
+    CHECK(r.F.size() == m.elements.size());
+}
