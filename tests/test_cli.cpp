@@ -20,6 +20,8 @@
 #include <vector>
 
 #include <catch2/catch.hpp>
+
+#include "cl/runtime.h"
 #include <nlohmann/json.hpp>
 #include <OpenImageIO/imageio.h>
 #include <tiny_gltf.h>
@@ -110,7 +112,7 @@ RunResult run_shell(const TempDir& dir, const std::string& script) {
 }
 
 // Runs the hemirad executable with `args` (each quoted), working directory `dir`.
-RunResult hemirad(const TempDir& dir, const std::vector<std::string>& args) {
+RunResult run_hemirad(const TempDir& dir, const std::vector<std::string>& args) {
     std::string script = shell_quote(HEMIRAD_EXE);
     for (const auto& a : args) script += " " + shell_quote(a);
     return run_shell(dir, script);
@@ -129,7 +131,7 @@ std::vector<std::string> bake_args(const fs::path& scene, const fs::path& out,
 // Runs a bake that must succeed.
 json bake_ok(const TempDir& dir, const fs::path& scene, const fs::path& out,
              const std::vector<std::string>& extra = kFast) {
-    const RunResult r = hemirad(dir, bake_args(scene, out, extra));
+    const RunResult r = run_hemirad(dir, bake_args(scene, out, extra));
     INFO("stderr: " << r.err);
     REQUIRE(r.code == 0);
     REQUIRE(fs::is_regular_file(out / "report.json"));
@@ -205,7 +207,7 @@ void check_one_line(const std::string& err) {
 RunResult expect_bad_input(const TempDir& dir, const std::vector<std::string>& args, const fs::path& out,
                            const std::string& token) {
     REQUIRE(!fs::exists(out));
-    const RunResult r = hemirad(dir, args);
+    const RunResult r = run_hemirad(dir, args);
     INFO("stderr: [" << r.err << "]");
     CHECK(r.code == 2);
     check_one_line(r.err);
@@ -561,8 +563,16 @@ TEST_CASE("bad input exits 2 with one line on stderr and no output directory", "
     SECTION("odd hemicube") {
         expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--hemicube", "33"})), out, "--hemicube");
     }
-    SECTION("opencl device in a reference-only build") {
-        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--device", "opencl"})), out, "--device");
+    SECTION("an OpenCL device that does not exist") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--device", "opencl:9.9"})), out,
+                         "opencl:9.9");
+    }
+    SECTION("a malformed device") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--device", "gpu"})), out, "--device gpu");
+    }
+    SECTION("verify with nothing to verify") {
+        expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--device", "ref", "--verify"})), out,
+                         "--verify");
     }
     SECTION("element size larger than the patch size") {
         expect_bad_input(dir,
@@ -577,7 +587,7 @@ TEST_CASE("bad input exits 2 with one line on stderr and no output directory", "
     SECTION("output path is an existing file") {
         const fs::path file = dir / "a_file";
         write_text(file, "keep me\n");
-        const RunResult r = hemirad(dir, bake_args(kClosedRoom, file));
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, file));
         INFO("stderr: " << r.err);
         CHECK(r.code == 2);
         check_one_line(r.err);
@@ -594,7 +604,7 @@ TEST_CASE("an existing output directory keeps the user's files", "[cli]") {
     write_text(out / "notes.txt", notes);
 
     SECTION("a failed bake") {
-        const RunResult r = hemirad(dir, bake_args(kClosedRoom, out, concat(kFast, {"--camera", "no_such_camera"})));
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, concat(kFast, {"--camera", "no_such_camera"})));
         CHECK(r.code == 2);
         check_one_line(r.err);
         REQUIRE(fs::is_directory(out));
@@ -628,7 +638,7 @@ TEST_CASE("previews are written every K passes", "[cli]") {
 TEST_CASE("devices and help and a missing subcommand", "[cli]") {
     TempDir dir;
     SECTION("devices --json") {
-        const RunResult r = hemirad(dir, {"devices", "--json"});
+        const RunResult r = run_hemirad(dir, {"devices", "--json"});
         CHECK(r.code == 0);
         const json devices = json::parse(r.out);
         REQUIRE(devices.is_array());
@@ -642,18 +652,18 @@ TEST_CASE("devices and help and a missing subcommand", "[cli]") {
         CHECK(has_ref);
     }
     SECTION("devices") {
-        const RunResult r = hemirad(dir, {"devices"});
+        const RunResult r = run_hemirad(dir, {"devices"});
         CHECK(r.code == 0);
         CHECK(r.out.find("ref") != std::string::npos);
     }
     SECTION("--help") {
-        const RunResult r = hemirad(dir, {"--help"});
+        const RunResult r = run_hemirad(dir, {"--help"});
         CHECK(r.code == 0);
         CHECK(r.out.find("bake") != std::string::npos);
         CHECK(r.out.find("devices") != std::string::npos);
     }
     SECTION("bake --help") {
-        const RunResult r = hemirad(dir, {"bake", "--help"});
+        const RunResult r = run_hemirad(dir, {"bake", "--help"});
         CHECK(r.code == 0);
         for (const char* option : {"--hemicube", "--patch-size", "--element-size", "--threshold", "--max-passes",
                                    "--seed", "--device", "--camera", "--preview-every", "--quiet", "--verify"}) {
@@ -662,13 +672,13 @@ TEST_CASE("devices and help and a missing subcommand", "[cli]") {
         }
     }
     SECTION("no subcommand") {
-        const RunResult r = hemirad(dir, {});
+        const RunResult r = run_hemirad(dir, {});
         CHECK(r.code == 2);
         check_one_line(r.err);
         CHECK(listing(dir.path()).empty());
     }
     SECTION("bake without a scene") {
-        const RunResult r = hemirad(dir, {"bake"});
+        const RunResult r = run_hemirad(dir, {"bake"});
         CHECK(r.code == 2);
         check_one_line(r.err);
         CHECK(!fs::exists(dir / "out"));
@@ -677,7 +687,7 @@ TEST_CASE("devices and help and a missing subcommand", "[cli]") {
 
 TEST_CASE("the default output directory is out/", "[cli]") {
     TempDir dir;
-    const RunResult r = hemirad(dir, concat({"bake", kClosedRoom.string()}, kFast));
+    const RunResult r = run_hemirad(dir, concat({"bake", kClosedRoom.string()}, kFast));
     INFO("stderr: " << r.err);
     REQUIRE(r.code == 0);
     CHECK(fs::is_regular_file(dir / "out" / "report.json"));
@@ -815,4 +825,19 @@ TEST_CASE("bad input after a scene warning is still one line on stderr", "[cli]"
     const fs::path out = dir / "never";
     expect_bad_input(dir, bake_args(file, out, concat(kFast, {"--camera", "no_such_camera"})), out,
                      "no_such_camera");
+}
+
+TEST_CASE("an OpenCL bake under verify gives the reference bake byte for byte", "[cli]") {
+    if (hemirad::ocl::list_devices().empty()) {
+        WARN("no OpenCL device: skipped");
+        return;
+    }
+    const TempDir dir;
+    const fs::path with_cl = dir / "opencl", with_ref = dir / "ref";
+    const json report = bake_ok(dir, kClosedRoom, with_cl, concat(kFast, {"--device", "opencl", "--verify"}));
+    bake_ok(dir, kClosedRoom, with_ref, concat(kFast, {"--device", "ref"}));
+    CHECK(report["device"]["backend"] == "opencl");
+    CHECK(report["verify"]["shots_checked"].get<long>() == report["passes"].get<long>());
+    CHECK(report["verify"]["cells_mismatched"].get<long>() == 0);
+    CHECK(read_text(with_cl / "baked.bin") == read_text(with_ref / "baked.bin"));
 }

@@ -16,7 +16,9 @@
 #include <fmt/core.h>
 
 #include "cli/bake.h"
+#include "cl/runtime.h"
 #include "core/error.h"
+#include "formfactor/verify.h"
 
 namespace hemirad::cli {
 namespace {
@@ -24,7 +26,7 @@ namespace {
 void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("scene", o.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
     bake.add_option("-o,--output", o.output, "output directory (created if missing)")->capture_default_str();
-    bake.add_option("--device", o.device, "form-factor engine: auto|ref (OpenCL engines come with the kernels)")
+    bake.add_option("--device", o.device, "form-factor engine: auto|ref|opencl|opencl:P.D (see hemirad devices)")
         ->capture_default_str();
     bake.add_option("--hemicube", o.hemicube, "hemicube resolution N: top face N×N plus four N×N/2 half faces")
         ->check(CLI::Range(8, 4096))->capture_default_str();
@@ -37,7 +39,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
         ->check(CLI::NonNegativeNumber)->capture_default_str();
     bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")->capture_default_str();
-    bake.add_flag("--verify", o.verify, "check every shot of an OpenCL engine against the reference");
+    bake.add_flag("--verify", o.verify, "check shots of the OpenCL engine against the scalar reference");
+    bake.add_option("--verify-every", o.verify_every, "with --verify, check every K-th shot")
+        ->check(CLI::PositiveNumber)->capture_default_str();
     bake.add_option("--camera", o.camera, "render from the camera with this name");
     bake.add_option("--preview-every", o.preview_every, "write DIR/preview/pass_NNNNNN.png every K passes")
         ->check(CLI::NonNegativeNumber);
@@ -92,6 +96,12 @@ int run(int argc, char** argv) {
     } catch (const Interrupted&) {
         std::cerr << (bake_options.progress ? "\n" : "") << "hemirad: interrupted; no output written\n";
         return 130;
+    } catch (const formfactor::VerifyError& e) {
+        std::cerr << "hemirad: verification failed: " << e.what() << "\n";
+        return 1;
+    } catch (const ocl::BuildError& e) {
+        std::cerr << "hemirad: " << e.what() << "\n";
+        return 1;
     } catch (const std::bad_alloc&) {
         std::cerr << "hemirad: out of memory\n";
         return 1;

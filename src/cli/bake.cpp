@@ -16,9 +16,9 @@
 #include <nlohmann/json.hpp>
 
 #include "cl/runtime.h"
+#include "cli/engine_select.h"
 #include "core/error.h"
 #include "formfactor/near_field.h"
-#include "formfactor/reference.h"
 #include "mesh/mesh.h"
 #include "output/output.h"
 #include "scene/scene.h"
@@ -206,9 +206,6 @@ void list_devices(std::ostream& out, bool json) {
 
 void run_bake(const BakeOptions& o) {
     const auto t_total = Clock::now();
-    if (o.device != "auto" && o.device != "ref")
-        throw InputError(fmt::format("--device {}: this build has only the reference engine (ref)", o.device));
-    if (o.verify) throw InputError("--verify: needs an OpenCL engine to check; this build has only the reference");
     if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
 
     auto t0 = Clock::now();
@@ -240,7 +237,10 @@ void run_bake(const BakeOptions& o) {
     formfactor::Settings ff_settings;
     ff_settings.hemicube = o.hemicube;
     ff_settings.seed = o.seed;
-    formfactor::NearFieldEngine near_field(mesh, std::make_unique<formfactor::ReferenceEngine>(mesh, ff_settings));
+    EngineChoice choice = choose_engine(o.device, o.verify, o.verify_every, mesh, ff_settings);
+    formfactor::VerifyingEngine* const verifier = choice.verifier;
+    if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({})\n", choice.id, choice.name);
+    formfactor::NearFieldEngine near_field(mesh, std::move(choice.engine));
     TimedEngine engine(near_field);
     solve::Settings solve_settings;
     solve_settings.threshold = o.threshold;
@@ -278,7 +278,7 @@ void run_bake(const BakeOptions& o) {
     ordered_json report;
     report["version"] = HEMIRAD_VERSION;
     report["scene"] = o.scene;
-    report["device"] = {{"backend", "ref"}, {"platform", "host"}, {"name", "scalar reference hemicube (1 thread)"}};
+    report["device"] = {{"backend", choice.backend}, {"platform", choice.platform}, {"name", choice.name}, {"id", choice.id}};
     report["settings"] = {
         {"hemicube", o.hemicube},
         {"patch_size", mesh_settings.patch_size},
@@ -286,7 +286,9 @@ void run_bake(const BakeOptions& o) {
         {"threshold", o.threshold},
         {"max_passes", o.max_passes},
         {"seed", o.seed},
+        {"device", o.device},
         {"verify", o.verify},
+        {"verify_every", o.verify_every},
         {"solver", "progressive"},
         {"camera", view.name},
         {"image", {width, height}},
@@ -322,6 +324,16 @@ void run_bake(const BakeOptions& o) {
     for (const auto& s : output::summarize(scene, mesh, radiosity, irradiance))
         meshes.push_back({{"name", s.name}, {"area", s.area}, {"radiosity", vec3(s.radiosity)}, {"irradiance", vec3(s.irradiance)}});
     report["meshes"] = meshes;
+    if (verifier) {
+        const formfactor::VerifySummary& v = verifier->summary();
+        report["verify"] = {{"shots_checked", v.shots_checked},
+                            {"cells_compared", v.cells_compared},
+                            {"cells_mismatched", v.cells_mismatched},
+                            {"max_abs_error", v.max_abs_error},
+                            {"max_rel_error", v.max_rel_error},
+                            {"tolerance", {{"absolute", formfactor::VerifyingEngine::kAbsoluteTolerance},
+                                           {"relative", formfactor::VerifyingEngine::kRelativeTolerance}}}};
+    }
     report["warnings"] = scene.warnings;
     report["timings_s"] = {{"load", t_load},
                            {"mesh", t_mesh},

@@ -20,6 +20,7 @@ struct BakeOptions {
     long max_passes = 100000;
     std::uint64_t seed = 1;
     bool verify = false;
+    long verify_every = 1;        // with --verify: check shots 0, K, 2K, …
     std::string camera;
     long preview_every = 0;
     int image_width = 640;

@@ -1,0 +1,80 @@
+// Device selection for `hemirad bake` (see engine_select.h).
+#include "cli/engine_select.h"
+
+#include <cstdlib>
+#include <regex>
+
+#include <fmt/core.h>
+
+#include "core/error.h"
+#include "formfactor/opencl_engine.h"
+#include "formfactor/reference.h"
+
+namespace hemirad::cli {
+namespace {
+
+// The device a spec names, or nullptr for the reference. `origin` names where the spec came from.
+const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& origin,
+                               const std::vector<ocl::DeviceInfo>& devices) {
+    // `auto` stays on the reference for now: the OpenCL engine gives the same cells but is not
+    // yet faster on CPUs (PoCL), and has not been run on a GPU. Ask for it with `opencl`.
+    if (spec == "ref" || spec == "auto") return nullptr;
+    if (spec == "opencl") {
+        for (const auto& d : devices)
+            if (d.type == "gpu") return &d;
+        if (!devices.empty()) return &devices.front();
+        throw InputError(fmt::format("{} {}: no OpenCL device found (see hemirad devices)", origin, spec));
+    }
+    std::smatch m;
+    static const std::regex kExact(R"(opencl:(\d+)\.(\d+))");
+    if (std::regex_match(spec, m, kExact)) {
+        const int p = std::stoi(m[1]), d = std::stoi(m[2]);
+        for (const auto& dev : devices)
+            if (dev.platform == p && dev.device == d) return &dev;
+        throw InputError(fmt::format("{} {}: no such OpenCL device (see hemirad devices)", origin, spec));
+    }
+    throw InputError(fmt::format("{} {}: expected auto, ref, opencl or opencl:P.D", origin, spec));
+}
+
+}  // namespace
+
+EngineChoice choose_engine(const std::string& device, bool verify, long verify_every, const mesh::Mesh& mesh,
+                           const formfactor::Settings& settings) {
+    std::string spec = device, origin = "--device";
+    if (spec == "auto") {
+        const char* env = std::getenv("HEMIRAD_DEVICE");
+        if (env && *env) {
+            spec = env;
+            origin = "HEMIRAD_DEVICE=";
+        }
+    }
+    const bool wants_opencl = spec != "ref" && spec != "auto";
+    const std::vector<ocl::DeviceInfo> devices = wants_opencl ? ocl::list_devices() : std::vector<ocl::DeviceInfo>{};
+    const ocl::DeviceInfo* chosen = resolve(spec, origin, devices);
+
+    EngineChoice out;
+    if (!chosen) {
+        if (verify) throw InputError("--verify checks an OpenCL engine against the reference; choose --device opencl");
+        out.engine = std::make_unique<formfactor::ReferenceEngine>(mesh, settings);
+        out.backend = "ref";
+        out.platform = "host";
+        out.name = "scalar reference hemicube (1 thread)";
+        out.id = "ref";
+        return out;
+    }
+    out.context = std::make_unique<ocl::Context>(*chosen);
+    out.engine = std::make_unique<formfactor::OpenCLEngine>(mesh, *out.context, settings);
+    if (verify) {
+        auto verifying = std::make_unique<formfactor::VerifyingEngine>(
+            std::move(out.engine), std::make_unique<formfactor::ReferenceEngine>(mesh, settings), verify_every);
+        out.verifier = verifying.get();
+        out.engine = std::move(verifying);
+    }
+    out.backend = "opencl";
+    out.platform = chosen->platform_name;
+    out.name = chosen->name;
+    out.id = chosen->id();
+    return out;
+}
+
+}  // namespace hemirad::cli
