@@ -1,0 +1,122 @@
+// Shot throughput of the hemicube engines on one scene, as ratios taken in one run: the engines
+// alternate, repeat after repeat, over the same shots, after a warm-up (kernel builds excluded).
+// Every timed shot of every engine is also compared with the reference, so a fast wrong engine
+// cannot win. Usage: hemirad_bench_engines [SCENE] [--hemicube N] [--patch-size S]
+//   [--element-size S] [--shots K] [--repeats R] [--json FILE]
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+
+#include "cl/runtime.h"
+#include "formfactor/opencl_engine.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+
+using namespace hemirad;
+
+namespace {
+
+struct Stats {
+    double min = 0.0, median = 0.0, sigma_percent = 0.0;
+};
+
+Stats stats(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    double mean = 0.0, var = 0.0;
+    for (double x : v) mean += x / v.size();
+    for (double x : v) var += (x - mean) * (x - mean) / v.size();
+    return {v.front(), v[v.size() / 2], mean > 0.0 ? 100.0 * std::sqrt(var) / mean : 0.0};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    std::string scene_file = std::string(HEMIRAD_SOURCE_DIR) + "/scenes/cornell_box.gltf", json_file;
+    int hemicube = 256, shots = 20, repeats = 5;
+    double patch = 0.06, element = 0.02;
+    CLI::App app{"hemicube engine throughput, as ratios in one run"};
+    app.add_option("scene", scene_file)->capture_default_str();
+    app.add_option("--hemicube", hemicube)->capture_default_str();
+    app.add_option("--patch-size", patch)->capture_default_str();
+    app.add_option("--element-size", element)->capture_default_str();
+    app.add_option("--shots", shots, "shots per engine per repeat")->capture_default_str();
+    app.add_option("--repeats", repeats)->capture_default_str();
+    app.add_option("--json", json_file, "also write the results here");
+    CLI11_PARSE(app, argc, argv);
+
+    const scene::Scene s = scene::load(scene_file);
+    const mesh::Mesh m = mesh::build(s, {patch, element});
+    const formfactor::Settings settings{hemicube, 1};
+
+    struct Entry {
+        std::string engine, device;
+        std::unique_ptr<ocl::Context> context;
+        std::unique_ptr<formfactor::Engine> engine_ptr;
+        std::vector<double> ms_per_shot;  // one value per repeat
+    };
+    std::vector<Entry> entries;
+    entries.push_back({"ref", "host (1 thread)", nullptr, std::make_unique<formfactor::ReferenceEngine>(m, settings), {}});
+    for (const auto& d : ocl::list_devices()) {
+        Entry e{"opencl", d.name + " (" + d.id() + ")", std::make_unique<ocl::Context>(d), nullptr, {}};
+        e.engine_ptr = std::make_unique<formfactor::OpenCLEngine>(m, *e.context, settings);
+        entries.push_back(std::move(e));
+    }
+
+    // The same shots for every engine: patches spread over the scene, shot index = seed stream.
+    std::vector<std::uint32_t> patches;
+    for (int i = 0; i < shots; ++i)
+        patches.push_back(static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u) % m.patches.size()));
+    std::vector<formfactor::ShotResult> expected(patches.size());
+    for (std::size_t i = 0; i < patches.size(); ++i) entries[0].engine_ptr->shoot(patches[i], i, expected[i]);
+
+    formfactor::ShotResult r;
+    for (auto& e : entries) e.engine_ptr->shoot(patches[0], 0, r);  // warm-up: builds, first uploads
+    double worst_error = 0.0;
+    for (int rep = 0; rep < repeats; ++rep) {
+        for (auto& e : entries) {
+            const auto t0 = std::chrono::steady_clock::now();
+            for (std::size_t i = 0; i < patches.size(); ++i) {
+                e.engine_ptr->shoot(patches[i], i, r);
+                for (std::size_t k = 0; k < r.F.size(); ++k)
+                    worst_error = std::max(worst_error, std::abs(r.F[k] - expected[i].F[k]));
+            }
+            const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+            e.ms_per_shot.push_back(ms / static_cast<double>(patches.size()));
+        }
+    }
+    if (worst_error > 1e-6) {
+        std::cerr << fmt::format("bench: an engine disagrees with the reference by {:.3g}; no result\n", worst_error);
+        return 1;
+    }
+
+    const Stats ref = stats(entries[0].ms_per_shot);
+    std::cout << fmt::format("{}: {} patches, {} elements, N = {}, {} shots × {} repeats (worst |ΔF| vs ref {:.1e})\n\n",
+                             scene_file, m.patches.size(), m.elements.size(), hemicube, shots, repeats, worst_error);
+    std::cout << "| engine | device | ms/shot median (min, σ) | shots/s | hemicube samples/s | vs ref |\n";
+    std::cout << "|---|---|---|---|---|---|\n";
+    nlohmann::ordered_json results = nlohmann::ordered_json::array();
+    for (const auto& e : entries) {
+        const Stats st = stats(e.ms_per_shot);
+        const double shots_per_s = 1000.0 / st.median;
+        const double samples = 3.0 * hemicube * hemicube * shots_per_s;
+        std::cout << fmt::format("| {} | {} | {:.2f} ({:.2f}, ±{:.0f}%) | {:.0f} | {:.3g} | {:.2f}× |\n", e.engine, e.device,
+                                 st.median, st.min, st.sigma_percent, shots_per_s, samples, ref.median / st.median);
+        results.push_back({{"engine", e.engine}, {"device", e.device}, {"scene", scene_file},
+                           {"triangles", s.triangles.size()}, {"patches", m.patches.size()},
+                           {"elements", m.elements.size()}, {"hemicube", hemicube}, {"shots_per_s", shots_per_s},
+                           {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
+                           {"speedup_vs_ref", ref.median / st.median}});
+    }
+    if (!json_file.empty()) std::ofstream(json_file) << results.dump(2) << "\n";
+    return 0;
+}
