@@ -841,3 +841,22 @@ TEST_CASE("an OpenCL bake under verify gives the reference bake byte for byte", 
     CHECK(report["verify"]["cells_mismatched"].get<long>() == 0);
     CHECK(read_text(with_cl / "baked.bin") == read_text(with_ref / "baked.bin"));
 }
+
+TEST_CASE("HEMIRAD_DEVICE picks the device when --device is auto", "[cli]") {
+    const TempDir dir;
+    const fs::path out = dir / "out";
+    std::string script = "HEMIRAD_DEVICE=bogus " + shell_quote(HEMIRAD_EXE);
+    for (const auto& a : bake_args(kClosedRoom, out)) script += " " + shell_quote(a);
+    const RunResult bad = run_shell(dir, script);
+    INFO("stderr: [" << bad.err << "]");
+    CHECK(bad.code == 2);
+    check_one_line(bad.err);
+    CHECK(bad.err.find("HEMIRAD_DEVICE") != std::string::npos);
+    CHECK(!fs::exists(out));
+
+    std::string ref_script = "HEMIRAD_DEVICE=ref " + shell_quote(HEMIRAD_EXE);
+    for (const auto& a : bake_args(kClosedRoom, out)) ref_script += " " + shell_quote(a);
+    const RunResult good = run_shell(dir, ref_script);
+    REQUIRE(good.code == 0);
+    CHECK(read_json(out / "report.json")["device"]["backend"] == "ref");
+}

@@ -13,8 +13,9 @@
 namespace hemirad::cli {
 namespace {
 
-// The device a spec names, or nullptr for the reference. `origin` names where the spec came from.
-const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& origin,
+// The device a spec names, or nullptr for the reference. `label` says where the spec came from
+// ("--device X" or "HEMIRAD_DEVICE=X") for the error message.
+const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& label,
                                const std::vector<ocl::DeviceInfo>& devices) {
     // `auto` stays on the reference for now: the OpenCL engine gives the same cells but is not
     // yet faster on CPUs (PoCL), and has not been run on a GPU. Ask for it with `opencl`.
@@ -23,7 +24,7 @@ const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& origi
         for (const auto& d : devices)
             if (d.type == "gpu") return &d;
         if (!devices.empty()) return &devices.front();
-        throw InputError(fmt::format("{} {}: no OpenCL device found (see hemirad devices)", origin, spec));
+        throw InputError(fmt::format("{}: no OpenCL device found (see hemirad devices)", label));
     }
     std::smatch m;
     static const std::regex kExact(R"(opencl:(\d+)\.(\d+))");
@@ -31,26 +32,26 @@ const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& origi
         const int p = std::stoi(m[1]), d = std::stoi(m[2]);
         for (const auto& dev : devices)
             if (dev.platform == p && dev.device == d) return &dev;
-        throw InputError(fmt::format("{} {}: no such OpenCL device (see hemirad devices)", origin, spec));
+        throw InputError(fmt::format("{}: no such OpenCL device (see hemirad devices)", label));
     }
-    throw InputError(fmt::format("{} {}: expected auto, ref, opencl or opencl:P.D", origin, spec));
+    throw InputError(fmt::format("{}: expected auto, ref, opencl or opencl:P.D", label));
 }
 
 }  // namespace
 
 EngineChoice choose_engine(const std::string& device, bool verify, long verify_every, const mesh::Mesh& mesh,
                            const formfactor::Settings& settings) {
-    std::string spec = device, origin = "--device";
+    std::string spec = device, label = "--device " + device;
     if (spec == "auto") {
         const char* env = std::getenv("HEMIRAD_DEVICE");
         if (env && *env) {
             spec = env;
-            origin = "HEMIRAD_DEVICE=";
+            label = "HEMIRAD_DEVICE=" + spec;
         }
     }
     const bool wants_opencl = spec != "ref" && spec != "auto";
     const std::vector<ocl::DeviceInfo> devices = wants_opencl ? ocl::list_devices() : std::vector<ocl::DeviceInfo>{};
-    const ocl::DeviceInfo* chosen = resolve(spec, origin, devices);
+    const ocl::DeviceInfo* chosen = resolve(spec, label, devices);
 
     EngineChoice out;
     if (!chosen) {
