@@ -15,24 +15,6 @@ using Catch::Matchers::WithinRel;
 
 namespace {
 
-// Area-weighted form factor from every patch of node `from` to all elements of node `to`:
-// F(A_from → A_to) = Σ_p A_p F(p → A_to) / A_from, one hemicube per patch.
-double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::uint32_t from, std::uint32_t to,
-                        std::uint64_t first_shot = 0) {
-    formfactor::ShotResult r;
-    double weighted = 0.0, area = 0.0;
-    std::uint64_t shot = first_shot;
-    for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
-        if (m.patches[p].node != from) continue;
-        engine.shoot(p, shot++, r);
-        double f = 0.0;
-        for (std::size_t k = 0; k < m.elements.size(); ++k)
-            if (m.elements[k].node == to) f += r.F[k];
-        weighted += m.patches[p].area * f;
-        area += m.patches[p].area;
-    }
-    return weighted / area;
-}
 
 scene::Scene with_materials(std::uint32_t& grey) {
     scene::Scene s;
@@ -129,7 +111,7 @@ TEST_CASE("hemicube: parallel squares error shrinks with subdivision", "[formfac
     for (double patch : {0.5, 0.25, 0.125}) {
         const mesh::Mesh m = mesh::build(s, {patch, patch / 2});
         formfactor::ReferenceEngine engine(m, {256, 1});
-        const double f = area_form_factor(m, engine, 0, 1);
+        const double f = test::area_form_factor(m, engine, 0, 1);
         const double err = std::abs(f - exact) / exact;
         CAPTURE(patch, f, err);
         CHECK(err < previous);
@@ -145,15 +127,15 @@ TEST_CASE("hemicube: perpendicular rectangles and reciprocity", "[formfactor]") 
         const scene::Scene s = test::perpendicular_rectangles(1, 1, 1, grey, grey, base);
         const mesh::Mesh m = mesh::build(s, {1.0 / 16, 1.0 / 32});
         formfactor::ReferenceEngine engine(m, {256, 3});
-        const double f = area_form_factor(m, engine, 0, 1);
+        const double f = test::area_form_factor(m, engine, 0, 1);
         CHECK_THAT(f, WithinRel(0.2000437761, 0.005));
     }
     SECTION("1×1 floor, 1×2 wall: A_i F_ij = A_j F_ji and both match the closed form") {
         const scene::Scene s = test::perpendicular_rectangles(1, 1, 2, grey, grey, base);
         const mesh::Mesh m = mesh::build(s, {1.0 / 16, 1.0 / 32});
         formfactor::ReferenceEngine engine(m, {256, 5});
-        const double f_floor_wall = area_form_factor(m, engine, 0, 1);
-        const double f_wall_floor = area_form_factor(m, engine, 1, 0, 1000);
+        const double f_floor_wall = test::area_form_factor(m, engine, 0, 1);
+        const double f_wall_floor = test::area_form_factor(m, engine, 1, 0, 1000);
         CHECK_THAT(f_floor_wall, WithinRel(0.2328526028, 0.005));
         CHECK_THAT(f_wall_floor, WithinRel(0.1164263014, 0.005));
         CHECK_THAT(1.0 * f_floor_wall, WithinRel(2.0 * f_wall_floor, 0.005));

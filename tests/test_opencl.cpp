@@ -147,22 +147,6 @@ Comparison compare(const mesh::Mesh& m, formfactor::ReferenceEngine& ref, formfa
     return c;
 }
 
-// Area-weighted form factor from the patches of node `from` to the elements of node `to`.
-double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::uint32_t from, std::uint32_t to) {
-    formfactor::ShotResult r;
-    double weighted = 0.0, area = 0.0;
-    std::uint64_t shot = 0;
-    for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
-        if (m.patches[p].node != from) continue;
-        engine.shoot(p, shot++, r);
-        double f = 0.0;
-        for (std::size_t k = 0; k < m.elements.size(); ++k)
-            if (m.elements[k].node == to) f += r.F[k];
-        weighted += m.patches[p].area * f;
-        area += m.patches[p].area;
-    }
-    return weighted / area;
-}
 
 }  // namespace
 
@@ -250,7 +234,7 @@ TEST_CASE("opencl: parallel unit squares match the analytic form factor", "[open
     s = test::parallel_rectangles(1, 1, 1, grey, grey, s);
     const mesh::Mesh m = mesh::build(s, {0.125, 0.0625});
     formfactor::OpenCLEngine engine(m, *ctx, {256, 1});
-    const double f = area_form_factor(m, engine, 0, 1);
+    const double f = test::area_form_factor(m, engine, 0, 1);
     CAPTURE(f);
     CHECK_THAT(f, WithinRel(0.1998248957, 0.005));
 }

@@ -1,9 +1,27 @@
-// Closed-form form factors (Howell's catalogue, as written in shared/REFERENCES.md).
+// Closed-form form factors (Howell's catalogue, as written in shared/REFERENCES.md) and the
+// area form factor measured through any engine.
 #include "test_scenes.h"
 
 #include <cmath>
 
 namespace hemirad::test {
+
+double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::uint32_t from, std::uint32_t to,
+                        std::uint64_t first_shot) {
+    formfactor::ShotResult r;
+    double weighted = 0.0, area = 0.0;
+    std::uint64_t shot = first_shot;
+    for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
+        if (m.patches[p].node != from) continue;
+        engine.shoot(p, shot++, r);
+        double f = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k)
+            if (m.elements[k].node == to) f += r.F[k];
+        weighted += m.patches[p].area * f;
+        area += m.patches[p].area;
+    }
+    return weighted / area;
+}
 
 double parallel_rectangles_ff(double a, double b, double c) {
     const double X = a / c, Y = b / c;

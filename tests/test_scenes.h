@@ -3,6 +3,8 @@
 
 #include <glm/glm.hpp>
 
+#include "formfactor/engine.h"
+#include "mesh/mesh.h"
 #include "scene/scene.h"
 
 namespace hemirad::test {
@@ -72,6 +74,12 @@ scene::Scene closed_box(glm::dvec3 size, MaterialOf material_of, scene::Scene s)
     finish(s);
     return s;
 }
+
+// Area-weighted form factor from every patch of node `from` to all elements of node `to`:
+// F(A_from → A_to) = Σ_p A_p F(p → A_to) / A_from, one hemicube per patch, shots counted from
+// `first_shot`.
+double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::uint32_t from, std::uint32_t to,
+                        std::uint64_t first_shot = 0);
 
 // Analytic form factors of ../shared/REFERENCES.md.
 double parallel_rectangles_ff(double a, double b, double c);
