@@ -1,6 +1,7 @@
 // Delta-form-factor table, face mapping and per-shot frame shared by every hemicube engine.
 #include "formfactor/hemicube.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/rng.h"
@@ -56,6 +57,14 @@ double DeltaFormFactors::sum() const {
         s = t;
     }
     return s;
+}
+
+double base_plane_epsilon(const mesh::Mesh& mesh) {
+    double extent = 0.0;
+    for (const auto& e : mesh.elements)
+        for (int k = 0; k < e.poly.n; ++k)
+            extent = std::max({extent, std::abs(e.poly.v[k].x), std::abs(e.poly.v[k].y), std::abs(e.poly.v[k].z)});
+    return 1e-9 * std::max(extent, 1e-30);
 }
 
 Frame make_frame(const mesh::Patch& shooter, std::uint64_t seed, std::uint64_t shot) {

@@ -39,6 +39,11 @@ private:
     std::vector<double> table_;
 };
 
+// Distance above the shooter's plane below which geometry is clipped (the base plane), relative
+// to the scene's coordinates so that geometry in the shooter's plane is clipped however far the
+// scene lies from the origin. Every engine must use exactly this value to agree cell for cell.
+double base_plane_epsilon(const mesh::Mesh& mesh);
+
 // Orthonormal frame of one shot: origin at the shooter's centroid, w its normal, (u, v)
 // rotated about w by an angle drawn from (seed, shot) so that aliasing becomes noise.
 struct Frame {

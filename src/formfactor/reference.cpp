@@ -83,12 +83,7 @@ ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& setting
     : mesh_(mesh), settings_(settings), delta_(settings.hemicube) {
     if (settings.hemicube < 8 || settings.hemicube % 2 != 0)
         throw InternalError("hemicube resolution must be even and at least 8");
-    // Geometry in the shooter's plane must be clipped however far the scene is from the origin.
-    double extent = 0.0;
-    for (const auto& e : mesh.elements)
-        for (int k = 0; k < e.poly.n; ++k)
-            extent = std::max({extent, std::abs(e.poly.v[k].x), std::abs(e.poly.v[k].y), std::abs(e.poly.v[k].z)});
-    eps_ = 1e-9 * std::max(extent, 1e-30);
+    eps_ = base_plane_epsilon(mesh);
     ids_.assign(delta_.cells(), kEmpty);
     depth_.assign(delta_.cells(), 0.0);
 }
