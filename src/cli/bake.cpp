@@ -231,14 +231,15 @@ void run_bake(const BakeOptions& o) {
     if (mesh.patches.empty())
         throw InputError(fmt::format("{}: every triangle has zero area; nothing to bake", o.scene));
 
-    OutputTransaction out(o.output);
-    // Only now, so that bad input is always exactly one line on stderr.
-    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
     formfactor::Settings ff_settings;
     ff_settings.hemicube = o.hemicube;
     ff_settings.seed = o.seed;
     EngineChoice choice = choose_engine(o.device, o.verify, o.verify_every, mesh, ff_settings);
     formfactor::VerifyingEngine* const verifier = choice.verifier;
+
+    OutputTransaction out(o.output);
+    // Only now, so that bad input is always exactly one line on stderr.
+    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
     if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({})\n", choice.id, choice.name);
     formfactor::NearFieldEngine near_field(mesh, std::move(choice.engine));
     TimedEngine engine(near_field);
