@@ -1,9 +1,11 @@
 // Hemicube form factors on an OpenCL device, cell for cell the scalar reference's result
 // (src/formfactor/reference.cpp): the same double-precision operations in the same order, no
-// contraction into FMAs. Per shot: setup (cull, clip and project each element on each face,
-// count its records per tile) -> scan (per-tile list offsets) -> scatter (record indices into
-// per-tile lists) -> raster (one work-group per tile, one work-item per cell: inside and depth
-// tests, the cell's id, the winner's delta form factor added in 64-bit fixed point).
+// contraction into FMAs. Per shot: setup (cull, clip and project each element on each face into
+// records with their cell boxes) -> count (records per tile) -> scan (per-tile list offsets) ->
+// scatter (record indices into per-tile lists) -> raster, on GPUs one work-group per tile and
+// one work-item per cell, on CPUs (raster_records) one work-item per tile walking its records:
+// inside and depth tests, the cell's id, the winner's delta form factor added in 64-bit fixed
+// point.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #pragma OPENCL FP_CONTRACT OFF
@@ -16,6 +18,12 @@
 #endif
 #ifndef HEMIRAD_WG
 #define HEMIRAD_WG 64  // work-group size of the per-element and per-record kernels
+#endif
+#ifndef HEMIRAD_RASTER_WG
+#define HEMIRAD_RASTER_WG 4  // work-group size of raster_records (one work-item per tile)
+#endif
+#ifndef HEMIRAD_COUNT_COPIES
+#define HEMIRAD_COUNT_COPIES 1  // copies of the per-tile counters, one per work-group mod this: less contention
 #endif
 #ifndef HEMIRAD_SCAN_WG
 #define HEMIRAD_SCAN_WG 256  // the single work-group of the tile-offset scan, a power of two
@@ -43,7 +51,7 @@ double dot3(Vec a, Vec b) {
     return a.x * b.x + a.y * b.y + a.z * b.z;
 }
 
-Vec to_local(__constant const HrShot* shot, Vec p) {
+Vec to_local(const HrShot* shot, Vec p) {
     const Vec d = vec(p.x - shot->origin[0], p.y - shot->origin[1], p.z - shot->origin[2]);
     return vec(dot3(d, vec(shot->u[0], shot->u[1], shot->u[2])), dot3(d, vec(shot->v[0], shot->v[1], shot->v[2])),
                dot3(d, vec(shot->w[0], shot->w[1], shot->w[2])));
@@ -114,14 +122,6 @@ bool clip_if_needed(ClipPolygon* poly, int plane, int face, double eps) {
     return any_in && poly->n >= 3;
 }
 
-// Signed area of (a, b, p), positive when p is left of a->b, evaluated from the endpoint lower
-// in (y, x) order so that the two polygons sharing an edge get exactly opposite values.
-double edge_function(double ax, double ay, double bx, double by, double x, double y) {
-    const bool forward = ay < by || (ay == by && ax < bx);
-    if (!forward) return -((ax - bx) * (y - by) - (ay - by) * (x - bx));
-    return (bx - ax) * (y - ay) - (by - ay) * (x - ax);
-}
-
 // Top-left rule for a counter-clockwise polygon: a centre on an edge belongs to it only for
 // edges going down, or going right along a horizontal.
 bool owns_edge_point(double dx, double dy) {
@@ -136,17 +136,30 @@ int face_rows(int face, int n) {
     return face == 0 ? n : n / 2;
 }
 
+// The first counter of the copy that element k's records count in (and scatter to): copy
+// (work-group of k) mod COUNT_COPIES, each copy `tiles` counters. Work-groups that run at the
+// same time on different cores then rarely increment the same cache line.
+int counter_copy(int k, int tiles) {
+    return (k / HEMIRAD_WG) % HEMIRAD_COUNT_COPIES * tiles;
+}
+
 // One work-item per element: the records of its (up to five) faces at records[5k + face], and
-// one count per tile each record may cover.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(__constant const HrShot* shot,
-                                                                            __global const HrElement* elements,
-                                                                            __global const HrPatch* patches,
-                                                                            __global HrRecord* records,
-                                                                            __global uint* tile_counts) {
+// for each record that may cover a cell its box at boxes[5k + face] and bit `face` of
+// faces_seen[k]. Also zeroes the tile counts and the sums for the kernels after it.
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
+    const HrShot shot_value, __global const HrElement* elements, __global const HrPatch* patches,
+    __global HrRecord* records, __global HrBox* boxes, __global int* faces_seen, __global uint* tile_counts,
+    __global long* sums) {
+    const HrShot* shot = &shot_value;
     const int k = (int)get_global_id(0);
+    // The shot's clears, ahead of count and raster in the queue.
+    const int counters = shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
+    for (int c = k; c < counters; c += (int)get_global_size(0)) tile_counts[c] = 0;
+    for (int c = k; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
     if (k >= shot->elements) return;
     __global HrRecord* out = records + (size_t)k * HR_FACES;
-    for (int face = 0; face < HR_FACES; ++face) out[face].n = 0;
+    faces_seen[k] = 0;
+    int seen = 0;  // the faces_seen bits so far
 
     __global const HrElement* e = elements + k;
     if (e->patch == shot->shooter) return;  // the shooter's own elements lie in its base plane
@@ -206,17 +219,36 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(__co
             area2 += px[i] * py[j] - px[j] * py[i];
         }
         if (area2 == 0.0) continue;
-        __global HrRecord* r = out + face;
         const bool reverse = area2 < 0.0;  // make counter-clockwise
+        double x[HR_MAX_CLIPPED], y[HR_MAX_CLIPPED];
         double xmin = px[0], xmax = px[0], ymin = py[0], ymax = py[0];
         for (int i = 0; i < poly.n; ++i) {
             const int from = reverse ? poly.n - 1 - i : i;
-            r->x[i] = px[from];
-            r->y[i] = py[from];
+            x[i] = px[from];
+            y[i] = py[from];
             xmin = px[i] < xmin ? px[i] : xmin;
             xmax = xmax < px[i] ? px[i] : xmax;
             ymin = py[i] < ymin ? py[i] : ymin;
             ymax = ymax < py[i] ? py[i] : ymax;
+        }
+        // The edges of the inside test. edge_function evaluates each edge from its endpoint lower
+        // in (y, x), so that the two polygons sharing an edge get exactly opposite values; from
+        // the other endpoint it negates, which is exact and commutes with rounding
+        // (fl(-a * b) = -fl(a * b), fl(-a - -b) = -fl(a - b)): folded into dx and dy.
+        __global HrRecord* r = out + face;
+        int edges = 0, owns = 0;
+        for (int a = 0; a < poly.n; ++a) {
+            const int b = a + 1 == poly.n ? 0 : a + 1;
+            const double ax = x[a], ay = y[a], bx = x[b], by = y[b];
+            if (ax == bx && ay == by) continue;  // clipping can repeat a vertex
+            const bool forward = ay < by || (ay == by && ax < bx);
+            __global HrEdge* edge = &r->edge[edges];
+            edge->ox = forward ? ax : bx;
+            edge->oy = forward ? ay : by;
+            edge->dx = forward ? bx - ax : -(ax - bx);
+            edge->dy = forward ? by - ay : -(ay - by);
+            owns |= owns_edge_point(bx - ax, by - ay) ? 1 << edges : 0;
+            ++edges;
         }
         const int rows = face_rows(face, n);
         const int i0 = max(0, (int)floor(xmin - 0.5));
@@ -229,32 +261,60 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(__co
         r->c = c;
         r->element = k;
         r->back = is_back;
-        r->n = poly.n;
+        r->edges = edges;
+        r->owns = owns;
         r->face = face;
-        r->i0 = i0;
-        r->i1 = i1;
-        r->j0 = j0;
-        r->j1 = j1;
         if (i0 > i1 || j0 > j1) continue;  // no cell centre on the face: in no tile's list
-        for (int ty = j0 / HEMIRAD_TILE; ty <= j1 / HEMIRAD_TILE; ++ty)
-            for (int tx = i0 / HEMIRAD_TILE; tx <= i1 / HEMIRAD_TILE; ++tx)
-                atomic_inc(&tile_counts[shot->tile_base[face] + ty * shot->tiles_x + tx]);
+        __global HrBox* box = boxes + (size_t)k * HR_FACES + face;
+        box->i0 = i0;
+        box->i1 = i1;
+        box->j0 = j0;
+        box->j1 = j1;
+        seen |= 1 << face;
+    }
+    faces_seen[k] = seen;
+}
+
+// One work-item per element: one count per tile each of its records may cover, in its counter
+// copy. Apart from setup, whose record stores would otherwise drain at every atomic.
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(const HrShot shot_value,
+                                                                            __global const HrBox* boxes,
+                                                                            __global const int* faces_seen,
+                                                                            __global uint* tile_counts) {
+    const HrShot* shot = &shot_value;
+    const int k = (int)get_global_id(0);
+    if (k >= shot->elements) return;
+    const int faces = faces_seen[k];
+    if (faces == 0) return;
+    __global uint* copy = tile_counts + counter_copy(k, shot->tile_base[HR_FACES]);
+    for (int face = 0; face < HR_FACES; ++face) {
+        if (!((faces >> face) & 1)) continue;
+        const HrBox box = boxes[k * HR_FACES + face];
+        __global uint* counts = copy + shot->tile_base[face];
+        for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
+            for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx)
+                atomic_inc(&counts[ty * shot->tiles_x + tx]);
     }
 }
 
-// One work-group: exclusive prefix sum of the tile counts into list offsets (and the scatter
-// cursors); offsets[tiles] is the total, which the host checks against the list capacity.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(__constant const HrShot* shot,
+// One work-group: exclusive prefix sum of the tile counts, tile by tile and within a tile copy
+// by copy, into list offsets (and the scatter cursors, laid out as the counts): a tile's list is
+// offsets[tile * COPIES] up to offsets[(tile + 1) * COPIES]. offsets[tiles * COPIES] is the
+// total, also in sums[elements + 1], which the host checks against the list capacity.
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(const HrShot shot_value,
                                                                                 __global const uint* tile_counts,
                                                                                 __global uint* offsets,
-                                                                                __global uint* cursors) {
+                                                                                __global uint* cursors,
+                                                                                __global long* sums) {
+    const HrShot* shot = &shot_value;
     __local uint partial[HEMIRAD_SCAN_WG];
     const int lid = (int)get_local_id(0);
     const int tiles = shot->tile_base[HR_FACES];
-    const int chunk = (tiles + HEMIRAD_SCAN_WG - 1) / HEMIRAD_SCAN_WG;
-    const int begin = min(lid * chunk, tiles), end = min(begin + chunk, tiles);
+    const int entries = tiles * HEMIRAD_COUNT_COPIES;
+    const int chunk = (entries + HEMIRAD_SCAN_WG - 1) / HEMIRAD_SCAN_WG;
+    const int begin = min(lid * chunk, entries), end = min(begin + chunk, entries);
     uint sum = 0;
-    for (int t = begin; t < end; ++t) sum += tile_counts[t];
+    for (int t = begin; t < end; ++t) sum += tile_counts[t % HEMIRAD_COUNT_COPIES * tiles + t / HEMIRAD_COUNT_COPIES];
     partial[lid] = sum;
     barrier(CLK_LOCAL_MEM_FENCE);
     for (int step = 1; step < HEMIRAD_SCAN_WG; step <<= 1) {  // Hillis-Steele, inclusive
@@ -265,29 +325,42 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
     }
     uint run = partial[lid] - sum;
     for (int t = begin; t < end; ++t) {
+        const int counter = t % HEMIRAD_COUNT_COPIES * tiles + t / HEMIRAD_COUNT_COPIES;
         offsets[t] = run;
-        cursors[t] = run;
-        run += tile_counts[t];
+        cursors[counter] = run;
+        run += tile_counts[counter];
     }
-    if (lid == HEMIRAD_SCAN_WG - 1) offsets[tiles] = partial[lid];
+    if (lid == HEMIRAD_SCAN_WG - 1) {
+        offsets[entries] = partial[lid];
+        sums[shot->elements + 1] = partial[lid];  // read back with the sums
+    }
 }
 
-// One work-item per record slot: its index into the list of every tile it may cover. The
-// order within a list varies from run to run; the raster's result does not depend on it.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(__constant const HrShot* shot,
-                                                                              __global const HrRecord* records,
+// One work-item per element, as in count (the same work-groups, so the same counter copies):
+// the index of each of its records in the list of every tile the record may cover. The order
+// within a list varies from run to run; the raster's result does not depend on it.
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(const HrShot shot_value,
+                                                                              __global const HrBox* boxes,
+                                                                              __global const int* faces_seen,
                                                                               __global uint* cursors,
                                                                               __global uint* lists) {
-    const int slot = (int)get_global_id(0);
-    if (slot >= shot->elements * HR_FACES) return;
-    __global const HrRecord* r = records + slot;
-    if (r->n == 0 || r->i0 > r->i1 || r->j0 > r->j1) return;  // as setup counted
-    const int base = shot->tile_base[r->face];
-    for (int ty = r->j0 / HEMIRAD_TILE; ty <= r->j1 / HEMIRAD_TILE; ++ty)
-        for (int tx = r->i0 / HEMIRAD_TILE; tx <= r->i1 / HEMIRAD_TILE; ++tx) {
-            const uint at = atomic_inc(&cursors[base + ty * shot->tiles_x + tx]);
-            if (at < shot->list_capacity) lists[at] = (uint)slot;
-        }
+    const HrShot* shot = &shot_value;
+    const int k = (int)get_global_id(0);
+    if (k >= shot->elements) return;
+    const int faces = faces_seen[k];
+    if (faces == 0) return;
+    __global uint* copy = cursors + counter_copy(k, shot->tile_base[HR_FACES]);
+    for (int face = 0; face < HR_FACES; ++face) {
+        if (!((faces >> face) & 1)) continue;
+        const int slot = k * HR_FACES + face;
+        const HrBox box = boxes[slot];
+        __global uint* face_cursors = copy + shot->tile_base[face];
+        for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
+            for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx) {
+                const uint at = atomic_inc(&face_cursors[ty * shot->tiles_x + tx]);
+                if (at < shot->list_capacity) lists[at] = (uint)slot;
+            }
+    }
 }
 
 // One work-group per tile, one work-item per cell: the nearest record at the cell centre,
@@ -295,11 +368,14 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(__
 // depend on the order of the tile's list. The winner's delta form factor goes to its sum
 // (sums[elements] for blockers) in fixed point: integer atomics add in any order exactly.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))) void raster(
-    __constant const HrShot* shot, __global const HrRecord* records, __global const uint* offsets,
-    __global const uint* lists, __global const long* delta_fixed, __global int* ids, __global long* sums) {
+    const HrShot shot_value, __global const HrRecord* records, __global const HrBox* boxes,
+    __global const uint* offsets, __global const uint* lists, __global const long* delta_fixed, __global int* ids,
+    __global long* sums) {
+    const HrShot* shot = &shot_value;
     const int tile = (int)get_group_id(0);
     const int tiles = shot->tile_base[HR_FACES];
-    if (offsets[tiles] > shot->list_capacity) return;  // lists overflowed: the host grows them and reruns
+    if (offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity)
+        return;  // overflowed: the host grows the lists, reruns
     int face = 0;
     while (face < HR_FACES - 1 && tile >= shot->tile_base[face + 1]) ++face;
     const int in_face = tile - shot->tile_base[face];
@@ -315,17 +391,16 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
     const double s = x / per_unit - 1.0, t = y / per_unit - t0;
     int best = -1, best_back = 0;
     double best_depth = 0.0;
-    const uint end = offsets[tile + 1];
-    for (uint at = offsets[tile]; at < end; ++at) {
-        __global const HrRecord* r = records + lists[at];
-        if (i < r->i0 || i > r->i1 || j < r->j0 || j > r->j1) continue;
+    const uint end = offsets[(tile + 1) * HEMIRAD_COUNT_COPIES];
+    for (uint at = offsets[tile * HEMIRAD_COUNT_COPIES]; at < end; ++at) {
+        const uint slot = lists[at];
+        const HrBox box = boxes[slot];
+        if (i < box.i0 || i > box.i1 || j < box.j0 || j > box.j1) continue;
+        __global const HrRecord* r = records + slot;
         bool inside = true;
-        for (int a = 0; a < r->n && inside; ++a) {
-            const int b = a + 1 == r->n ? 0 : a + 1;
-            const double ax = r->x[a], ay = r->y[a], bx = r->x[b], by = r->y[b];
-            if (ax == bx && ay == by) continue;  // clipping can repeat a vertex
-            const double edge = edge_function(ax, ay, bx, by, x, y);
-            inside = edge > 0.0 || (edge == 0.0 && owns_edge_point(bx - ax, by - ay));
+        for (int e = 0; e < r->edges && inside; ++e) {
+            const double edge = r->edge[e].dx * (y - r->edge[e].oy) - r->edge[e].dy * (x - r->edge[e].ox);
+            inside = edge > 0.0 || (edge == 0.0 && ((r->owns >> e) & 1));
         }
         if (!inside) continue;
         const double inv_depth = (r->nf[0] * s + r->nf[1] * t + r->nf[2]) / r->c;
@@ -340,6 +415,120 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
     const size_t cell = face_offset + (size_t)j * n + i;
     ids[cell] = best < 0 ? HR_EMPTY : (best_back ? HR_BLOCKER : best);
     if (best >= 0) atom_add(&sums[best_back ? shot->elements : best], delta_fixed[cell]);
+}
+
+// For CPU devices: one work-item per tile walks the records of its list in turn, each over
+// only its bounding box within the tile, keeping the winners in private arrays (the
+// reference's loop order, parallel across tiles). Records are small (a few cells a row), so
+// each row is tested four cells at a time without branches: the same double operations per
+// lane as the scalar test. The winner is the reference's: the nearest at the cell centre,
+// ties to the lower element index.
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
+    const HrShot shot_value, __global const HrRecord* records, __global const HrBox* boxes,
+    __global const uint* offsets, __global const uint* lists, __global const long* delta_fixed, __global int* ids,
+    __global long* sums) {
+    const HrShot* shot = &shot_value;
+    const int tile = (int)get_global_id(0);
+    const int tiles = shot->tile_base[HR_FACES];
+    if (tile >= tiles) return;
+    if (offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity)
+        return;  // overflowed: the host grows the lists, reruns
+    int face = 0;
+    while (face < HR_FACES - 1 && tile >= shot->tile_base[face + 1]) ++face;
+    const int in_face = tile - shot->tile_base[face];
+    const int n = shot->n;
+    const int ci0 = (in_face % shot->tiles_x) * HEMIRAD_TILE, cj0 = (in_face / shot->tiles_x) * HEMIRAD_TILE;
+    const int ci1 = min(ci0 + HEMIRAD_TILE, n) - 1, cj1 = min(cj0 + HEMIRAD_TILE, face_rows(face, n)) - 1;
+    const double per_unit = 0.5 * n;
+    const double t0 = face == 0 ? 1.0 : 0.0;
+
+    // Row-major tile cells; the last row's last group of four may reach 3 past the end.
+    int best[HEMIRAD_TILE * HEMIRAD_TILE + 3], best_back[HEMIRAD_TILE * HEMIRAD_TILE + 3];
+    double best_depth[HEMIRAD_TILE * HEMIRAD_TILE + 3];
+    for (int c = 0; c < HEMIRAD_TILE * HEMIRAD_TILE + 3; ++c) {
+        best[c] = -1;
+        best_back[c] = 0;
+        best_depth[c] = 0.0;
+    }
+    const double4 lane = (double4)(0.5, 1.5, 2.5, 3.5);  // cell centres from the group's first cell
+    const int4 lane_index = (int4)(0, 1, 2, 3);
+    double column_s[HEMIRAD_TILE + 3];  // s = x / per_unit - 1 of the tile's columns, computed once
+    for (int c = 0; c < HEMIRAD_TILE + 3; ++c) column_s[c] = (ci0 + c + 0.5) / per_unit - 1.0;
+
+    const uint end = offsets[(tile + 1) * HEMIRAD_COUNT_COPIES];
+    for (uint at = offsets[tile * HEMIRAD_COUNT_COPIES]; at < end; ++at) {
+        const uint slot = lists[at];
+        const HrBox box = boxes[slot];
+        const int i0 = max(box.i0, ci0), i1 = min(box.i1, ci1), j0 = max(box.j0, cj0), j1 = min(box.j1, cj1);
+        if (i0 > i1 || j0 > j1) continue;
+        __global const HrRecord* r = records + slot;
+        const int count = r->edges;
+        double ox[HR_MAX_CLIPPED], oy[HR_MAX_CLIPPED], dx[HR_MAX_CLIPPED], dy[HR_MAX_CLIPPED];
+        long owns[HR_MAX_CLIPPED];  // all bits set where a centre on the edge is inside
+        for (int e = 0; e < count; ++e) {
+            ox[e] = r->edge[e].ox;
+            oy[e] = r->edge[e].oy;
+            dx[e] = r->edge[e].dx;
+            dy[e] = r->edge[e].dy;
+            owns[e] = -(long)((r->owns >> e) & 1);
+        }
+        const double nf0 = r->nf[0], nf1 = r->nf[1], nf2 = r->nf[2], c = r->c;
+        const int k = r->element, back = r->back;
+        for (int j = j0; j <= j1; ++j) {
+            const double y = j + 0.5;
+            double row[HR_MAX_CLIPPED];  // each edge's dx * (y - oy), shared by the row
+            for (int e = 0; e < count; ++e) row[e] = dx[e] * (y - oy[e]);
+            const double row_depth = nf1 * (y / per_unit - t0);
+            const int base = (j - cj0) * HEMIRAD_TILE - ci0;
+            for (int i = i0; i <= i1; i += 4) {
+                const double4 x = (double)i + lane;
+                long4 in = convert_long4((int4)(i) + lane_index <= (int4)(i1));
+                for (int e = 0; e < count; ++e) {
+                    const double4 edge = row[e] - dy[e] * (x - ox[e]);
+                    in &= (edge > 0.0) | ((edge == 0.0) & (long4)(owns[e]));
+                }
+                if (!any(in)) continue;
+                const double4 s = vload4(0, column_s + (i - ci0));
+                const double4 inv_depth = (nf0 * s + row_depth + nf2) / c;
+                const int cell = base + i;
+                const int4 old = vload4(0, best + cell);
+                const double4 old_depth = vload4(0, best_depth + cell);
+                const long4 take = in & (convert_long4(old < 0) | (inv_depth > old_depth) |
+                                         ((inv_depth == old_depth) & convert_long4((int4)(k) < old)));
+                const int4 take_int = convert_int4(take);
+                vstore4(select(old, (int4)(k), take_int), 0, best + cell);
+                vstore4(select(old_depth, inv_depth, take), 0, best_depth + cell);
+                vstore4(select(vload4(0, best_back + cell), (int4)(back), take_int), 0, best_back + cell);
+            }
+        }
+    }
+
+    // Ids out; the delta form factors summed per winner in the tile (a short list: a tile holds
+    // a few elements), then one atomic each, after all the tile's stores.
+    const size_t face_offset = face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
+    int keys[HEMIRAD_TILE * HEMIRAD_TILE];
+    long parts[HEMIRAD_TILE * HEMIRAD_TILE];
+    int winners = 0, last = -1;  // last: the list entry of the previous cell's winner
+    for (int j = cj0; j <= cj1; ++j)
+        for (int i = ci0; i <= ci1; ++i) {
+            const int at = (j - cj0) * HEMIRAD_TILE + (i - ci0);
+            const size_t cell = face_offset + (size_t)j * n + i;
+            const int b = best[at];
+            const bool blocked = b >= 0 && best_back[at];
+            ids[cell] = b < 0 ? HR_EMPTY : (blocked ? HR_BLOCKER : b);
+            if (b < 0) continue;
+            const int key = blocked ? shot->elements : b;
+            if (last < 0 || keys[last] != key) {
+                last = 0;
+                while (last < winners && keys[last] != key) ++last;
+                if (last == winners) {
+                    keys[winners] = key;
+                    parts[winners++] = 0;
+                }
+            }
+            parts[last] += delta_fixed[cell];
+        }
+    for (int w = 0; w < winners; ++w) atom_add(&sums[keys[w]], parts[w]);
 }
 
 // The sizes of the shared structs as this compiler lays them out; the host compares them with

@@ -59,17 +59,33 @@ typedef struct {
     hr_int pad;
 } HrShot;
 
-// One element seen on one face: its clipped polygon in cell coordinates (x in [0, N), y in
-// [0, rows)), counter-clockwise, its plane for the depth, and the cells it may cover.
+// One edge of a record's inside test: at a cell centre (x, y) its value is
+// dx * (y - oy) - dy * (x - ox), exactly the reference's edge_function for the polygon's edge
+// (the sign folded into dx and dy).
 typedef struct {
-    hr_double x[HR_MAX_CLIPPED], y[HR_MAX_CLIPPED];
+    hr_double ox, oy, dx, dy;
+} HrEdge;
+
+// The cells a record may cover, inclusive (its cell bounding box on its face): what the tile
+// binning reads, apart from the records.
+typedef struct {
+    hr_int i0, i1, j0, j1;
+} HrBox;
+
+// One element seen on one face: its clipped polygon in cell coordinates (x in [0, N), y in
+// [0, rows)) as the edges of the inside test, and its plane for the depth. A cell centre is
+// inside where every edge is > 0, or == 0 with the edge's bit set in `owns`. The fixed fields
+// come first, so a triangle's record spans three cache lines.
+typedef struct {
     hr_double nf[3];  // element normal in face coordinates
     hr_double c;      // plane offset: nf.p = c
     hr_int element;   // element index
     hr_int back;      // 1: the back of a one-sided surface (a blocker)
-    hr_int n;         // vertex count; 0: not visible on this face
+    hr_int edges;     // edge count, degenerate edges dropped
+    hr_int owns;      // bit e: a centre exactly on edge e is inside (the top-left rule)
     hr_int face;
-    hr_int i0, i1, j0, j1;  // cell bounding box, inclusive; empty when i0 > i1
+    hr_int pad;
+    HrEdge edge[HR_MAX_CLIPPED];
 } HrRecord;
 
 #endif

@@ -1,5 +1,6 @@
 // The OpenCL hemicube engine (see opencl_engine.h): uploads the mesh once, then per shot runs
-// setup -> scan -> scatter -> raster of kernels/hemicube.cl and reads back the fixed-point sums.
+// setup -> count -> scan -> scatter -> raster of kernels/hemicube.cl and reads back the
+// fixed-point sums (one read; the shot itself goes as a kernel argument).
 #include "formfactor/opencl_engine.h"
 
 #include <algorithm>
@@ -22,8 +23,9 @@ static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96);
 static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
               offsetof(HrShot, tiles_x) == 116 && offsetof(HrShot, tile_base) == 120 &&
               offsetof(HrShot, list_capacity) == 144);
-static_assert(sizeof(HrRecord) == 208 && offsetof(HrRecord, nf) == 144 && offsetof(HrRecord, c) == 168 &&
-              offsetof(HrRecord, element) == 176 && offsetof(HrRecord, i0) == 192);
+static_assert(sizeof(HrEdge) == 32 && sizeof(HrBox) == 16);
+static_assert(sizeof(HrRecord) == 344 && offsetof(HrRecord, c) == 24 && offsetof(HrRecord, element) == 32 &&
+              offsetof(HrRecord, owns) == 44 && offsetof(HrRecord, edge) == 56);
 static_assert(HR_FACES == kFaces);
 static_assert(HR_EMPTY == OpenCLEngine::kEmpty && HR_BLOCKER == OpenCLEngine::kBlocker);
 
@@ -33,8 +35,11 @@ struct TuningEntry {
     OpenCLTuning tuning;
 };
 const TuningEntry kTuningTable[] = {
-    {"gpu", {16, 128, 256, "", 0}},  // not yet measured: 256-cell raster groups, 4 warps per 1D group
-    {"cpu", {8, 64, 256, "", 0}},    // PoCL, 2 cores: 8 was ~12% faster than 16 per shot (Cornell, N = 256)
+    // Not yet measured: 256-cell raster groups, 4 warps per 1D group.
+    {"gpu", {16, false, 4, 128, 256, 1, "", 0}},
+    // PoCL, 2 cores (Cornell, N = 256): the per-record raster ~2.5x faster than per-cell;
+    // tiles 16 a little ahead of 8 and 32; a raster group of 1 ahead of 4 and 16.
+    {"cpu", {16, true, 1, 64, 256, 8, "", 0}},
 };
 
 // Binds a kernel's arguments in order: the one place each kernel's signature is spelled out.
@@ -104,27 +109,24 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     if (!info.int64_atomics)
         throw InternalError(
             fmt::format("{}: needs cl_khr_int64_base_atomics for deterministic form-factor sums", info.name));
-    if (tuning.tile < 1 || tuning.work_group < 1 || tuning.scan_work_group < 1 ||
-        (tuning.scan_work_group & (tuning.scan_work_group - 1)) != 0)
+    if (tuning.tile < 1 || tuning.work_group < 1 || tuning.scan_work_group < 1 || tuning.raster_work_group < 1 ||
+        tuning.count_copies < 1 || (tuning.scan_work_group & (tuning.scan_work_group - 1)) != 0)
         throw InternalError("OpenCL tuning: tile and work-group sizes must be positive, the scan's a power of two");
 
-    // Exactly the reference's clip distance: geometry in the shooter's plane must be clipped
-    // however far the scene is from the origin.
-    double extent = 0.0;
-    for (const auto& e : mesh.elements)
-        for (int k = 0; k < e.poly.n; ++k)
-            extent = std::max({extent, std::abs(e.poly.v[k].x), std::abs(e.poly.v[k].y), std::abs(e.poly.v[k].z)});
-    eps_ = 1e-9 * std::max(extent, 1e-30);
+    eps_ = base_plane_epsilon(mesh);  // exactly the reference's clip distance
 
     // Never -cl-fast-relaxed-math or -cl-mad-enable: the kernel must round like the reference.
-    options_ = fmt::format("-cl-std=CL1.2 -DHEMIRAD_TILE={} -DHEMIRAD_WG={} -DHEMIRAD_SCAN_WG={}", tuning.tile,
-                           tuning.work_group, tuning.scan_work_group);
+    options_ = fmt::format(
+        "-cl-std=CL1.2 -DHEMIRAD_TILE={} -DHEMIRAD_WG={} -DHEMIRAD_SCAN_WG={} -DHEMIRAD_RASTER_WG={} "
+        "-DHEMIRAD_COUNT_COPIES={}",
+        tuning.tile, tuning.work_group, tuning.scan_work_group, tuning.raster_work_group, tuning.count_copies);
     if (!tuning.extra_options.empty()) options_ += " " + tuning.extra_options;
     cl::Program& program = context.program(std::string(ocl::kernel_source("hemicube.cl")), options_);
     setup_ = cl::Kernel(program, "setup");
+    count_ = cl::Kernel(program, "count");
     scan_ = cl::Kernel(program, "scan");
     scatter_ = cl::Kernel(program, "scatter");
-    raster_ = cl::Kernel(program, "raster");
+    raster_ = cl::Kernel(program, tuning.raster_per_record ? "raster_records" : "raster");
     check_layout(context, program);
     const auto check_group = [&](cl::Kernel& kernel, const char* name, int size) {
         const std::size_t most = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(context.device());
@@ -134,9 +136,10 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
                             name, most, size));
     };
     check_group(setup_, "setup", tuning.work_group);
+    check_group(count_, "count", tuning.work_group);
     check_group(scatter_, "scatter", tuning.work_group);
     check_group(scan_, "scan", tuning.scan_work_group);
-    check_group(raster_, "raster", tuning.tile * tuning.tile);
+    check_group(raster_, "raster", raster_group_size());
 
     // Tiles: face by face, row-major within a face.
     const int n = settings.hemicube;
@@ -175,31 +178,31 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     cl::Context& cl_context = context.context();
     cl::CommandQueue& queue = context.queue();
     const std::size_t record_slots = std::max<std::size_t>(1, mesh.elements.size() * kFaces);
-    shot_ = cl::Buffer(cl_context, CL_MEM_READ_ONLY, sizeof(HrShot));
     elements_ = upload(cl_context, queue, elements);
     patches_ = upload(cl_context, queue, patches);
     delta_fixed_ = upload(cl_context, queue, delta_fixed);
     records_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, record_slots * sizeof(HrRecord));
-    tile_counts_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, tiles * sizeof(hr_uint));
-    offsets_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, (tiles + 1) * sizeof(hr_uint));
-    cursors_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, tiles * sizeof(hr_uint));
+    const std::size_t counters = tiles * static_cast<std::size_t>(tuning.count_copies);
+    boxes_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, record_slots * sizeof(HrBox));
+    faces_seen_ =
+        cl::Buffer(cl_context, CL_MEM_READ_WRITE, std::max<std::size_t>(1, mesh.elements.size()) * sizeof(hr_int));
+    tile_counts_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, counters * sizeof(hr_uint));
+    offsets_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, (counters + 1) * sizeof(hr_uint));
+    cursors_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, counters * sizeof(hr_uint));
     // Most records cover a tile or two; a shot that needs more grows the lists and reruns.
     list_capacity_ = tuning.list_capacity > 0
                          ? tuning.list_capacity
                          : static_cast<std::uint32_t>(std::max<std::size_t>(1u << 16, 4 * record_slots));
     lists_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, list_capacity_ * sizeof(hr_uint));
     ids_buffer_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, delta_.cells() * sizeof(hr_int));
-    sums_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, (mesh.elements.size() + 1) * sizeof(hr_long));
-    sums_host_.assign(mesh.elements.size() + 1, 0);
+    sums_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, (mesh.elements.size() + 2) * sizeof(hr_long));
+    sums_host_.assign(mesh.elements.size() + 2, 0);
     ids_.assign(delta_.cells(), kEmpty);
-    bind_arguments();
 }
 
-void OpenCLEngine::bind_arguments() {
-    bind(setup_, shot_, elements_, patches_, records_, tile_counts_);
-    bind(scan_, shot_, tile_counts_, offsets_, cursors_);
-    bind(scatter_, shot_, records_, cursors_, lists_);
-    bind(raster_, shot_, records_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
+std::size_t OpenCLEngine::raster_group_size() const {
+    return static_cast<std::size_t>(tuning_.raster_per_record ? tuning_.raster_work_group
+                                                              : tuning_.tile * tuning_.tile);
 }
 
 std::uint32_t OpenCLEngine::run_shot(std::uint32_t patch, const Frame& frame) {
@@ -215,25 +218,28 @@ std::uint32_t OpenCLEngine::run_shot(std::uint32_t patch, const Frame& frame) {
     shot.tiles_x = tiles_x_;
     std::copy(tile_base_.begin(), tile_base_.end(), shot.tile_base);
     shot.list_capacity = list_capacity_;
+    // Every kernel's arguments, bound here only; the shot goes by value: no upload to wait for.
+    bind(setup_, shot, elements_, patches_, records_, boxes_, faces_seen_, tile_counts_, sums_);
+    bind(count_, shot, boxes_, faces_seen_, tile_counts_);
+    bind(scan_, shot, tile_counts_, offsets_, cursors_, sums_);
+    bind(scatter_, shot, boxes_, faces_seen_, cursors_, lists_);
+    bind(raster_, shot, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
 
     cl::CommandQueue& queue = context_.queue();
     const std::size_t elements = mesh_.elements.size();
     const std::size_t tiles = static_cast<std::size_t>(tile_base_[kFaces]);
     const std::size_t wg = static_cast<std::size_t>(tuning_.work_group);
-    const std::size_t raster_wg = static_cast<std::size_t>(tuning_.tile * tuning_.tile);
-    queue.enqueueWriteBuffer(shot_, CL_TRUE, 0, sizeof(HrShot), &shot);  // blocking: `shot` is local
-    queue.enqueueFillBuffer(tile_counts_, hr_uint{0}, 0, tiles * sizeof(hr_uint));
-    queue.enqueueFillBuffer(sums_, hr_long{0}, 0, (elements + 1) * sizeof(hr_long));
+    const std::size_t scan_wg = static_cast<std::size_t>(tuning_.scan_work_group);
+    const std::size_t raster_wg = raster_group_size();
+    const std::size_t raster_items = tuning_.raster_per_record ? round_up(tiles, raster_wg) : tiles * raster_wg;
     queue.enqueueNDRangeKernel(setup_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg));
-    queue.enqueueNDRangeKernel(scan_, cl::NullRange, cl::NDRange(static_cast<std::size_t>(tuning_.scan_work_group)),
-                               cl::NDRange(static_cast<std::size_t>(tuning_.scan_work_group)));
-    queue.enqueueNDRangeKernel(scatter_, cl::NullRange, cl::NDRange(round_up(elements * kFaces, wg)), cl::NDRange(wg));
-    queue.enqueueNDRangeKernel(raster_, cl::NullRange, cl::NDRange(tiles * raster_wg), cl::NDRange(raster_wg));
-    // The queue is in order: when the blocking read of the list total returns, the sums are in.
-    hr_uint needed = 0;
-    queue.enqueueReadBuffer(sums_, CL_FALSE, 0, sums_host_.size() * sizeof(hr_long), sums_host_.data());
-    queue.enqueueReadBuffer(offsets_, CL_TRUE, tiles * sizeof(hr_uint), sizeof(hr_uint), &needed);
-    return needed;
+    queue.enqueueNDRangeKernel(count_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg));
+    queue.enqueueNDRangeKernel(scan_, cl::NullRange, cl::NDRange(scan_wg), cl::NDRange(scan_wg));
+    queue.enqueueNDRangeKernel(scatter_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg));
+    queue.enqueueNDRangeKernel(raster_, cl::NullRange, cl::NDRange(raster_items), cl::NDRange(raster_wg));
+    // The sums, then the list entries the shot needed (from scan).
+    queue.enqueueReadBuffer(sums_, CL_TRUE, 0, sums_host_.size() * sizeof(hr_long), sums_host_.data());
+    return static_cast<std::uint32_t>(sums_host_[elements + 1]);
 }
 
 void OpenCLEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
@@ -246,7 +252,6 @@ void OpenCLEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& ou
         list_capacity_ = static_cast<std::uint32_t>(std::min<std::uint64_t>(0xffffffffu, needed + needed / 4ull));
         lists_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE,
                             static_cast<std::size_t>(list_capacity_) * sizeof(hr_uint));
-        bind_arguments();
     }
     ids_stale_ = true;
 

@@ -15,9 +15,12 @@ namespace hemirad::formfactor {
 
 // The tuning knobs of kernels/hemicube.cl, passed to the build as -D options.
 struct OpenCLTuning {
-    int tile = 16;                    // raster tile edge in cells; a raster work-group is tile×tile items
+    int tile = 16;                    // raster tile edge in cells
+    bool raster_per_record = false;   // raster_records (a work-item per tile, CPUs) instead of raster (a cell each)
+    int raster_work_group = 4;        // work-group size of raster_records; raster's is tile×tile
     int work_group = 64;              // work-group size of the per-element and per-record kernels
     int scan_work_group = 256;        // the one work-group of the tile-offset scan, a power of two
+    int count_copies = 1;             // copies of the per-tile counters (work-group mod copies): less contention
     std::string extra_options;        // appended to the build options (more -D overrides)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
 };
@@ -58,15 +61,15 @@ private:
     int tiles_x_ = 0;
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
 
-    cl::Kernel setup_, scan_, scatter_, raster_;
-    cl::Buffer shot_, elements_, patches_, records_, tile_counts_, offsets_, cursors_, lists_, delta_fixed_,
-        ids_buffer_, sums_;
-    std::vector<std::int64_t> sums_host_;  // per element, then blocked; fixed point
+    cl::Kernel setup_, count_, scan_, scatter_, raster_;  // raster_: raster or raster_records
+    cl::Buffer elements_, patches_, records_, boxes_, faces_seen_, tile_counts_, offsets_, cursors_, lists_,
+        delta_fixed_, ids_buffer_, sums_;
+    std::vector<std::int64_t> sums_host_;  // per element, then blocked (fixed point), then the list entries needed
 
     mutable std::vector<std::int32_t> ids_;
     mutable bool ids_stale_ = false;
 
-    void bind_arguments();
+    std::size_t raster_group_size() const;
     std::uint32_t run_shot(std::uint32_t patch, const Frame& frame);  // returns the list entries needed
 };
 
