@@ -272,7 +272,7 @@ TEST_CASE("bake writes exactly the five output files and a complete report", "[c
     CHECK(report.at("scene").get<std::string>().find("closed_room.gltf") != std::string::npos);
 
     const json& device = report.at("device");
-    CHECK(device.at("backend") == "ref");
+    CHECK(device.at("backend") == (hemirad::ocl::list_devices().empty() ? "ref" : "opencl"));  // auto
     CHECK(device.at("platform").is_string());
     CHECK(device.at("name").is_string());
 
@@ -859,4 +859,31 @@ TEST_CASE("HEMIRAD_DEVICE picks the device when --device is auto", "[cli]") {
     const RunResult good = run_shell(dir, ref_script);
     REQUIRE(good.code == 0);
     CHECK(read_json(out / "report.json")["device"]["backend"] == "ref");
+}
+
+TEST_CASE("auto falls back to the reference when the OpenCL kernels do not build", "[cli]") {
+    if (hemirad::ocl::list_devices().empty()) {
+        WARN("no OpenCL device: skipped");
+        return;
+    }
+    const TempDir dir;
+    const fs::path out = dir / "out", forced = dir / "forced";
+    const std::string broken = "HEMIRAD_OPENCL_OPTIONS=-DClipPolygon=42 ";  // turns a kernel typedef into nonsense
+    std::string script = broken + shell_quote(HEMIRAD_EXE);
+    for (const auto& a : bake_args(kClosedRoom, out)) script += " " + shell_quote(a);
+    const RunResult fell_back = run_shell(dir, script);
+    INFO("stderr: [" << fell_back.err << "]");
+    REQUIRE(fell_back.code == 0);
+    CHECK(fell_back.err.find("using the reference engine") != std::string::npos);
+    const json report = read_json(out / "report.json");
+    CHECK(report["device"]["backend"] == "ref");
+    CHECK(report["warnings"].dump().find("using the reference engine") != std::string::npos);
+
+    // Asked for by name, the same failure is an error with the build log, and nothing is written.
+    std::string named = broken + shell_quote(HEMIRAD_EXE);
+    for (const auto& a : bake_args(kClosedRoom, forced, concat(kFast, {"--device", "opencl"}))) named += " " + shell_quote(a);
+    const RunResult failed = run_shell(dir, named);
+    CHECK(failed.code == 1);
+    CHECK(failed.err.find("build failed") != std::string::npos);
+    CHECK(!fs::exists(forced));
 }

@@ -240,6 +240,7 @@ void run_bake(const BakeOptions& o) {
     OutputTransaction out(o.output);
     // Only now, so that bad input is always exactly one line on stderr.
     for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
+    if (!choice.warning.empty()) std::cerr << "hemirad: warning: " << choice.warning << "\n";
     if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({})\n", choice.id, choice.name);
     formfactor::NearFieldEngine near_field(mesh, std::move(choice.engine));
     TimedEngine engine(near_field);
@@ -336,6 +337,7 @@ void run_bake(const BakeOptions& o) {
                                            {"relative", formfactor::VerifyingEngine::kRelativeTolerance}}}};
     }
     report["warnings"] = scene.warnings;
+    if (!choice.warning.empty()) report["warnings"].push_back(choice.warning);
     report["timings_s"] = {{"load", t_load},
                            {"mesh", t_mesh},
                            {"formfactors", engine.seconds()},

@@ -17,13 +17,12 @@ namespace {
 // ("--device X" or "HEMIRAD_DEVICE=X") for the error message.
 const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& label,
                                const std::vector<ocl::DeviceInfo>& devices) {
-    // `auto` stays on the reference for now: the OpenCL engine gives the same cells but is not
-    // yet faster on CPUs (PoCL), and has not been run on a GPU. Ask for it with `opencl`.
-    if (spec == "ref" || spec == "auto") return nullptr;
-    if (spec == "opencl") {
+    if (spec == "ref") return nullptr;
+    if (spec == "auto" || spec == "opencl") {
         for (const auto& d : devices)
             if (d.type == "gpu") return &d;
         if (!devices.empty()) return &devices.front();
+        if (spec == "auto") return nullptr;
         throw InputError(fmt::format("{}: no OpenCL device found (see hemirad devices)", label));
     }
     std::smatch m;
@@ -37,11 +36,34 @@ const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& label
     throw InputError(fmt::format("{}: expected auto, ref, opencl or opencl:P.D", label));
 }
 
+// `auto` trusts a device only after one shot agrees with the reference: a driver that builds the
+// kernels but computes something else must not quietly change a bake.
+std::string probe(formfactor::Engine& engine, const mesh::Mesh& mesh, const formfactor::Settings& settings) {
+    formfactor::ReferenceEngine reference(mesh, settings);
+    formfactor::ShotResult got, want;
+    const auto patch = static_cast<std::uint32_t>(mesh.patches.size() / 2);
+    engine.shoot(patch, 0, got);
+    reference.shoot(patch, 0, want);
+    return formfactor::compare_shot(got, want);
+}
+
+std::string first_line(const std::string& text) { return text.substr(0, text.find('\n')); }
+
+// The device's tuning, with HEMIRAD_OPENCL_OPTIONS appended to the kernel build options
+// (extra -D overrides of the kernels' tuning knobs).
+std::unique_ptr<formfactor::OpenCLEngine> make_opencl_engine(const mesh::Mesh& mesh, ocl::Context& context,
+                                                             const formfactor::Settings& settings) {
+    formfactor::OpenCLTuning tuning = formfactor::default_tuning(context.info());
+    if (const char* extra = std::getenv("HEMIRAD_OPENCL_OPTIONS"); extra && *extra)
+        tuning.extra_options += std::string(" ") + extra;
+    return std::make_unique<formfactor::OpenCLEngine>(mesh, context, settings, tuning);
+}
+
 }  // namespace
 
 EngineChoice choose_engine(const std::string& device, bool verify, long verify_every, const mesh::Mesh& mesh,
                            const formfactor::Settings& settings) {
-    std::string spec = device, label = "--device " + device;
+    std::string spec = device, label = "--device " + device;  // `auto` may become HEMIRAD_DEVICE's value
     if (spec == "auto") {
         const char* env = std::getenv("HEMIRAD_DEVICE");
         if (env && *env) {
@@ -49,7 +71,7 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
             label = "HEMIRAD_DEVICE=" + spec;
         }
     }
-    const bool wants_opencl = spec != "ref" && spec != "auto";
+    const bool wants_opencl = spec != "ref";
     const std::vector<ocl::DeviceInfo> devices = wants_opencl ? ocl::list_devices() : std::vector<ocl::DeviceInfo>{};
     const ocl::DeviceInfo* chosen = resolve(spec, label, devices);
 
@@ -63,8 +85,23 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
         out.id = "ref";
         return out;
     }
-    out.context = std::make_unique<ocl::Context>(*chosen);
-    out.engine = std::make_unique<formfactor::OpenCLEngine>(mesh, *out.context, settings);
+    if (spec == "auto") {
+        // Any failure of the automatic choice falls back to the reference, with a warning.
+        try {
+            out.context = std::make_unique<ocl::Context>(*chosen);
+            out.engine = make_opencl_engine(mesh, *out.context, settings);
+            if (const std::string problem = probe(*out.engine, mesh, settings); !problem.empty())
+                throw std::runtime_error("its first shot disagrees with the reference: " + problem);
+        } catch (const std::exception& e) {
+            EngineChoice fallback = choose_engine("ref", verify, verify_every, mesh, settings);
+            fallback.warning = fmt::format("{} ({}): {}; using the reference engine", chosen->id(), chosen->name,
+                                           first_line(e.what()));
+            return fallback;
+        }
+    } else {
+        out.context = std::make_unique<ocl::Context>(*chosen);
+        out.engine = make_opencl_engine(mesh, *out.context, settings);
+    }
     if (verify) {
         auto verifying = std::make_unique<formfactor::VerifyingEngine>(
             std::move(out.engine), std::make_unique<formfactor::ReferenceEngine>(mesh, settings), verify_every);

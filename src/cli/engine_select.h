@@ -16,12 +16,14 @@ struct EngineChoice {
     std::unique_ptr<formfactor::Engine> engine;      // the hemicube engine, verifying if asked
     formfactor::VerifyingEngine* verifier = nullptr; // into `engine` when --verify
     std::string backend, platform, name, id;         // what report.json and the log say
+    std::string warning;                             // why `auto` fell back to the reference, if it did
 };
 
-// `device`: auto | ref | opencl | opencl:P.D. `auto` takes HEMIRAD_DEVICE when it is set, else
-// the reference (for now; see engine_select.cpp). `opencl` takes the first OpenCL GPU, else the
-// first OpenCL device. Throws InputError for a device that is malformed or not present, or
-// --verify without an OpenCL engine.
+// `device`: auto | ref | opencl | opencl:P.D. `opencl` takes the first OpenCL GPU, else the
+// first OpenCL device. `auto` takes HEMIRAD_DEVICE when it is set, else what `opencl` would,
+// else the reference; an automatic OpenCL choice whose kernels fail to build or whose first shot
+// disagrees with the reference falls back to the reference with `warning` set. Throws InputError
+// for a device that is malformed or not present, or --verify without an OpenCL engine.
 EngineChoice choose_engine(const std::string& device, bool verify, long verify_every, const mesh::Mesh& mesh,
                            const formfactor::Settings& settings);
 

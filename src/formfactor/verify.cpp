@@ -8,6 +8,28 @@
 
 namespace hemirad::formfactor {
 
+std::string compare_shot(const ShotResult& got, const ShotResult& want, VerifySummary* summary) {
+    if (got.F.size() != want.F.size())
+        return fmt::format("{} form factors where the reference has {}", got.F.size(), want.F.size());
+    for (std::size_t k = 0; k <= got.F.size(); ++k) {
+        // k == size stands for the blocked share, checked like any element.
+        const double g = k < got.F.size() ? got.F[k] : got.blocked;
+        const double w = k < want.F.size() ? want.F[k] : want.blocked;
+        const double abs_error = std::abs(g - w);
+        if (summary) {
+            summary->max_abs_error = std::max(summary->max_abs_error, abs_error);
+            if (std::abs(w) > VerifyingEngine::kAbsoluteTolerance)
+                summary->max_rel_error = std::max(summary->max_rel_error, abs_error / std::abs(w));
+        }
+        if (abs_error > VerifyingEngine::kAbsoluteTolerance + VerifyingEngine::kRelativeTolerance * std::abs(w)) {
+            const std::string what = k < got.F.size() ? fmt::format("element {}", k) : std::string("the blocked share");
+            return fmt::format("{} has F = {:.9g}, the reference says {:.9g} (|error| {:.3g} > {:g} + {:g}·F)", what, g,
+                               w, abs_error, VerifyingEngine::kAbsoluteTolerance, VerifyingEngine::kRelativeTolerance);
+        }
+    }
+    return {};
+}
+
 VerifyingEngine::VerifyingEngine(std::unique_ptr<Engine> engine, std::unique_ptr<Engine> reference, long every)
     : engine_(std::move(engine)), reference_(std::move(reference)), every_(std::max(1L, every)) {}
 
@@ -23,25 +45,10 @@ void VerifyingEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
         summary_.cells_compared += static_cast<long>(ids->size());
         for (std::size_t c = 0; c < ids->size(); ++c) summary_.cells_mismatched += (*ids)[c] != (*ref_ids)[c];
     }
-    if (out.F.size() != expected_.F.size())
-        throw VerifyError(fmt::format("verify: shot {} (patch {}): {} form factors, the reference has {}", shot, patch,
-                                      out.F.size(), expected_.F.size()));
-    for (std::size_t k = 0; k <= out.F.size(); ++k) {
-        // k == size stands for the blocked share, checked like any element.
-        const double got = k < out.F.size() ? out.F[k] : out.blocked;
-        const double want = k < expected_.F.size() ? expected_.F[k] : expected_.blocked;
-        const double abs_error = std::abs(got - want);
-        summary_.max_abs_error = std::max(summary_.max_abs_error, abs_error);
-        if (std::abs(want) > kAbsoluteTolerance) summary_.max_rel_error = std::max(summary_.max_rel_error, abs_error / std::abs(want));
-        if (abs_error > kAbsoluteTolerance + kRelativeTolerance * std::abs(want)) {
-            const std::string what = k < out.F.size() ? fmt::format("element {}", k) : std::string("the blocked share");
-            throw VerifyError(fmt::format(
-                "verify: shot {} (patch {}): {} has F = {:.9g} on {}, the reference says {:.9g} "
-                "(|error| {:.3g} > {:g} + {:g}·F); {} of {} cells differ so far",
-                shot, patch, what, got, engine_->name(), want, abs_error, kAbsoluteTolerance, kRelativeTolerance,
-                summary_.cells_mismatched, summary_.cells_compared));
-        }
-    }
+    const std::string problem = compare_shot(out, expected_, &summary_);
+    if (!problem.empty())
+        throw VerifyError(fmt::format("verify: shot {} (patch {}) on {}: {}; {} of {} cells differ so far", shot, patch,
+                                      engine_->name(), problem, summary_.cells_mismatched, summary_.cells_compared));
 }
 
 }  // namespace hemirad::formfactor

@@ -25,6 +25,11 @@ struct VerifySummary {
     double max_rel_error = 0.0;      // where the reference value is above kAbsoluteTolerance
 };
 
+// The first form factor (element, or the blocked share) that differs from the reference by more
+// than VerifyingEngine's tolerance, described in a sentence; empty when the shot agrees. Also
+// widens `max_abs_error` and `max_rel_error` of `summary` when given.
+std::string compare_shot(const ShotResult& got, const ShotResult& want, VerifySummary* summary = nullptr);
+
 class VerifyingEngine final : public Engine {
 public:
     static constexpr double kAbsoluteTolerance = 1e-6;
