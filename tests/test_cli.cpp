@@ -111,9 +111,10 @@ RunResult run_shell(const TempDir& dir, const std::string& script) {
     return r;
 }
 
-// Runs the hemirad executable with `args` (each quoted), working directory `dir`.
-RunResult run_hemirad(const TempDir& dir, const std::vector<std::string>& args) {
-    std::string script = shell_quote(HEMIRAD_EXE);
+// Runs the hemirad executable with `args` (each quoted), working directory `dir`, with the
+// environment assignments `env` ("NAME=value ", unquoted) in front.
+RunResult run_hemirad(const TempDir& dir, const std::vector<std::string>& args, const std::string& env = "") {
+    std::string script = env + shell_quote(HEMIRAD_EXE);
     for (const auto& a : args) script += " " + shell_quote(a);
     return run_shell(dir, script);
 }
@@ -845,18 +846,14 @@ TEST_CASE("an OpenCL bake under verify gives the reference bake byte for byte", 
 TEST_CASE("HEMIRAD_DEVICE picks the device when --device is auto", "[cli]") {
     const TempDir dir;
     const fs::path out = dir / "out";
-    std::string script = "HEMIRAD_DEVICE=bogus " + shell_quote(HEMIRAD_EXE);
-    for (const auto& a : bake_args(kClosedRoom, out)) script += " " + shell_quote(a);
-    const RunResult bad = run_shell(dir, script);
+    const RunResult bad = run_hemirad(dir, bake_args(kClosedRoom, out), "HEMIRAD_DEVICE=bogus ");
     INFO("stderr: [" << bad.err << "]");
     CHECK(bad.code == 2);
     check_one_line(bad.err);
     CHECK(bad.err.find("HEMIRAD_DEVICE") != std::string::npos);
     CHECK(!fs::exists(out));
 
-    std::string ref_script = "HEMIRAD_DEVICE=ref " + shell_quote(HEMIRAD_EXE);
-    for (const auto& a : bake_args(kClosedRoom, out)) ref_script += " " + shell_quote(a);
-    const RunResult good = run_shell(dir, ref_script);
+    const RunResult good = run_hemirad(dir, bake_args(kClosedRoom, out), "HEMIRAD_DEVICE=ref ");
     REQUIRE(good.code == 0);
     CHECK(read_json(out / "report.json")["device"]["backend"] == "ref");
 }
@@ -869,9 +866,7 @@ TEST_CASE("auto falls back to the reference when the OpenCL kernels do not build
     const TempDir dir;
     const fs::path out = dir / "out", forced = dir / "forced";
     const std::string broken = "HEMIRAD_OPENCL_OPTIONS=-DClipPolygon=42 ";  // turns a kernel typedef into nonsense
-    std::string script = broken + shell_quote(HEMIRAD_EXE);
-    for (const auto& a : bake_args(kClosedRoom, out)) script += " " + shell_quote(a);
-    const RunResult fell_back = run_shell(dir, script);
+    const RunResult fell_back = run_hemirad(dir, bake_args(kClosedRoom, out), broken);
     INFO("stderr: [" << fell_back.err << "]");
     REQUIRE(fell_back.code == 0);
     CHECK(fell_back.err.find("using the reference engine") != std::string::npos);
@@ -880,9 +875,7 @@ TEST_CASE("auto falls back to the reference when the OpenCL kernels do not build
     CHECK(report["warnings"].dump().find("using the reference engine") != std::string::npos);
 
     // Asked for by name, the same failure is an error with the build log, and nothing is written.
-    std::string named = broken + shell_quote(HEMIRAD_EXE);
-    for (const auto& a : bake_args(kClosedRoom, forced, concat(kFast, {"--device", "opencl"}))) named += " " + shell_quote(a);
-    const RunResult failed = run_shell(dir, named);
+    const RunResult failed = run_hemirad(dir, bake_args(kClosedRoom, forced, concat(kFast, {"--device", "opencl"})), broken);
     CHECK(failed.code == 1);
     CHECK(failed.err.find("build failed") != std::string::npos);
     CHECK(!fs::exists(forced));
