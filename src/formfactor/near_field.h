@@ -19,7 +19,6 @@ public:
     NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine> inner, double reach = kDefaultReach);
     std::string name() const override { return inner_->name(); }
     void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
-    Engine& inner() { return *inner_; }
 
     static constexpr double kDefaultReach = 4.0;
 

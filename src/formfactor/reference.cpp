@@ -86,6 +86,8 @@ ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& setting
     eps_ = base_plane_epsilon(mesh);
     ids_.assign(delta_.cells(), kEmpty);
     depth_.assign(delta_.cells(), 0.0);
+    owner_.assign(delta_.cells(), -1);
+    back_.assign(delta_.cells(), 0);
 }
 
 void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
@@ -94,9 +96,9 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
     const int n = delta_.n();
     const double half = 0.5 * n;  // cells per unit of face coordinate
 
-    std::vector<std::int32_t> owner(delta_.cells(), -1);  // winning element per cell
-    std::vector<char> back(delta_.cells(), 0);
     std::fill(depth_.begin(), depth_.end(), 0.0);
+    std::fill(owner_.begin(), owner_.end(), -1);
+    std::fill(back_.begin(), back_.end(), 0);
 
     for (std::size_t k = 0; k < mesh_.elements.size(); ++k) {
         const mesh::Element& e = mesh_.elements[k];
@@ -186,11 +188,11 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
                     const double inv_depth = (nf.x * s + nf.y * t + nf.z) / c;
                     const std::size_t cell = base + static_cast<std::size_t>(j) * n + i;
                     const bool nearer = inv_depth > depth_[cell] ||
-                                        (inv_depth == depth_[cell] && owner[cell] > static_cast<std::int32_t>(k));
-                    if (owner[cell] < 0 || nearer) {
+                                        (inv_depth == depth_[cell] && owner_[cell] > static_cast<std::int32_t>(k));
+                    if (owner_[cell] < 0 || nearer) {
                         depth_[cell] = inv_depth;
-                        owner[cell] = static_cast<std::int32_t>(k);
-                        back[cell] = is_back;
+                        owner_[cell] = static_cast<std::int32_t>(k);
+                        back_[cell] = is_back;
                     }
                 }
             }
@@ -200,15 +202,15 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
     out.F.assign(mesh_.elements.size(), 0.0);
     out.blocked = 0.0;
     const auto& table = delta_.table();
-    for (std::size_t cell = 0; cell < owner.size(); ++cell) {
-        if (owner[cell] < 0) {
+    for (std::size_t cell = 0; cell < owner_.size(); ++cell) {
+        if (owner_[cell] < 0) {
             ids_[cell] = kEmpty;
-        } else if (back[cell]) {
+        } else if (back_[cell]) {
             ids_[cell] = kBlocker;
             out.blocked += table[cell];
         } else {
-            ids_[cell] = owner[cell];
-            out.F[static_cast<std::size_t>(owner[cell])] += table[cell];
+            ids_[cell] = owner_[cell];
+            out.F[static_cast<std::size_t>(owner_[cell])] += table[cell];
         }
     }
 }

@@ -27,7 +27,9 @@ private:
     DeltaFormFactors delta_;
     double eps_;  // base-plane clip distance, relative to the scene's size
     std::vector<std::int32_t> ids_;
-    std::vector<double> depth_;  // 1/d per cell, larger is nearer
+    std::vector<double> depth_;          // 1/d per cell, larger is nearer
+    std::vector<std::int32_t> owner_;    // winning element per cell, −1 for none
+    std::vector<char> back_;             // the winner is the back of a one-sided surface
 
     bool above_base_plane(const mesh::Polygon& poly, const Frame& frame) const;
 };
