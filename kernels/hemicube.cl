@@ -25,6 +25,9 @@
 #ifndef HEMIRAD_COUNT_COPIES
 #define HEMIRAD_COUNT_COPIES 1  // copies of the per-tile counters, one per work-group mod this: less contention
 #endif
+#ifndef HEMIRAD_LANES
+#define HEMIRAD_LANES 4  // cells per row step of raster_records: 4 or 8 (double8 on AVX-512)
+#endif
 #ifndef HEMIRAD_SCAN_WG
 #define HEMIRAD_SCAN_WG 256  // the single work-group of the tile-offset scan, a power of two
 #endif
@@ -136,19 +139,19 @@ int face_rows(int face, int n) {
     return face == 0 ? n : n / 2;
 }
 
-// The first counter of the copy that element k's records count in (and scatter to): copy
-// (work-group of k) mod COUNT_COPIES, each copy `tiles` counters. Work-groups that run at the
-// same time on different cores then rarely increment the same cache line.
-int counter_copy(int k, int tiles) {
-    return (k / HEMIRAD_WG) % HEMIRAD_COUNT_COPIES * tiles;
+// The first counter of the copy that this work-group's records count in (and scatter to): copy
+// (work-group) mod COUNT_COPIES, each copy `tiles` counters. Work-groups that run at the same
+// time on different cores then rarely increment the same cache line.
+int counter_copy(int tiles) {
+    return (int)(get_group_id(0) % HEMIRAD_COUNT_COPIES) * tiles;
 }
 
-// One work-item per element: the records of its (up to five) faces at records[5k + face], and
-// for each record that may cover a cell its box at boxes[5k + face] and bit `face` of
-// faces_seen[k]. Also zeroes the tile counts and the sums for the kernels after it.
+// One work-item per element: a record, and its cell box, for each face on which the element
+// may cover a cell centre, packed at the next free index (record_count[0], zero before the
+// shot). Also zeroes the tile counts and the sums for the kernels after it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const HrShot shot_value, __global const HrElement* elements, __global const HrPatch* patches,
-    __global HrRecord* records, __global HrBox* boxes, __global int* faces_seen, __global uint* tile_counts,
+    __global HrRecord* records, __global HrBox* boxes, __global uint* record_count, __global uint* tile_counts,
     __global long* sums) {
     const HrShot* shot = &shot_value;
     const int k = (int)get_global_id(0);
@@ -157,9 +160,6 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     for (int c = k; c < counters; c += (int)get_global_size(0)) tile_counts[c] = 0;
     for (int c = k; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
     if (k >= shot->elements) return;
-    __global HrRecord* out = records + (size_t)k * HR_FACES;
-    faces_seen[k] = 0;
-    int seen = 0;  // the faces_seen bits so far
 
     __global const HrElement* e = elements + k;
     if (e->patch == shot->shooter) return;  // the shooter's own elements lie in its base plane
@@ -231,11 +231,21 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
             ymin = py[i] < ymin ? py[i] : ymin;
             ymax = ymax < py[i] ? py[i] : ymax;
         }
+        const int rows = face_rows(face, n);
+        const int i0 = max(0, (int)floor(xmin - 0.5));
+        const int i1 = min(n - 1, (int)ceil(xmax - 0.5));
+        const int j0 = max(0, (int)floor(ymin - 0.5));
+        const int j1 = min(rows - 1, (int)ceil(ymax - 0.5));
+        if (i0 > i1 || j0 > j1) continue;  // no cell centre on the face: no record
+
+        // The next free record: records are packed, so the raster reads little memory. Their
+        // order varies from run to run; the raster's result does not depend on it.
+        const uint slot = atomic_inc(&record_count[0]);
+        __global HrRecord* r = records + slot;
         // The edges of the inside test. edge_function evaluates each edge from its endpoint lower
         // in (y, x), so that the two polygons sharing an edge get exactly opposite values; from
         // the other endpoint it negates, which is exact and commutes with rounding
         // (fl(-a * b) = -fl(a * b), fl(-a - -b) = -fl(a - b)): folded into dx and dy.
-        __global HrRecord* r = out + face;
         int edges = 0, owns = 0;
         for (int a = 0; a < poly.n; ++a) {
             const int b = a + 1 == poly.n ? 0 : a + 1;
@@ -250,11 +260,6 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
             owns |= owns_edge_point(bx - ax, by - ay) ? 1 << edges : 0;
             ++edges;
         }
-        const int rows = face_rows(face, n);
-        const int i0 = max(0, (int)floor(xmin - 0.5));
-        const int i1 = min(n - 1, (int)ceil(xmax - 0.5));
-        const int j0 = max(0, (int)floor(ymin - 0.5));
-        const int j1 = min(rows - 1, (int)ceil(ymax - 0.5));
         r->nf[0] = nf.x;
         r->nf[1] = nf.y;
         r->nf[2] = nf.z;
@@ -264,33 +269,28 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         r->edges = edges;
         r->owns = owns;
         r->face = face;
-        if (i0 > i1 || j0 > j1) continue;  // no cell centre on the face: in no tile's list
-        __global HrBox* box = boxes + (size_t)k * HR_FACES + face;
+        __global HrBox* box = boxes + slot;
         box->i0 = i0;
         box->i1 = i1;
         box->j0 = j0;
         box->j1 = j1;
-        seen |= 1 << face;
     }
-    faces_seen[k] = seen;
 }
 
-// One work-item per element: one count per tile each of its records may cover, in its counter
-// copy. Apart from setup, whose record stores would otherwise drain at every atomic.
+// One count per tile each record may cover, in the counter copy of the work-group. Apart from
+// setup, whose record stores would otherwise drain at every atomic. Work-items stride over
+// the packed records, as many as setup made.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(const HrShot shot_value,
+                                                                            __global const HrRecord* records,
                                                                             __global const HrBox* boxes,
-                                                                            __global const int* faces_seen,
+                                                                            __global const uint* record_count,
                                                                             __global uint* tile_counts) {
     const HrShot* shot = &shot_value;
-    const int k = (int)get_global_id(0);
-    if (k >= shot->elements) return;
-    const int faces = faces_seen[k];
-    if (faces == 0) return;
-    __global uint* copy = tile_counts + counter_copy(k, shot->tile_base[HR_FACES]);
-    for (int face = 0; face < HR_FACES; ++face) {
-        if (!((faces >> face) & 1)) continue;
-        const HrBox box = boxes[k * HR_FACES + face];
-        __global uint* counts = copy + shot->tile_base[face];
+    __global uint* copy = tile_counts + counter_copy(shot->tile_base[HR_FACES]);
+    const uint used = record_count[0];
+    for (uint slot = get_global_id(0); slot < used; slot += get_global_size(0)) {
+        const HrBox box = boxes[slot];
+        __global uint* counts = copy + shot->tile_base[records[slot].face];
         for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
             for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx)
                 atomic_inc(&counts[ty * shot->tiles_x + tx]);
@@ -336,29 +336,25 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
     }
 }
 
-// One work-item per element, as in count (the same work-groups, so the same counter copies):
-// the index of each of its records in the list of every tile the record may cover. The order
-// within a list varies from run to run; the raster's result does not depend on it.
+// As count (the same work-items, so the same counter copies): the index of each record in the
+// list of every tile it may cover. The order within a list varies from run to run; the
+// raster's result does not depend on it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(const HrShot shot_value,
+                                                                              __global const HrRecord* records,
                                                                               __global const HrBox* boxes,
-                                                                              __global const int* faces_seen,
+                                                                              __global const uint* record_count,
                                                                               __global uint* cursors,
                                                                               __global uint* lists) {
     const HrShot* shot = &shot_value;
-    const int k = (int)get_global_id(0);
-    if (k >= shot->elements) return;
-    const int faces = faces_seen[k];
-    if (faces == 0) return;
-    __global uint* copy = cursors + counter_copy(k, shot->tile_base[HR_FACES]);
-    for (int face = 0; face < HR_FACES; ++face) {
-        if (!((faces >> face) & 1)) continue;
-        const int slot = k * HR_FACES + face;
+    __global uint* copy = cursors + counter_copy(shot->tile_base[HR_FACES]);
+    const uint used = record_count[0];
+    for (uint slot = get_global_id(0); slot < used; slot += get_global_size(0)) {
         const HrBox box = boxes[slot];
-        __global uint* face_cursors = copy + shot->tile_base[face];
+        __global uint* face_cursors = copy + shot->tile_base[records[slot].face];
         for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
             for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx) {
                 const uint at = atomic_inc(&face_cursors[ty * shot->tiles_x + tx]);
-                if (at < shot->list_capacity) lists[at] = (uint)slot;
+                if (at < shot->list_capacity) lists[at] = slot;
             }
     }
 }
@@ -369,8 +365,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(co
 // (sums[elements] for blockers) in fixed point: integer atomics add in any order exactly.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))) void raster(
     const HrShot shot_value, __global const HrRecord* records, __global const HrBox* boxes,
-    __global const uint* offsets, __global const uint* lists, __global const long* delta_fixed, __global int* ids,
-    __global long* sums) {
+    __global const uint* offsets, __global const uint* lists,
+    __global const long* delta_fixed, __global int* ids, __global long* sums) {
     const HrShot* shot = &shot_value;
     const int tile = (int)get_group_id(0);
     const int tiles = shot->tile_base[HR_FACES];
@@ -420,13 +416,40 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
 // For CPU devices: one work-item per tile walks the records of its list in turn, each over
 // only its bounding box within the tile, keeping the winners in private arrays (the
 // reference's loop order, parallel across tiles). Records are small (a few cells a row), so
-// each row is tested four cells at a time without branches: the same double operations per
+// each row is tested LANES cells at a time without branches: the same double operations per
 // lane as the scalar test. The winner is the reference's: the nearest at the cell centre,
-// ties to the lower element index.
+// ties to the lower element index. Each record adds the delta form factors of the cells it
+// takes to its element's sum with one atomic, and a cell taken from an earlier record (a rare
+// overdraw) is given back by that record's element.
+#if HEMIRAD_LANES == 8
+typedef double8 lane_double;
+typedef long8 lane_long;
+typedef int8 lane_int;
+#define LANE_CENTRES ((double8)(0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5))
+#define LANE_INDEX ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#define vload_lanes vload8
+#define vstore_lanes vstore8
+#define convert_lane_long convert_long8
+#define convert_lane_int convert_int8
+#elif HEMIRAD_LANES == 4
+typedef double4 lane_double;
+typedef long4 lane_long;
+typedef int4 lane_int;
+#define LANE_CENTRES ((double4)(0.5, 1.5, 2.5, 3.5))
+#define LANE_INDEX ((int4)(0, 1, 2, 3))
+#define vload_lanes vload4
+#define vstore_lanes vstore4
+#define convert_lane_long convert_long4
+#define convert_lane_int convert_int4
+#else
+#error HEMIRAD_LANES must be 4 or 8
+#endif
+#define TILE_CELLS (HEMIRAD_TILE * HEMIRAD_TILE)
+
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
     const HrShot shot_value, __global const HrRecord* records, __global const HrBox* boxes,
-    __global const uint* offsets, __global const uint* lists, __global const long* delta_fixed, __global int* ids,
-    __global long* sums) {
+    __global const uint* offsets, __global const uint* lists,
+    __global const long* delta_fixed, __global int* ids, __global long* sums) {
     const HrShot* shot = &shot_value;
     const int tile = (int)get_global_id(0);
     const int tiles = shot->tile_base[HR_FACES];
@@ -442,18 +465,19 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     const double per_unit = 0.5 * n;
     const double t0 = face == 0 ? 1.0 : 0.0;
 
-    // Row-major tile cells; the last row's last group of four may reach 3 past the end.
-    int best[HEMIRAD_TILE * HEMIRAD_TILE + 3], best_back[HEMIRAD_TILE * HEMIRAD_TILE + 3];
-    double best_depth[HEMIRAD_TILE * HEMIRAD_TILE + 3];
-    for (int c = 0; c < HEMIRAD_TILE * HEMIRAD_TILE + 3; ++c) {
+    // Row-major tile cells; the last row's last group may reach LANES - 1 past the end. Per
+    // cell: the winning element (for ties), its depth, and the id the cell reports.
+    int best[TILE_CELLS + HEMIRAD_LANES - 1], best_id[TILE_CELLS + HEMIRAD_LANES - 1];
+    double best_depth[TILE_CELLS + HEMIRAD_LANES - 1];
+    for (int c = 0; c < TILE_CELLS + HEMIRAD_LANES - 1; ++c) {
         best[c] = -1;
-        best_back[c] = 0;
+        best_id[c] = HR_EMPTY;
         best_depth[c] = 0.0;
     }
-    const double4 lane = (double4)(0.5, 1.5, 2.5, 3.5);  // cell centres from the group's first cell
-    const int4 lane_index = (int4)(0, 1, 2, 3);
-    double column_s[HEMIRAD_TILE + 3];  // s = x / per_unit - 1 of the tile's columns, computed once
-    for (int c = 0; c < HEMIRAD_TILE + 3; ++c) column_s[c] = (ci0 + c + 0.5) / per_unit - 1.0;
+    double column_s[HEMIRAD_TILE + HEMIRAD_LANES - 1];  // s = x / per_unit - 1 of the tile's columns
+    for (int c = 0; c < HEMIRAD_TILE + HEMIRAD_LANES - 1; ++c) column_s[c] = (ci0 + c + 0.5) / per_unit - 1.0;
+    const size_t face_offset = face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
+    __global const long* delta_face = delta_fixed + face_offset;
 
     const uint end = offsets[(tile + 1) * HEMIRAD_COUNT_COPIES];
     for (uint at = offsets[tile * HEMIRAD_COUNT_COPIES]; at < end; ++at) {
@@ -473,62 +497,59 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
             owns[e] = -(long)((r->owns >> e) & 1);
         }
         const double nf0 = r->nf[0], nf1 = r->nf[1], nf2 = r->nf[2], c = r->c;
-        const int k = r->element, back = r->back;
+        const int k = r->element;
+        const int id = r->back ? HR_BLOCKER : k;
+        lane_long won = 0;  // the delta form factors of the cells this record takes, per lane
         for (int j = j0; j <= j1; ++j) {
             const double y = j + 0.5;
             double row[HR_MAX_CLIPPED];  // each edge's dx * (y - oy), shared by the row
             for (int e = 0; e < count; ++e) row[e] = dx[e] * (y - oy[e]);
             const double row_depth = nf1 * (y / per_unit - t0);
             const int base = (j - cj0) * HEMIRAD_TILE - ci0;
-            for (int i = i0; i <= i1; i += 4) {
-                const double4 x = (double)i + lane;
-                long4 in = convert_long4((int4)(i) + lane_index <= (int4)(i1));
+            for (int i = i0; i <= i1; i += HEMIRAD_LANES) {
+                const lane_double x = (double)i + LANE_CENTRES;
+                lane_long in = convert_lane_long((lane_int)(i) + LANE_INDEX <= (lane_int)(i1));
                 for (int e = 0; e < count; ++e) {
-                    const double4 edge = row[e] - dy[e] * (x - ox[e]);
-                    in &= (edge > 0.0) | ((edge == 0.0) & (long4)(owns[e]));
+                    const lane_double edge = row[e] - dy[e] * (x - ox[e]);
+                    in &= (edge > 0.0) | ((edge == 0.0) & (lane_long)(owns[e]));
                 }
                 if (!any(in)) continue;
-                const double4 s = vload4(0, column_s + (i - ci0));
-                const double4 inv_depth = (nf0 * s + row_depth + nf2) / c;
+                const lane_double s = vload_lanes(0, column_s + (i - ci0));
+                const lane_double inv_depth = (nf0 * s + row_depth + nf2) / c;
                 const int cell = base + i;
-                const int4 old = vload4(0, best + cell);
-                const double4 old_depth = vload4(0, best_depth + cell);
-                const long4 take = in & (convert_long4(old < 0) | (inv_depth > old_depth) |
-                                         ((inv_depth == old_depth) & convert_long4((int4)(k) < old)));
-                const int4 take_int = convert_int4(take);
-                vstore4(select(old, (int4)(k), take_int), 0, best + cell);
-                vstore4(select(old_depth, inv_depth, take), 0, best_depth + cell);
-                vstore4(select(vload4(0, best_back + cell), (int4)(back), take_int), 0, best_back + cell);
+                const lane_int old = vload_lanes(0, best + cell);
+                const lane_double old_depth = vload_lanes(0, best_depth + cell);
+                const lane_long take = in & (convert_lane_long(old < 0) | (inv_depth > old_depth) |
+                                             ((inv_depth == old_depth) & convert_lane_long((lane_int)(k) < old)));
+                if (!any(take)) continue;
+                const lane_int take_int = convert_lane_int(take);
+                const lane_long delta = vload_lanes(0, delta_face + (size_t)j * n + i);  // may read past the row
+                won += select((lane_long)(0), delta, take);
+                // Cells taken from an earlier record (overdraw, rare): its element gives them back.
+                const lane_int old_id = vload_lanes(0, best_id + cell);
+                if (any(take_int & (old >= 0))) {
+                    for (int lane = 0; lane < HEMIRAD_LANES; ++lane)
+                        if (take_int[lane] && old[lane] >= 0)
+                            atom_add(&sums[old_id[lane] == HR_BLOCKER ? shot->elements : old[lane]], -delta[lane]);
+                }
+                vstore_lanes(select(old, (lane_int)(k), take_int), 0, best + cell);
+                vstore_lanes(select(old_id, (lane_int)(id), take_int), 0, best_id + cell);
+                vstore_lanes(select(old_depth, inv_depth, take), 0, best_depth + cell);
             }
         }
+        // Integer sums: the order of these atomics (and of the lists) cannot change the result.
+#if HEMIRAD_LANES == 8
+        const long4 half_sum = won.lo + won.hi;
+#else
+        const long4 half_sum = won;
+#endif
+        const long total = half_sum.x + half_sum.y + half_sum.z + half_sum.w;
+        if (total != 0) atom_add(&sums[id == HR_BLOCKER ? shot->elements : k], total);
     }
 
-    // Ids out; the delta form factors summed per winner in the tile (a short list: a tile holds
-    // a few elements), then one atomic each, after all the tile's stores.
-    const size_t face_offset = face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
-    int keys[HEMIRAD_TILE * HEMIRAD_TILE];
-    long parts[HEMIRAD_TILE * HEMIRAD_TILE];
-    int winners = 0, last = -1;  // last: the list entry of the previous cell's winner
     for (int j = cj0; j <= cj1; ++j)
-        for (int i = ci0; i <= ci1; ++i) {
-            const int at = (j - cj0) * HEMIRAD_TILE + (i - ci0);
-            const size_t cell = face_offset + (size_t)j * n + i;
-            const int b = best[at];
-            const bool blocked = b >= 0 && best_back[at];
-            ids[cell] = b < 0 ? HR_EMPTY : (blocked ? HR_BLOCKER : b);
-            if (b < 0) continue;
-            const int key = blocked ? shot->elements : b;
-            if (last < 0 || keys[last] != key) {
-                last = 0;
-                while (last < winners && keys[last] != key) ++last;
-                if (last == winners) {
-                    keys[winners] = key;
-                    parts[winners++] = 0;
-                }
-            }
-            parts[last] += delta_fixed[cell];
-        }
-    for (int w = 0; w < winners; ++w) atom_add(&sums[keys[w]], parts[w]);
+        for (int i = ci0; i <= ci1; ++i)
+            ids[face_offset + (size_t)j * n + i] = best_id[(j - cj0) * HEMIRAD_TILE + (i - ci0)];
 }
 
 // The sizes of the shared structs as this compiler lays them out; the host compares them with

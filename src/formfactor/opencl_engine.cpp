@@ -36,10 +36,10 @@ struct TuningEntry {
 };
 const TuningEntry kTuningTable[] = {
     // Not yet measured: 256-cell raster groups, 4 warps per 1D group.
-    {"gpu", {16, false, 4, 128, 256, 1, "", 0}},
+    {"gpu", {16, false, 4, 128, 256, 1, 4, "", 0}},
     // PoCL, 2 cores (Cornell, N = 256): the per-record raster ~2.5x faster than per-cell;
     // tiles 16 a little ahead of 8 and 32; a raster group of 1 ahead of 4 and 16.
-    {"cpu", {16, true, 1, 64, 256, 8, "", 0}},
+    {"cpu", {16, true, 1, 64, 256, 8, 8, "", 0}},
 };
 
 // Binds a kernel's arguments in order: the one place each kernel's signature is spelled out.
@@ -110,7 +110,7 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         throw InternalError(
             fmt::format("{}: needs cl_khr_int64_base_atomics for deterministic form-factor sums", info.name));
     if (tuning.tile < 1 || tuning.work_group < 1 || tuning.scan_work_group < 1 || tuning.raster_work_group < 1 ||
-        tuning.count_copies < 1 || (tuning.scan_work_group & (tuning.scan_work_group - 1)) != 0)
+        tuning.count_copies < 1 || (tuning.lanes != 4 && tuning.lanes != 8) || (tuning.scan_work_group & (tuning.scan_work_group - 1)) != 0)
         throw InternalError("OpenCL tuning: tile and work-group sizes must be positive, the scan's a power of two");
 
     eps_ = base_plane_epsilon(mesh);  // exactly the reference's clip distance
@@ -118,8 +118,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     // Never -cl-fast-relaxed-math or -cl-mad-enable: the kernel must round like the reference.
     options_ = fmt::format(
         "-cl-std=CL1.2 -DHEMIRAD_TILE={} -DHEMIRAD_WG={} -DHEMIRAD_SCAN_WG={} -DHEMIRAD_RASTER_WG={} "
-        "-DHEMIRAD_COUNT_COPIES={}",
-        tuning.tile, tuning.work_group, tuning.scan_work_group, tuning.raster_work_group, tuning.count_copies);
+        "-DHEMIRAD_COUNT_COPIES={} -DHEMIRAD_LANES={}",
+        tuning.tile, tuning.work_group, tuning.scan_work_group, tuning.raster_work_group, tuning.count_copies,
+        tuning.lanes);
     if (!tuning.extra_options.empty()) options_ += " " + tuning.extra_options;
     cl::Program& program = context.program(std::string(ocl::kernel_source("hemicube.cl")), options_);
     setup_ = cl::Kernel(program, "setup");
@@ -171,8 +172,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         patches[p].n = mesh.patches[p].poly.n;
     }
     // Fixed point: 2^62 per unit of form factor; the whole table sums to 1, far below 2^63.
-    std::vector<hr_long> delta_fixed(delta_.cells());
-    for (std::size_t c = 0; c < delta_fixed.size(); ++c)
+    // Zero-padded: raster_records reads whole lane groups, up to 7 entries past the last cell.
+    std::vector<hr_long> delta_fixed(delta_.cells() + 8, 0);
+    for (std::size_t c = 0; c < delta_.cells(); ++c)
         delta_fixed[c] = static_cast<hr_long>(std::llround(std::ldexp(delta_.table()[c], HR_FIXED_SHIFT)));
 
     cl::Context& cl_context = context.context();
@@ -184,8 +186,7 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     records_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, record_slots * sizeof(HrRecord));
     const std::size_t counters = tiles * static_cast<std::size_t>(tuning.count_copies);
     boxes_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, record_slots * sizeof(HrBox));
-    faces_seen_ =
-        cl::Buffer(cl_context, CL_MEM_READ_WRITE, std::max<std::size_t>(1, mesh.elements.size()) * sizeof(hr_int));
+    record_count_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, sizeof(hr_uint));
     tile_counts_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, counters * sizeof(hr_uint));
     offsets_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, (counters + 1) * sizeof(hr_uint));
     cursors_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, counters * sizeof(hr_uint));
@@ -219,10 +220,10 @@ std::uint32_t OpenCLEngine::run_shot(std::uint32_t patch, const Frame& frame) {
     std::copy(tile_base_.begin(), tile_base_.end(), shot.tile_base);
     shot.list_capacity = list_capacity_;
     // Every kernel's arguments, bound here only; the shot goes by value: no upload to wait for.
-    bind(setup_, shot, elements_, patches_, records_, boxes_, faces_seen_, tile_counts_, sums_);
-    bind(count_, shot, boxes_, faces_seen_, tile_counts_);
+    bind(setup_, shot, elements_, patches_, records_, boxes_, record_count_, tile_counts_, sums_);
+    bind(count_, shot, records_, boxes_, record_count_, tile_counts_);
     bind(scan_, shot, tile_counts_, offsets_, cursors_, sums_);
-    bind(scatter_, shot, boxes_, faces_seen_, cursors_, lists_);
+    bind(scatter_, shot, records_, boxes_, record_count_, cursors_, lists_);
     bind(raster_, shot, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
 
     cl::CommandQueue& queue = context_.queue();
@@ -232,13 +233,24 @@ std::uint32_t OpenCLEngine::run_shot(std::uint32_t patch, const Frame& frame) {
     const std::size_t scan_wg = static_cast<std::size_t>(tuning_.scan_work_group);
     const std::size_t raster_wg = raster_group_size();
     const std::size_t raster_items = tuning_.raster_per_record ? round_up(tiles, raster_wg) : tiles * raster_wg;
-    queue.enqueueNDRangeKernel(setup_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg));
-    queue.enqueueNDRangeKernel(count_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg));
-    queue.enqueueNDRangeKernel(scan_, cl::NullRange, cl::NDRange(scan_wg), cl::NDRange(scan_wg));
-    queue.enqueueNDRangeKernel(scatter_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg));
-    queue.enqueueNDRangeKernel(raster_, cl::NullRange, cl::NDRange(raster_items), cl::NDRange(raster_wg));
+    std::array<cl::Event, kStages> events;
+    queue.enqueueFillBuffer(record_count_, hr_uint{0}, 0, sizeof(hr_uint));
+    queue.enqueueNDRangeKernel(setup_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg), nullptr,
+                               &events[0]);
+    queue.enqueueNDRangeKernel(count_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg), nullptr,
+                               &events[1]);
+    queue.enqueueNDRangeKernel(scan_, cl::NullRange, cl::NDRange(scan_wg), cl::NDRange(scan_wg), nullptr, &events[2]);
+    queue.enqueueNDRangeKernel(scatter_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg), nullptr,
+                               &events[3]);
+    queue.enqueueNDRangeKernel(raster_, cl::NullRange, cl::NDRange(raster_items), cl::NDRange(raster_wg), nullptr,
+                               &events[4]);
     // The sums, then the list entries the shot needed (from scan).
-    queue.enqueueReadBuffer(sums_, CL_TRUE, 0, sums_host_.size() * sizeof(hr_long), sums_host_.data());
+    queue.enqueueReadBuffer(sums_, CL_TRUE, 0, sums_host_.size() * sizeof(hr_long), sums_host_.data(), nullptr,
+                            &events[5]);
+    for (int s = 0; s < kStages; ++s)
+        stage_seconds_[static_cast<std::size_t>(s)] +=
+            1e-9 * static_cast<double>(events[static_cast<std::size_t>(s)].getProfilingInfo<CL_PROFILING_COMMAND_END>() -
+                                       events[static_cast<std::size_t>(s)].getProfilingInfo<CL_PROFILING_COMMAND_START>());
     return static_cast<std::uint32_t>(sums_host_[elements + 1]);
 }
 

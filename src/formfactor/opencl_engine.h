@@ -21,6 +21,7 @@ struct OpenCLTuning {
     int work_group = 64;              // work-group size of the per-element and per-record kernels
     int scan_work_group = 256;        // the one work-group of the tile-offset scan, a power of two
     int count_copies = 1;             // copies of the per-tile counters (work-group mod copies): less contention
+    int lanes = 4;                    // cells per row step of raster_records: 4 or 8
     std::string extra_options;        // appended to the build options (more -D overrides)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
 };
@@ -49,6 +50,12 @@ public:
     const DeltaFormFactors& delta() const { return delta_; }
     const std::string& build_options() const { return options_; }
 
+    // Device time per stage, summed over every shot so far (OpenCL event profiling).
+    static constexpr int kStages = 6;
+    static constexpr std::array<const char*, kStages> kStageNames = {"setup", "count", "scan", "scatter", "raster",
+                                                                     "read"};
+    const std::array<double, kStages>& stage_seconds() const { return stage_seconds_; }
+
 private:
     const mesh::Mesh& mesh_;
     ocl::Context& context_;
@@ -62,10 +69,11 @@ private:
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
 
     cl::Kernel setup_, count_, scan_, scatter_, raster_;  // raster_: raster or raster_records
-    cl::Buffer elements_, patches_, records_, boxes_, faces_seen_, tile_counts_, offsets_, cursors_, lists_,
+    cl::Buffer elements_, patches_, records_, boxes_, record_count_, tile_counts_, offsets_, cursors_, lists_,
         delta_fixed_, ids_buffer_, sums_;
     std::vector<std::int64_t> sums_host_;  // per element, then blocked (fixed point), then the list entries needed
 
+    std::array<double, kStages> stage_seconds_{};
     mutable std::vector<std::int32_t> ids_;
     mutable bool ids_stale_ = false;
 
