@@ -125,6 +125,22 @@ bool clip_if_needed(ClipPolygon* poly, int plane, int face, double eps) {
     return any_in && poly->n >= 3;
 }
 
+// Bit 5 * face + plane set where p (hemicube frame) is outside that plane of that face, the
+// plane values exactly those plane_value(plane, face, eps, to_face(face, p)) computes: to_face
+// only permutes and negates coordinates, so each face's value is one of seven differences
+// below or its exact negation (fl(-a - -b) = -fl(a - b)), outside where it is < 0.
+uint outside_bits(Vec p, double eps) {
+    const double base = p.z - eps;  // every face's base plane
+    const double zmx = p.z - p.x, zpx = p.z + p.x, zmy = p.z - p.y, zpy = p.z + p.y;
+    const double xmy = p.x - p.y, xpy = p.x + p.y;
+    const uint face0 = (base < 0.0) | (zmx < 0.0) << 1 | (zpx < 0.0) << 2 | (zmy < 0.0) << 3 | (zpy < 0.0) << 4;
+    const uint face1 = (base < 0.0) | (xmy < 0.0) << 1 | (xpy < 0.0) << 2 | (zmx > 0.0) << 3;    // (y, z, x)
+    const uint face2 = (base < 0.0) | (xmy > 0.0) << 1 | (xpy > 0.0) << 2 | (zpx > 0.0) << 3;    // (-y, z, -x)
+    const uint face3 = (base < 0.0) | (xpy < 0.0) << 1 | (xmy > 0.0) << 2 | (zmy > 0.0) << 3;    // (-x, z, y)
+    const uint face4 = (base < 0.0) | (xpy > 0.0) << 1 | (xmy < 0.0) << 2 | (zpy > 0.0) << 3;    // (x, z, -y)
+    return face0 | face1 << 5 | face2 << 10 | face3 << 15 | face4 << 20;
+}
+
 // Top-left rule for a counter-clockwise polygon: a centre on an edge belongs to it only for
 // edges going down, or going right along a horizontal.
 bool owns_edge_point(double dx, double dy) {
@@ -192,13 +208,34 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const int n = shot->n;
     const double per_unit = 0.5 * n;  // cells per unit of face coordinate (the reference's `half`)
 
+    // Which vertices lie outside which face planes, from the seven plane values every face shares.
+    uint outside_all = ~0u, outside_any = 0u;
+    for (int i = 0; i < e->n; ++i) {
+        const uint bits = outside_bits(in_frame[i], eps);
+        outside_all &= bits;
+        outside_any |= bits;
+    }
+
     for (int face = 0; face < HR_FACES; ++face) {
+        // Planes in the clipping order: while no plane has cut the polygon it is the element
+        // itself, so a plane with every vertex in changes nothing and one with every vertex out
+        // hides the face, as clip_if_needed would decide. From the first plane that cuts it on,
+        // the clipping itself.
+        const int planes = face == 0 ? 5 : 4;
+        int first_cut = planes;
+        bool hidden = false;
+        for (int plane = 0; plane < planes && first_cut == planes && !hidden; ++plane) {
+            const uint bit = 1u << (face * 5 + plane);
+            hidden = (outside_all & bit) != 0;
+            if (!hidden && (outside_any & bit) != 0) first_cut = plane;
+        }
+        if (hidden) continue;
         ClipPolygon poly;
         poly.n = 0;
         for (int i = 0; i < e->n; ++i) poly.v[poly.n++] = to_face(face, in_frame[i]);
-        const bool visible = clip_if_needed(&poly, kBasePlane, face, eps) && clip_if_needed(&poly, kRight, face, eps) &&
-                             clip_if_needed(&poly, kLeft, face, eps) && clip_if_needed(&poly, kTop, face, eps) &&
-                             (face != 0 || clip_if_needed(&poly, kBottom, face, eps));
+        bool visible = true;
+        for (int plane = first_cut; plane < planes && visible; ++plane)
+            visible = clip_if_needed(&poly, plane, face, eps);
         if (!visible || poly.n > HR_MAX_CLIPPED) continue;
 
         // The plane n.p = c in face coordinates gives 1/depth = (n_u s + n_v t + n_d) / c.
