@@ -2,7 +2,7 @@
 // alternate, repeat after repeat, over the same shots, after a warm-up (kernel builds excluded).
 // Every timed shot of every engine is also compared with the reference, so a fast wrong engine
 // cannot win. Usage: hemirad_bench_engines [SCENE] [--hemicube N] [--patch-size S]
-//   [--element-size S] [--shots K] [--repeats R] [--json FILE]
+//   [--element-size S] [--shots K] [--repeats R] [--batch K] [--json FILE]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -43,7 +43,7 @@ Stats stats(std::vector<double> v) {
 
 int main(int argc, char** argv) {
     std::string scene_file = std::string(HEMIRAD_SOURCE_DIR) + "/scenes/cornell_box.gltf", json_file;
-    int hemicube = 256, shots = 20, repeats = 5;
+    int hemicube = 256, shots = 20, repeats = 5, batch = 1;
     double patch = 0.06, element = 0.02;
     CLI::App app{"hemicube engine throughput, as ratios in one run"};
     app.add_option("scene", scene_file)->capture_default_str();
@@ -52,6 +52,9 @@ int main(int argc, char** argv) {
     app.add_option("--element-size", element)->capture_default_str();
     app.add_option("--shots", shots, "shots per engine per repeat")->capture_default_str();
     app.add_option("--repeats", repeats)->capture_default_str();
+    app.add_option("--batch", batch, "shots per shoot_batch call (the reference runs them in turn)")
+        ->capture_default_str()
+        ->check(CLI::PositiveNumber);
     app.add_option("--json", json_file, "also write the results here");
     CLI11_PARSE(app, argc, argv);
 
@@ -81,15 +84,20 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < patches.size(); ++i) entries[0].engine_ptr->shoot(patches[i], i, expected[i]);
 
     formfactor::ShotResult r;
+    std::vector<formfactor::ShotResult> results;
     for (auto& e : entries) e.engine_ptr->shoot(patches[0], 0, r);  // warm-up: builds, first uploads
     double worst_error = 0.0;
     for (int rep = 0; rep < repeats; ++rep) {
         for (auto& e : entries) {
             const auto t0 = std::chrono::steady_clock::now();
-            for (std::size_t i = 0; i < patches.size(); ++i) {
-                e.engine_ptr->shoot(patches[i], i, r);
-                for (std::size_t k = 0; k < r.F.size(); ++k)
-                    worst_error = std::max(worst_error, std::abs(r.F[k] - expected[i].F[k]));
+            for (std::size_t first = 0; first < patches.size(); first += static_cast<std::size_t>(batch)) {
+                std::vector<formfactor::ShotRequest> requests;
+                for (std::size_t i = first; i < std::min(patches.size(), first + static_cast<std::size_t>(batch)); ++i)
+                    requests.push_back({patches[i], i});
+                e.engine_ptr->shoot_batch(requests, results);
+                for (std::size_t b = 0; b < requests.size(); ++b)
+                    for (std::size_t k = 0; k < results[b].F.size(); ++k)
+                        worst_error = std::max(worst_error, std::abs(results[b].F[k] - expected[first + b].F[k]));
             }
             const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
             e.ms_per_shot.push_back(ms / static_cast<double>(patches.size()));
@@ -101,20 +109,20 @@ int main(int argc, char** argv) {
     }
 
     const Stats ref = stats(entries[0].ms_per_shot);
-    std::cout << fmt::format("{}: {} patches, {} elements, N = {}, {} shots × {} repeats (worst |ΔF| vs ref {:.1e})\n\n",
-                             scene_file, m.patches.size(), m.elements.size(), hemicube, shots, repeats, worst_error);
+    std::cout << fmt::format("{}: {} patches, {} elements, N = {}, {} shots × {} repeats, batches of {} (worst |ΔF| vs ref {:.1e})\n\n",
+                             scene_file, m.patches.size(), m.elements.size(), hemicube, shots, repeats, batch, worst_error);
     std::cout << "| engine | device | ms/shot median (min, σ) | shots/s | hemicube samples/s | vs ref |\n";
     std::cout << "|---|---|---|---|---|---|\n";
-    nlohmann::ordered_json results = nlohmann::ordered_json::array();
+    nlohmann::ordered_json rows = nlohmann::ordered_json::array();
     for (const auto& e : entries) {
         const Stats st = stats(e.ms_per_shot);
         const double shots_per_s = 1000.0 / st.median;
         const double samples = 3.0 * hemicube * hemicube * shots_per_s;
         std::cout << fmt::format("| {} | {} | {:.2f} ({:.2f}, ±{:.0f}%) | {:.0f} | {:.3g} | {:.2f}× |\n", e.engine, e.device,
                                  st.median, st.min, st.sigma_percent, shots_per_s, samples, ref.median / st.median);
-        results.push_back({{"engine", e.engine}, {"device", e.device}, {"scene", scene_file},
+        rows.push_back({{"engine", e.engine}, {"device", e.device}, {"scene", scene_file},
                            {"triangles", s.triangles.size()}, {"patches", m.patches.size()},
-                           {"elements", m.elements.size()}, {"hemicube", hemicube}, {"shots_per_s", shots_per_s},
+                           {"elements", m.elements.size()}, {"hemicube", hemicube}, {"batch", batch}, {"shots_per_s", shots_per_s},
                            {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
                            {"speedup_vs_ref", ref.median / st.median}});
     }
@@ -128,6 +136,6 @@ int main(int argc, char** argv) {
                                      1e3 * cl_engine->stage_seconds()[static_cast<std::size_t>(st)] / timed_shots);
         std::cout << "\n";
     }
-    if (!json_file.empty()) std::ofstream(json_file) << results.dump(2) << "\n";
+    if (!json_file.empty()) std::ofstream(json_file) << rows.dump(2) << "\n";
     return 0;
 }

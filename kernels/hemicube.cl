@@ -155,6 +155,21 @@ int face_rows(int face, int n) {
     return face == 0 ? n : n / 2;
 }
 
+// Every per-shot buffer holds a batch of shots, shot b at b times these strides; a kernel's
+// dimension 1 is the shot within the batch.
+size_t record_stride(const HrShot* shot) {
+    return (size_t)shot->elements * HR_FACES;
+}
+size_t counter_stride(const HrShot* shot) {
+    return (size_t)shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
+}
+size_t sum_stride(const HrShot* shot) {
+    return (size_t)shot->elements + 2;  // per element, the blocked share, the list entries needed
+}
+size_t cell_stride(const HrShot* shot) {
+    return (size_t)3 * shot->n * shot->n;
+}
+
 // The first counter of the copy that this work-group's records count in (and scatter to): copy
 // (work-group) mod COUNT_COPIES, each copy `tiles` counters. Work-groups that run at the same
 // time on different cores then rarely increment the same cache line.
@@ -166,10 +181,17 @@ int counter_copy(int tiles) {
 // may cover a cell centre, packed at the next free index (record_count[0], zero before the
 // shot). Also zeroes the tile counts and the sums for the kernels after it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
-    const HrShot shot_value, __global const HrElement* elements, __global const HrPatch* patches,
+    __global const HrShot* shots, __global const HrElement* elements, __global const HrPatch* patches,
     __global HrRecord* records, __global HrBox* boxes, __global uint* record_count, __global uint* tile_counts,
     __global long* sums) {
+    const size_t b = get_global_id(1);
+    const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
+    records += b * record_stride(shot);
+    boxes += b * record_stride(shot);
+    record_count += b;
+    tile_counts += b * counter_stride(shot);
+    sums += b * sum_stride(shot);
     const int k = (int)get_global_id(0);
     // The shot's clears, ahead of count and raster in the queue.
     const int counters = shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
@@ -317,12 +339,18 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
 // One count per tile each record may cover, in the counter copy of the work-group. Apart from
 // setup, whose record stores would otherwise drain at every atomic. Work-items stride over
 // the packed records, as many as setup made.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(const HrShot shot_value,
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(__global const HrShot* shots,
                                                                             __global const HrRecord* records,
                                                                             __global const HrBox* boxes,
                                                                             __global const uint* record_count,
                                                                             __global uint* tile_counts) {
+    const size_t b = get_global_id(1);
+    const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
+    records += b * record_stride(shot);
+    boxes += b * record_stride(shot);
+    record_count += b;
+    tile_counts += b * counter_stride(shot);
     __global uint* copy = tile_counts + counter_copy(shot->tile_base[HR_FACES]);
     const uint used = record_count[0];
     for (uint slot = get_global_id(0); slot < used; slot += get_global_size(0)) {
@@ -338,12 +366,18 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(cons
 // by copy, into list offsets (and the scatter cursors, laid out as the counts): a tile's list is
 // offsets[tile * COPIES] up to offsets[(tile + 1) * COPIES]. offsets[tiles * COPIES] is the
 // total, also in sums[elements + 1], which the host checks against the list capacity.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(const HrShot shot_value,
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(__global const HrShot* shots,
                                                                                 __global const uint* tile_counts,
                                                                                 __global uint* offsets,
                                                                                 __global uint* cursors,
                                                                                 __global long* sums) {
+    const size_t b = get_global_id(1);
+    const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
+    tile_counts += b * counter_stride(shot);
+    offsets += b * (counter_stride(shot) + 1);
+    cursors += b * counter_stride(shot);
+    sums += b * sum_stride(shot);
     __local uint partial[HEMIRAD_SCAN_WG];
     const int lid = (int)get_local_id(0);
     const int tiles = shot->tile_base[HR_FACES];
@@ -376,13 +410,20 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
 // As count (the same work-items, so the same counter copies): the index of each record in the
 // list of every tile it may cover. The order within a list varies from run to run; the
 // raster's result does not depend on it.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(const HrShot shot_value,
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(__global const HrShot* shots,
                                                                               __global const HrRecord* records,
                                                                               __global const HrBox* boxes,
                                                                               __global const uint* record_count,
                                                                               __global uint* cursors,
                                                                               __global uint* lists) {
+    const size_t b = get_global_id(1);
+    const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
+    records += b * record_stride(shot);
+    boxes += b * record_stride(shot);
+    record_count += b;
+    cursors += b * counter_stride(shot);
+    lists += b * (size_t)shot->list_capacity;
     __global uint* copy = cursors + counter_copy(shot->tile_base[HR_FACES]);
     const uint used = record_count[0];
     for (uint slot = get_global_id(0); slot < used; slot += get_global_size(0)) {
@@ -401,10 +442,18 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(co
 // depend on the order of the tile's list. The winner's delta form factor goes to its sum
 // (sums[elements] for blockers) in fixed point: integer atomics add in any order exactly.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))) void raster(
-    const HrShot shot_value, __global const HrRecord* records, __global const HrBox* boxes,
+    __global const HrShot* shots, __global const HrRecord* records, __global const HrBox* boxes,
     __global const uint* offsets, __global const uint* lists,
     __global const long* delta_fixed, __global int* ids, __global long* sums) {
+    const size_t b = get_global_id(1);
+    const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
+    records += b * record_stride(shot);
+    boxes += b * record_stride(shot);
+    offsets += b * (counter_stride(shot) + 1);
+    lists += b * (size_t)shot->list_capacity;
+    ids += b * cell_stride(shot);
+    sums += b * sum_stride(shot);
     const int tile = (int)get_group_id(0);
     const int tiles = shot->tile_base[HR_FACES];
     if (offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity)
@@ -484,10 +533,18 @@ typedef int4 lane_int;
 #define TILE_CELLS (HEMIRAD_TILE * HEMIRAD_TILE)
 
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
-    const HrShot shot_value, __global const HrRecord* records, __global const HrBox* boxes,
+    __global const HrShot* shots, __global const HrRecord* records, __global const HrBox* boxes,
     __global const uint* offsets, __global const uint* lists,
     __global const long* delta_fixed, __global int* ids, __global long* sums) {
+    const size_t b = get_global_id(1);
+    const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
+    records += b * record_stride(shot);
+    boxes += b * record_stride(shot);
+    offsets += b * (counter_stride(shot) + 1);
+    lists += b * (size_t)shot->list_capacity;
+    ids += b * cell_stride(shot);
+    sums += b * sum_stride(shot);
     const int tile = (int)get_global_id(0);
     const int tiles = shot->tile_base[HR_FACES];
     if (tile >= tiles) return;

@@ -1,5 +1,6 @@
-// FormFactorEngine: shoot(patch) → F[patch → element] for every element of the mesh.
-// The scalar reference hemicube implements it now; the OpenCL engine will implement it next.
+// FormFactorEngine: shoot(patch) → F[patch → element] for every element of the mesh, one shot
+// or a batch of shots at a time. Implemented by the scalar reference hemicube, the OpenCL
+// engine, and decorators (near field, verification).
 #pragma once
 
 #include <cstdint>
@@ -24,6 +25,12 @@ struct ShotResult {
     double blocked = 0.0;
 };
 
+// One shot of a batch: the shooter and the global shot counter.
+struct ShotRequest {
+    std::uint32_t patch = 0;
+    std::uint64_t shot = 0;
+};
+
 class Engine {
 public:
     virtual ~Engine() = default;
@@ -31,9 +38,20 @@ public:
     // Form factors from patch `patch` to every element. `shot` is the global shot counter:
     // with the seed it fixes the hemicube's rotation, so any engine reproduces the same shot.
     virtual void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) = 0;
-    // The id buffer of the last shot (element index, −1 empty, −2 blocker; cells in
-    // DeltaFormFactors order), for engines that keep one; used by verification.
-    virtual const std::vector<std::int32_t>* last_ids() const { return nullptr; }
+    // Several shots at once, with exactly the results of shoot() one at a time (out[i] for
+    // shots[i]). Engines that can run them together (the OpenCL engine: one launch per stage)
+    // override it; this one shoots in turn.
+    virtual void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
+        out.resize(shots.size());
+        for (std::size_t i = 0; i < shots.size(); ++i) shoot(shots[i].patch, shots[i].shot, out[i]);
+    }
+    // The id buffer of shot i of the last shoot_batch (a shoot() is a batch of one): element
+    // index, −1 empty, −2 blocker, cells in DeltaFormFactors order; nullptr where the engine
+    // does not keep it. Used by verification.
+    virtual const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const {
+        (void)i;
+        return nullptr;
+    }
 };
 
 }  // namespace hemirad::formfactor

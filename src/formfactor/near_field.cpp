@@ -12,6 +12,15 @@ NearFieldEngine::NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine>
 
 void NearFieldEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
     inner_->shoot(patch, shot, out);
+    correct(patch, out);
+}
+
+void NearFieldEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
+    inner_->shoot_batch(shots, out);
+    for (std::size_t i = 0; i < shots.size(); ++i) correct(shots[i].patch, out[i]);
+}
+
+void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     const mesh::Patch& shooter = mesh_.patches[patch];
     double radius = 0.0;
     for (int i = 0; i < shooter.poly.n; ++i) radius = std::max(radius, glm::length(shooter.poly.v[i] - shooter.centroid));

@@ -19,6 +19,8 @@ public:
     NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine> inner, double reach = kDefaultReach);
     std::string name() const override { return inner_->name(); }
     void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
+    const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return inner_->last_ids(i); }
 
     static constexpr double kDefaultReach = 4.0;
 
@@ -27,6 +29,8 @@ private:
     std::unique_ptr<Engine> inner_;
     double reach_;
     std::vector<std::size_t> near_;  // receivers corrected in the current shot, ascending
+
+    void correct(std::uint32_t patch, ShotResult& out);  // the inner engine's shot, in place
 };
 
 }  // namespace hemirad::formfactor

@@ -151,7 +151,6 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         tile_base_[static_cast<std::size_t>(face) + 1] =
             tile_base_[static_cast<std::size_t>(face)] + tiles_x_ * tiles_y;
     }
-    const std::size_t tiles = static_cast<std::size_t>(tile_base_[kFaces]);
 
     std::vector<HrElement> elements(mesh.elements.size());
     for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
@@ -183,22 +182,34 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     elements_ = upload(cl_context, queue, elements);
     patches_ = upload(cl_context, queue, patches);
     delta_fixed_ = upload(cl_context, queue, delta_fixed);
-    records_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, record_slots * sizeof(HrRecord));
-    const std::size_t counters = tiles * static_cast<std::size_t>(tuning.count_copies);
-    boxes_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, record_slots * sizeof(HrBox));
-    record_count_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, sizeof(hr_uint));
-    tile_counts_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, counters * sizeof(hr_uint));
-    offsets_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, (counters + 1) * sizeof(hr_uint));
-    cursors_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, counters * sizeof(hr_uint));
     // Most records cover a tile or two; a shot that needs more grows the lists and reruns.
     list_capacity_ = tuning.list_capacity > 0
                          ? tuning.list_capacity
                          : static_cast<std::uint32_t>(std::max<std::size_t>(1u << 16, 4 * record_slots));
-    lists_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, list_capacity_ * sizeof(hr_uint));
-    ids_buffer_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, delta_.cells() * sizeof(hr_int));
-    sums_ = cl::Buffer(cl_context, CL_MEM_READ_WRITE, (mesh.elements.size() + 2) * sizeof(hr_long));
-    sums_host_.assign(mesh.elements.size() + 2, 0);
-    ids_.assign(delta_.cells(), kEmpty);
+    allocate_batch(1);
+}
+
+void OpenCLEngine::allocate_batch(std::size_t shots) {
+    cl::Context& cl_context = context_.context();
+    const std::size_t record_slots = std::max<std::size_t>(1, mesh_.elements.size() * kFaces);
+    const std::size_t counters = static_cast<std::size_t>(tile_base_[kFaces]) * static_cast<std::size_t>(tuning_.count_copies);
+    const auto buffer = [&](std::size_t per_shot_bytes) {
+        return cl::Buffer(cl_context, CL_MEM_READ_WRITE, shots * per_shot_bytes);
+    };
+    shots_ = buffer(sizeof(HrShot));
+    records_ = buffer(record_slots * sizeof(HrRecord));
+    boxes_ = buffer(record_slots * sizeof(HrBox));
+    record_count_ = buffer(sizeof(hr_uint));
+    tile_counts_ = buffer(counters * sizeof(hr_uint));
+    offsets_ = buffer((counters + 1) * sizeof(hr_uint));
+    cursors_ = buffer(counters * sizeof(hr_uint));
+    lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
+    ids_buffer_ = buffer(delta_.cells() * sizeof(hr_int));
+    sums_ = buffer(sum_stride() * sizeof(hr_long));
+    sums_host_.assign(shots * sum_stride(), 0);
+    ids_.assign(shots, std::vector<std::int32_t>(delta_.cells(), kEmpty));
+    ids_stale_.assign(shots, false);
+    batch_capacity_ = shots;
 }
 
 std::size_t OpenCLEngine::raster_group_size() const {
@@ -206,26 +217,37 @@ std::size_t OpenCLEngine::raster_group_size() const {
                                                               : tuning_.tile * tuning_.tile);
 }
 
-std::uint32_t OpenCLEngine::run_shot(std::uint32_t patch, const Frame& frame) {
-    HrShot shot{};
-    copy3(frame.origin, shot.origin);
-    copy3(frame.u, shot.u);
-    copy3(frame.v, shot.v);
-    copy3(frame.w, shot.w);
-    shot.eps = eps_;
-    shot.n = settings_.hemicube;
-    shot.shooter = static_cast<hr_int>(patch);
-    shot.elements = static_cast<hr_int>(mesh_.elements.size());
-    shot.tiles_x = tiles_x_;
-    std::copy(tile_base_.begin(), tile_base_.end(), shot.tile_base);
-    shot.list_capacity = list_capacity_;
-    // Every kernel's arguments, bound here only; the shot goes by value: no upload to wait for.
-    bind(setup_, shot, elements_, patches_, records_, boxes_, record_count_, tile_counts_, sums_);
-    bind(count_, shot, records_, boxes_, record_count_, tile_counts_);
-    bind(scan_, shot, tile_counts_, offsets_, cursors_, sums_);
-    bind(scatter_, shot, records_, boxes_, record_count_, cursors_, lists_);
-    bind(raster_, shot, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
+std::size_t OpenCLEngine::sum_stride() const {
+    return mesh_.elements.size() + 2;  // per element, the blocked share, the list entries needed
+}
 
+std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) {
+    const std::size_t batch = requests.size();
+    std::vector<HrShot> shots(batch);
+    for (std::size_t i = 0; i < batch; ++i) {
+        const Frame frame = make_frame(mesh_.patches.at(requests[i].patch), settings_.seed, requests[i].shot);
+        HrShot& shot = shots[i];
+        shot = {};
+        copy3(frame.origin, shot.origin);
+        copy3(frame.u, shot.u);
+        copy3(frame.v, shot.v);
+        copy3(frame.w, shot.w);
+        shot.eps = eps_;
+        shot.n = settings_.hemicube;
+        shot.shooter = static_cast<hr_int>(requests[i].patch);
+        shot.elements = static_cast<hr_int>(mesh_.elements.size());
+        shot.tiles_x = tiles_x_;
+        std::copy(tile_base_.begin(), tile_base_.end(), shot.tile_base);
+        shot.list_capacity = list_capacity_;
+    }
+    // Every kernel's arguments, bound here only.
+    bind(setup_, shots_, elements_, patches_, records_, boxes_, record_count_, tile_counts_, sums_);
+    bind(count_, shots_, records_, boxes_, record_count_, tile_counts_);
+    bind(scan_, shots_, tile_counts_, offsets_, cursors_, sums_);
+    bind(scatter_, shots_, records_, boxes_, record_count_, cursors_, lists_);
+    bind(raster_, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
+
+    // Dimension 1 of every kernel is the shot within the batch.
     cl::CommandQueue& queue = context_.queue();
     const std::size_t elements = mesh_.elements.size();
     const std::size_t tiles = static_cast<std::size_t>(tile_base_[kFaces]);
@@ -234,52 +256,67 @@ std::uint32_t OpenCLEngine::run_shot(std::uint32_t patch, const Frame& frame) {
     const std::size_t raster_wg = raster_group_size();
     const std::size_t raster_items = tuning_.raster_per_record ? round_up(tiles, raster_wg) : tiles * raster_wg;
     std::array<cl::Event, kStages> events;
-    queue.enqueueFillBuffer(record_count_, hr_uint{0}, 0, sizeof(hr_uint));
-    queue.enqueueNDRangeKernel(setup_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg), nullptr,
-                               &events[0]);
-    queue.enqueueNDRangeKernel(count_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg), nullptr,
-                               &events[1]);
-    queue.enqueueNDRangeKernel(scan_, cl::NullRange, cl::NDRange(scan_wg), cl::NDRange(scan_wg), nullptr, &events[2]);
-    queue.enqueueNDRangeKernel(scatter_, cl::NullRange, cl::NDRange(round_up(elements, wg)), cl::NDRange(wg), nullptr,
-                               &events[3]);
-    queue.enqueueNDRangeKernel(raster_, cl::NullRange, cl::NDRange(raster_items), cl::NDRange(raster_wg), nullptr,
-                               &events[4]);
-    // The sums, then the list entries the shot needed (from scan).
-    queue.enqueueReadBuffer(sums_, CL_TRUE, 0, sums_host_.size() * sizeof(hr_long), sums_host_.data(), nullptr,
+    queue.enqueueWriteBuffer(shots_, CL_FALSE, 0, batch * sizeof(HrShot), shots.data());
+    queue.enqueueFillBuffer(record_count_, hr_uint{0}, 0, batch * sizeof(hr_uint));
+    const auto run = [&](cl::Kernel& kernel, std::size_t items, std::size_t group, cl::Event* event) {
+        queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(items, batch), cl::NDRange(group, 1), nullptr,
+                                   event);
+    };
+    run(setup_, round_up(elements, wg), wg, &events[0]);
+    run(count_, round_up(elements, wg), wg, &events[1]);
+    run(scan_, scan_wg, scan_wg, &events[2]);
+    run(scatter_, round_up(elements, wg), wg, &events[3]);
+    run(raster_, raster_items, raster_wg, &events[4]);
+    // The sums, then per shot the list entries it needed (from scan).
+    queue.enqueueReadBuffer(sums_, CL_TRUE, 0, batch * sum_stride() * sizeof(hr_long), sums_host_.data(), nullptr,
                             &events[5]);
     for (int s = 0; s < kStages; ++s)
         stage_seconds_[static_cast<std::size_t>(s)] +=
             1e-9 * static_cast<double>(events[static_cast<std::size_t>(s)].getProfilingInfo<CL_PROFILING_COMMAND_END>() -
                                        events[static_cast<std::size_t>(s)].getProfilingInfo<CL_PROFILING_COMMAND_START>());
-    return static_cast<std::uint32_t>(sums_host_[elements + 1]);
+    std::uint32_t needed = 0;
+    for (std::size_t i = 0; i < batch; ++i)
+        needed = std::max(needed, static_cast<std::uint32_t>(sums_host_[i * sum_stride() + elements + 1]));
+    return needed;
 }
 
 void OpenCLEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    const mesh::Patch& shooter = mesh_.patches.at(patch);
-    const Frame frame = make_frame(shooter, settings_.seed, shot);
-    for (;;) {
-        const std::uint32_t needed = run_shot(patch, frame);
-        if (needed <= list_capacity_) break;
-        // The raster skipped this shot: grow the lists with some headroom and run it again.
-        list_capacity_ = static_cast<std::uint32_t>(std::min<std::uint64_t>(0xffffffffu, needed + needed / 4ull));
-        lists_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE,
-                            static_cast<std::size_t>(list_capacity_) * sizeof(hr_uint));
-    }
-    ids_stale_ = true;
-
-    const std::size_t elements = mesh_.elements.size();
-    out.F.assign(elements, 0.0);
-    for (std::size_t k = 0; k < elements; ++k)
-        out.F[k] = std::ldexp(static_cast<double>(sums_host_[k]), -HR_FIXED_SHIFT);
-    out.blocked = std::ldexp(static_cast<double>(sums_host_[elements]), -HR_FIXED_SHIFT);
+    shoot_batch({{patch, shot}}, batch_results_);
+    out = std::move(batch_results_[0]);
 }
 
-const std::vector<std::int32_t>& OpenCLEngine::ids() const {
-    if (ids_stale_) {
-        context_.queue().enqueueReadBuffer(ids_buffer_, CL_TRUE, 0, ids_.size() * sizeof(std::int32_t), ids_.data());
-        ids_stale_ = false;
+void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
+    out.resize(shots.size());
+    if (shots.empty()) return;
+    if (shots.size() > batch_capacity_) allocate_batch(shots.size());
+    for (;;) {
+        const std::uint32_t needed = run_batch(shots);
+        if (needed <= list_capacity_) break;
+        // The raster skipped the batch: grow the lists with some headroom and run it again.
+        list_capacity_ = static_cast<std::uint32_t>(std::min<std::uint64_t>(0xffffffffu, needed + needed / 4ull));
+        lists_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE,
+                            batch_capacity_ * std::size_t{list_capacity_} * sizeof(hr_uint));
     }
-    return ids_;
+    last_batch_ = shots.size();
+    std::fill(ids_stale_.begin(), ids_stale_.end(), true);
+
+    const std::size_t elements = mesh_.elements.size();
+    for (std::size_t i = 0; i < shots.size(); ++i) {
+        const hr_long* sums = sums_host_.data() + i * sum_stride();
+        out[i].F.resize(elements);
+        for (std::size_t k = 0; k < elements; ++k) out[i].F[k] = std::ldexp(static_cast<double>(sums[k]), -HR_FIXED_SHIFT);
+        out[i].blocked = std::ldexp(static_cast<double>(sums[elements]), -HR_FIXED_SHIFT);
+    }
+}
+
+const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t i) const {
+    if (i >= last_batch_) return nullptr;
+    if (ids_stale_[i]) {
+        context_.queue().enqueueReadBuffer(ids_buffer_, CL_TRUE, i * delta_.cells() * sizeof(std::int32_t),
+                                           delta_.cells() * sizeof(std::int32_t), ids_[i].data());
+        ids_stale_[i] = false;
+    }
+    return &ids_[i];
 }
 
 }  // namespace hemirad::formfactor

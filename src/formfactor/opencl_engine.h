@@ -40,13 +40,17 @@ public:
     std::string name() const override { return "opencl"; }
     void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
 
-    // The id buffer of the last shot with the reference's conventions: face by face, cell
-    // (i, j) at DeltaFormFactors::offset(face) + j·N + i; the element index, kEmpty where nothing
-    // was hit, kBlocker for the back of a one-sided surface. Read from the device on first use.
+    // Runs a batch's shots together: each stage is one launch over every shot (dimension 1 of
+    // the NDRange), so a GPU has enough work. The buffers grow to the largest batch seen.
+    void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
+
+    // The id buffer of shot i of the last batch with the reference's conventions: face by
+    // face, cell (i, j) at DeltaFormFactors::offset(face) + j·N + i; the element index, kEmpty
+    // where nothing was hit, kBlocker for the back of a one-sided surface. Read from the
+    // device on first use.
     static constexpr std::int32_t kEmpty = -1;
     static constexpr std::int32_t kBlocker = -2;
-    const std::vector<std::int32_t>& ids() const;
-    const std::vector<std::int32_t>* last_ids() const override { return &ids(); }
+    const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
     const DeltaFormFactors& delta() const { return delta_; }
     const std::string& build_options() const { return options_; }
 
@@ -69,16 +73,21 @@ private:
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
 
     cl::Kernel setup_, count_, scan_, scatter_, raster_;  // raster_: raster or raster_records
-    cl::Buffer elements_, patches_, records_, boxes_, record_count_, tile_counts_, offsets_, cursors_, lists_,
+    cl::Buffer shots_, elements_, patches_, records_, boxes_, record_count_, tile_counts_, offsets_, cursors_, lists_,
         delta_fixed_, ids_buffer_, sums_;
-    std::vector<std::int64_t> sums_host_;  // per element, then blocked (fixed point), then the list entries needed
+    std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
+    std::size_t batch_capacity_ = 0;       // shots the per-shot buffers hold
+    std::size_t last_batch_ = 0;
+    std::vector<ShotResult> batch_results_;
 
     std::array<double, kStages> stage_seconds_{};
-    mutable std::vector<std::int32_t> ids_;
-    mutable bool ids_stale_ = false;
+    mutable std::vector<std::vector<std::int32_t>> ids_;  // per shot of the last batch
+    mutable std::vector<bool> ids_stale_;
 
     std::size_t raster_group_size() const;
-    std::uint32_t run_shot(std::uint32_t patch, const Frame& frame);  // returns the list entries needed
+    std::size_t sum_stride() const;
+    void allocate_batch(std::size_t shots);
+    std::uint32_t run_batch(const std::vector<ShotRequest>& shots);  // returns the list entries needed
 };
 
 }  // namespace hemirad::formfactor

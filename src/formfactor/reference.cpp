@@ -93,6 +93,7 @@ ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& setting
 void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
     const mesh::Patch& shooter = mesh_.patches.at(patch);
     const Frame frame = make_frame(shooter, settings_.seed, shot);
+    last_batch_ = 1;
     const int n = delta_.n();
     const double half = 0.5 * n;  // cells per unit of face coordinate
 

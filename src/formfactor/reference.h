@@ -18,7 +18,14 @@ public:
     static constexpr std::int32_t kEmpty = -1;
     static constexpr std::int32_t kBlocker = -2;
     const std::vector<std::int32_t>& ids() const { return ids_; }
-    const std::vector<std::int32_t>* last_ids() const override { return &ids_; }
+    // Keeps the last shot's buffer only: that of a batch's last shot.
+    void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override {
+        Engine::shoot_batch(shots, out);
+        last_batch_ = shots.size();
+    }
+    const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override {
+        return i + 1 == last_batch_ ? &ids_ : nullptr;
+    }
     const DeltaFormFactors& delta() const { return delta_; }
 
 private:
@@ -30,6 +37,7 @@ private:
     std::vector<double> depth_;          // 1/d per cell, larger is nearer
     std::vector<std::int32_t> owner_;    // winning element per cell, −1 for none
     std::vector<char> back_;             // the winner is the back of a one-sided surface
+    std::size_t last_batch_ = 1;         // shots in the last batch: ids_ is its last
 
     bool above_base_plane(const mesh::Polygon& poly, const Frame& frame) const;
 };

@@ -34,21 +34,30 @@ VerifyingEngine::VerifyingEngine(std::unique_ptr<Engine> engine, std::unique_ptr
     : engine_(std::move(engine)), reference_(std::move(reference)), every_(std::max(1L, every)) {}
 
 void VerifyingEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    engine_->shoot(patch, shot, out);
-    if (shot % static_cast<std::uint64_t>(every_) != 0) return;
-    reference_->shoot(patch, shot, expected_);
-    ++summary_.shots_checked;
+    shoot_batch({{patch, shot}}, batch_);
+    out = std::move(batch_[0]);
+}
 
-    const auto* ids = engine_->last_ids();
-    const auto* ref_ids = reference_->last_ids();
-    if (ids && ref_ids && ids->size() == ref_ids->size()) {
-        summary_.cells_compared += static_cast<long>(ids->size());
-        for (std::size_t c = 0; c < ids->size(); ++c) summary_.cells_mismatched += (*ids)[c] != (*ref_ids)[c];
+void VerifyingEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
+    engine_->shoot_batch(shots, out);
+    for (std::size_t i = 0; i < shots.size(); ++i) {
+        const auto [patch, shot] = shots[i];
+        if (shot % static_cast<std::uint64_t>(every_) != 0) continue;
+        reference_->shoot(patch, shot, expected_);
+        ++summary_.shots_checked;
+
+        const auto* ids = engine_->last_ids(i);
+        const auto* ref_ids = reference_->last_ids();
+        if (ids && ref_ids && ids->size() == ref_ids->size()) {
+            summary_.cells_compared += static_cast<long>(ids->size());
+            for (std::size_t c = 0; c < ids->size(); ++c) summary_.cells_mismatched += (*ids)[c] != (*ref_ids)[c];
+        }
+        const std::string problem = compare_shot(out[i], expected_, &summary_);
+        if (!problem.empty())
+            throw VerifyError(fmt::format("verify: shot {} (patch {}) on {}: {}; {} of {} cells differ so far", shot,
+                                          patch, engine_->name(), problem, summary_.cells_mismatched,
+                                          summary_.cells_compared));
     }
-    const std::string problem = compare_shot(out, expected_, &summary_);
-    if (!problem.empty())
-        throw VerifyError(fmt::format("verify: shot {} (patch {}) on {}: {}; {} of {} cells differ so far", shot, patch,
-                                      engine_->name(), problem, summary_.cells_mismatched, summary_.cells_compared));
 }
 
 }  // namespace hemirad::formfactor

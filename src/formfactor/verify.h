@@ -39,13 +39,15 @@ public:
     VerifyingEngine(std::unique_ptr<Engine> engine, std::unique_ptr<Engine> reference, long every);
     std::string name() const override { return engine_->name(); }
     void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
-    const std::vector<std::int32_t>* last_ids() const override { return engine_->last_ids(); }
+    void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
+    const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return engine_->last_ids(i); }
     const VerifySummary& summary() const { return summary_; }
 
 private:
     std::unique_ptr<Engine> engine_, reference_;
     long every_;
     ShotResult expected_;
+    std::vector<ShotResult> batch_;
     VerifySummary summary_;
 };
 
