@@ -38,6 +38,10 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->check(CLI::Range(0.0, 1.0))->capture_default_str();
     bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
         ->check(CLI::NonNegativeNumber)->capture_default_str();
+    bake.add_option("--batch", o.batch,
+                    "shoot the K patches with the most unshot flux together (one launch on OpenCL); "
+                    "each still shoots its flux at the time it is applied")
+        ->check(CLI::Range(1, 256))->capture_default_str();
     bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")->capture_default_str();
     bake.add_flag("--verify", o.verify, "check shots of the OpenCL engine against the scalar reference");
     bake.add_option("--verify-every", o.verify_every, "with --verify, check every K-th shot")

@@ -45,6 +45,12 @@ public:
         inner_.shoot(patch, shot, out);
         seconds_ += seconds_since(t0);
     }
+    void shoot_batch(const std::vector<formfactor::ShotRequest>& shots,
+                     std::vector<formfactor::ShotResult>& out) override {
+        const auto t0 = Clock::now();
+        inner_.shoot_batch(shots, out);
+        seconds_ += seconds_since(t0);
+    }
     double seconds() const { return seconds_; }
 
 private:
@@ -247,14 +253,16 @@ void run_bake(const BakeOptions& o) {
     solve::Settings solve_settings;
     solve_settings.threshold = o.threshold;
     solve_settings.max_passes = o.max_passes;
+    solve_settings.batch = o.batch;
 
     t0 = Clock::now();
     solve::Progressive solver(mesh, engine, solve_settings);
     ProgressLine progress(o.progress);
+    long previews = 0;
     while (solver.step()) {
         if (o.interrupted && *o.interrupted) throw Interrupted();
         progress.update(solver, o.threshold);
-        if (o.preview_every > 0 && solver.passes() % o.preview_every == 0)
+        if (o.preview_every > 0 && solver.passes() / o.preview_every > previews && (previews = solver.passes() / o.preview_every))
             write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
     }
     progress.update(solver, o.threshold);
@@ -287,6 +295,7 @@ void run_bake(const BakeOptions& o) {
         {"element_size", mesh_settings.element_size},
         {"threshold", o.threshold},
         {"max_passes", o.max_passes},
+        {"batch", o.batch},
         {"seed", o.seed},
         {"device", o.device},
         {"verify", o.verify},

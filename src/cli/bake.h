@@ -18,6 +18,7 @@ struct BakeOptions {
     double element_size = 0.0;    // 0: patch size / kDefaultElementsPerPatchEdge
     double threshold = 1e-3;
     long max_passes = 100000;
+    int batch = 1;                // shooters per engine call (the top-K unshot patches)
     std::uint64_t seed = 1;
     bool verify = false;
     long verify_every = 1;        // with --verify: check shots 0, K, 2K, …

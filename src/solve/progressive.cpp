@@ -40,23 +40,35 @@ bool Progressive::done() const {
 bool Progressive::step() {
     if (done()) return false;
 
-    // The patch with the most unshot flux; ties go to the lower index.
-    std::size_t best = 0;
-    double best_flux = -1.0;
-    for (std::size_t p = 0; p < unshot_.size(); ++p) {
-        const double flux = sum(unshot_[p]) * mesh_.patches[p].area;
-        if (flux > best_flux) {
-            best_flux = flux;
-            best = p;
-        }
-    }
-    if (best_flux <= 0.0) {
+    // The patches with the most unshot flux; ties go to the lower index.
+    std::vector<std::size_t> order;
+    for (std::size_t p = 0; p < unshot_.size(); ++p)
+        if (sum(unshot_[p]) * mesh_.patches[p].area > 0.0) order.push_back(p);
+    if (order.empty()) {
         converged_ = true;
         return false;
     }
+    long count = std::min<long>(std::max(1, settings_.batch), static_cast<long>(order.size()));
+    if (settings_.max_passes > 0) count = std::min(count, settings_.max_passes - passes_);
+    const auto more_flux = [&](std::size_t a, std::size_t b) {
+        const double fa = sum(unshot_[a]) * mesh_.patches[a].area, fb = sum(unshot_[b]) * mesh_.patches[b].area;
+        return fa > fb || (fa == fb && a < b);
+    };
+    std::partial_sort(order.begin(), order.begin() + count, order.end(), more_flux);
 
+    std::vector<formfactor::ShotRequest> requests;
+    for (long i = 0; i < count; ++i)
+        requests.push_back({static_cast<std::uint32_t>(order[static_cast<std::size_t>(i)]),
+                            static_cast<std::uint64_t>(passes_ + i)});
+    engine_.shoot_batch(requests, batch_results_);
+    // In order; a batch cut short by convergence leaves the rest unshot, the books exact.
+    for (long i = 0; i < count && !done(); ++i)
+        apply(order[static_cast<std::size_t>(i)], batch_results_[static_cast<std::size_t>(i)]);
+    return true;
+}
+
+void Progressive::apply(std::size_t best, const formfactor::ShotResult& shot) {
     const mesh::Patch& shooter = mesh_.patches[best];
-    engine_.shoot(static_cast<std::uint32_t>(best), static_cast<std::uint64_t>(passes_), shot_);
     const glm::dvec3 u = unshot_[best];
     const glm::dvec3 flux = u * shooter.area;
     unshot_[best] = glm::dvec3(0.0);
@@ -64,8 +76,8 @@ bool Progressive::step() {
     // ΔH_j = ΔB_i F_ij A_i / A_j; what element j reflects, ρ_j ΔH_j A_j, joins its patch's pool.
     glm::dvec3 hit{0.0}, reflected{0.0};
     double f_sum = 0.0;
-    for (std::size_t k = 0; k < shot_.F.size(); ++k) {
-        const double f = shot_.F[k];
+    for (std::size_t k = 0; k < shot.F.size(); ++k) {
+        const double f = shot.F[k];
         if (f == 0.0) continue;
         const mesh::Element& e = mesh_.elements[k];
         const glm::dvec3 received = flux * f;  // flux arriving at element k
@@ -78,9 +90,9 @@ bool Progressive::step() {
         reflected += back;
         f_sum += f;
     }
-    absorbed_ += flux * shot_.blocked;
-    escaped_ += flux * (1.0 - f_sum - shot_.blocked);  // may be −1e-16: books stay exact
-    hit += flux * shot_.blocked;
+    absorbed_ += flux * shot.blocked;
+    escaped_ += flux * (1.0 - f_sum - shot.blocked);  // may be −1e-16: books stay exact
+    hit += flux * shot.blocked;
 
     // Recent behaviour of the scene, flux-weighted, forgetting over about one round of patches.
     const double keep = 1.0 - 1.0 / std::max<double>(16.0, static_cast<double>(mesh_.patches.size()));
@@ -90,7 +102,6 @@ bool Progressive::step() {
 
     ++passes_;
     update_convergence();
-    return true;
 }
 
 glm::dvec3 Progressive::effective_reflectance() const {

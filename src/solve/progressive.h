@@ -19,6 +19,10 @@ struct Settings {
     // ambient-corrected incident light over the last round, falls below this (flux-weighted).
     double threshold = 1e-3;
     long max_passes = 0;       // 0: no limit but the threshold
+    // Shooters per step: the `batch` patches with the most unshot flux go to the engine
+    // together (one launch on the OpenCL engine), then are applied in turn, each shooting
+    // the unshot flux it holds by then. 1 is Southwell's order exactly.
+    int batch = 1;
 };
 
 // Flux bookkeeping, as radiosity × area summed over elements, averaged over r, g, b.
@@ -34,7 +38,8 @@ class Progressive {
 public:
     Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings);
 
-    // Shoots one patch. Returns false (and does nothing) once converged or out of passes.
+    // Shoots one batch of patches (one pass each). Returns false (and does nothing) once
+    // converged or out of passes.
     bool step();
     bool done() const;
     bool converged() const { return converged_; }
@@ -58,13 +63,14 @@ public:
     glm::dvec3 ambient() const;
 
     Energy energy() const;
-    const formfactor::ShotResult& last_shot() const { return shot_; }
 
 private:
     const mesh::Mesh& mesh_;
     formfactor::Engine& engine_;
     Settings settings_;
-    formfactor::ShotResult shot_;
+    std::vector<formfactor::ShotResult> batch_results_;  // the last step's shots
+
+    void apply(std::size_t patch, const formfactor::ShotResult& shot);  // one pass
 
     std::vector<glm::dvec3> H_;        // incident per element, shot so far
     std::vector<glm::dvec3> unshot_;   // unshot radiosity per patch
