@@ -294,21 +294,31 @@ TEST_CASE("opencl: a batch of shots gives exactly the shots one at a time", "[op
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::OpenCLEngine batched(m, *ctx, {128, 5});
     formfactor::OpenCLEngine single(m, *ctx, {128, 5});
+    formfactor::OpenCLTuning tight = formfactor::default_tuning(ctx->info());
+    tight.batch_memory = 1;  // below one shot: every batch runs one shot per launch
+    formfactor::OpenCLEngine split(m, *ctx, {128, 5}, tight);
     formfactor::ReferenceEngine ref(m, {128, 5});
     // Different shooters and shot counters, one patch twice; then a smaller batch reusing the buffers.
     for (const std::vector<formfactor::ShotRequest>& requests :
          {std::vector<formfactor::ShotRequest>{{0, 3}, {5, 4}, {static_cast<std::uint32_t>(m.patches.size() - 1), 5},
                                                {5, 6}, {2, 7}},
           std::vector<formfactor::ShotRequest>{{1, 8}, {3, 9}}}) {
-        std::vector<formfactor::ShotResult> results;
+        std::vector<formfactor::ShotResult> results, split_results;
         batched.shoot_batch(requests, results);
+        split.shoot_batch(requests, split_results);
         REQUIRE(results.size() == requests.size());
+        REQUIRE(split_results.size() == requests.size());
+        // Split into launches, only the last launch's id buffer is kept.
+        CHECK(split.last_ids(0) == nullptr);
+        REQUIRE(split.last_ids(requests.size() - 1) != nullptr);
+        CHECK(*split.last_ids(requests.size() - 1) == *batched.last_ids(requests.size() - 1));
         for (std::size_t i = 0; i < requests.size(); ++i) {
             formfactor::ShotResult one, want;
             single.shoot(requests[i].patch, requests[i].shot, one);
             ref.shoot(requests[i].patch, requests[i].shot, want);
             CAPTURE(i, requests[i].patch, requests[i].shot);
             CHECK(results[i].F == one.F);
+            CHECK(split_results[i].F == one.F);
             CHECK(results[i].blocked == one.blocked);
             REQUIRE(batched.last_ids(i) != nullptr);
             CHECK(*batched.last_ids(i) == *ref.last_ids());  // cell for cell the reference's

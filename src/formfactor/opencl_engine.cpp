@@ -217,6 +217,17 @@ std::size_t OpenCLEngine::raster_group_size() const {
                                                               : tuning_.tile * tuning_.tile);
 }
 
+std::size_t OpenCLEngine::max_batch() const {
+    const std::size_t record_slots = std::max<std::size_t>(1, mesh_.elements.size() * kFaces);
+    const std::size_t per_shot = record_slots * (sizeof(HrRecord) + sizeof(HrBox)) +
+                                 std::size_t{list_capacity_} * sizeof(hr_uint) + delta_.cells() * sizeof(hr_int) +
+                                 sum_stride() * sizeof(hr_long);
+    const std::size_t budget = tuning_.batch_memory > 0
+                                   ? tuning_.batch_memory
+                                   : std::min<std::size_t>(std::size_t{1} << 30, context_.info().global_memory / 4);
+    return std::max<std::size_t>(1, budget / per_shot);
+}
+
 std::size_t OpenCLEngine::sum_stride() const {
     return mesh_.elements.size() + 2;  // per element, the blocked share, the list entries needed
 }
@@ -288,6 +299,24 @@ void OpenCLEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& ou
 void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     out.resize(shots.size());
     if (shots.empty()) return;
+    // Per-shot buffers are large (records for every element and face): a batch beyond the
+    // memory budget runs as several launches, with the same results.
+    const std::size_t most = max_batch();
+    if (shots.size() > most) {
+        std::vector<ShotResult> part;
+        std::size_t first = 0;
+        for (; first + most < shots.size(); first += most) {
+            shoot_batch({shots.begin() + static_cast<std::ptrdiff_t>(first),
+                         shots.begin() + static_cast<std::ptrdiff_t>(first + most)},
+                        part);
+            std::move(part.begin(), part.end(), out.begin() + static_cast<std::ptrdiff_t>(first));
+        }
+        shoot_batch({shots.begin() + static_cast<std::ptrdiff_t>(first), shots.end()}, part);
+        std::move(part.begin(), part.end(), out.begin() + static_cast<std::ptrdiff_t>(first));
+        ids_first_ = first;  // the id buffers kept are the last part's
+        return;
+    }
+    ids_first_ = 0;
     if (shots.size() > batch_capacity_) allocate_batch(shots.size());
     for (;;) {
         const std::uint32_t needed = run_batch(shots);
@@ -309,8 +338,9 @@ void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vecto
     }
 }
 
-const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t i) const {
-    if (i >= last_batch_) return nullptr;
+const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t shot) const {
+    if (shot < ids_first_ || shot - ids_first_ >= last_batch_) return nullptr;
+    const std::size_t i = shot - ids_first_;
     if (ids_stale_[i]) {
         context_.queue().enqueueReadBuffer(ids_buffer_, CL_TRUE, i * delta_.cells() * sizeof(std::int32_t),
                                            delta_.cells() * sizeof(std::int32_t), ids_[i].data());

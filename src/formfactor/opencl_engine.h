@@ -24,6 +24,7 @@ struct OpenCLTuning {
     int lanes = 4;                    // cells per row step of raster_records: 4 or 8
     std::string extra_options;        // appended to the build options (more -D overrides)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
+    std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: 1 GiB or device memory / 4
 };
 
 // The knobs for a device, from a small hand-edited table.
@@ -41,7 +42,9 @@ public:
     void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
 
     // Runs a batch's shots together: each stage is one launch over every shot (dimension 1 of
-    // the NDRange), so a GPU has enough work. The buffers grow to the largest batch seen.
+    // the NDRange), so a GPU has enough work. The buffers grow to the largest batch seen; a
+    // batch beyond the memory budget (1 GiB or a quarter of the device's memory) runs in parts,
+    // and then only the last part's id buffers are kept.
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
 
     // The id buffer of shot i of the last batch with the reference's conventions: face by
@@ -77,7 +80,8 @@ private:
         delta_fixed_, ids_buffer_, sums_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
     std::size_t batch_capacity_ = 0;       // shots the per-shot buffers hold
-    std::size_t last_batch_ = 0;
+    std::size_t last_batch_ = 0;           // shots of the last launch
+    std::size_t ids_first_ = 0;            // their first index in the last shoot_batch
     std::vector<ShotResult> batch_results_;
 
     std::array<double, kStages> stage_seconds_{};
@@ -86,6 +90,7 @@ private:
 
     std::size_t raster_group_size() const;
     std::size_t sum_stride() const;
+    std::size_t max_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
     std::uint32_t run_batch(const std::vector<ShotRequest>& shots);  // returns the list entries needed
 };
