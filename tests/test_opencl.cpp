@@ -372,3 +372,25 @@ TEST_CASE("opencl: batched shooting converges to the same furnace and books as o
     CHECK(batching < 1e-2);
     CHECK(batching < 2.0 * reseeding);
 }
+
+TEST_CASE("opencl: the GPU raster kernel (one work-item per cell) gives the reference's cells too", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    // Whatever the device, run the tuning a GPU gets, so the kernel is checked where no GPU is.
+    const Case c = comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+    tuning.raster_per_record = false;
+    tuning.tile = 8;  // 64-item work-groups: within any device's limit
+    formfactor::OpenCLEngine gpu_style(m, *ctx, {64, 2}, tuning);
+    formfactor::ReferenceEngine ref(m, {64, 2});
+    const std::vector<formfactor::ShotRequest> requests{{0, 0}, {3, 1}, {static_cast<std::uint32_t>(m.patches.size() - 1), 2}};
+    std::vector<formfactor::ShotResult> results;
+    gpu_style.shoot_batch(requests, results);
+    for (std::size_t i = 0; i < requests.size(); ++i) {
+        formfactor::ShotResult want;
+        ref.shoot(requests[i].patch, requests[i].shot, want);
+        CAPTURE(i);
+        CHECK(*gpu_style.last_ids(i) == *ref.last_ids());
+        CHECK(formfactor::compare_shot(results[i], want).empty());
+    }
+}
