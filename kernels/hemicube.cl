@@ -437,6 +437,31 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(__
     }
 }
 
+// What both raster kernels read and write of shot b of the batch: its slices of the per-shot
+// buffers.
+void raster_slices(const HrShot* shot, size_t b, __global const HrRecord** records, __global const HrBox** boxes,
+                   __global const uint** offsets, __global const uint** lists, __global int** ids,
+                   __global long** sums) {
+    *records += b * record_stride(shot);
+    *boxes += b * record_stride(shot);
+    *offsets += b * (counter_stride(shot) + 1);
+    *lists += b * (size_t)shot->list_capacity;
+    *ids += b * cell_stride(shot);
+    *sums += b * sum_stride(shot);
+}
+
+// The face a tile lies on (tiles are numbered face by face).
+int tile_face(const HrShot* shot, int tile) {
+    int face = 0;
+    while (face < HR_FACES - 1 && tile >= shot->tile_base[face + 1]) ++face;
+    return face;
+}
+
+// The first cell of a face in the id and delta-form-factor buffers (DeltaFormFactors::offset).
+size_t face_cell_offset(int face, int n) {
+    return face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
+}
+
 // One work-group per tile, one work-item per cell: the nearest record at the cell centre,
 // ties to the lower element index. (depth, index) is a total order, so the winner does not
 // depend on the order of the tile's list. The winner's delta form factor goes to its sum
@@ -445,21 +470,14 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
     __global const HrShot* shots, __global const HrRecord* records, __global const HrBox* boxes,
     __global const uint* offsets, __global const uint* lists,
     __global const long* delta_fixed, __global int* ids, __global long* sums) {
-    const size_t b = get_global_id(1);
-    const HrShot shot_value = shots[b];
+    const HrShot shot_value = shots[get_global_id(1)];
     const HrShot* shot = &shot_value;
-    records += b * record_stride(shot);
-    boxes += b * record_stride(shot);
-    offsets += b * (counter_stride(shot) + 1);
-    lists += b * (size_t)shot->list_capacity;
-    ids += b * cell_stride(shot);
-    sums += b * sum_stride(shot);
+    raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
     const int tile = (int)get_group_id(0);
     const int tiles = shot->tile_base[HR_FACES];
     if (offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity)
         return;  // overflowed: the host grows the lists, reruns
-    int face = 0;
-    while (face < HR_FACES - 1 && tile >= shot->tile_base[face + 1]) ++face;
+    const int face = tile_face(shot, tile);
     const int in_face = tile - shot->tile_base[face];
     const int lid = (int)get_local_id(0);
     const int i = (in_face % shot->tiles_x) * HEMIRAD_TILE + lid % HEMIRAD_TILE;
@@ -493,7 +511,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
             best_back = r->back;
         }
     }
-    const size_t face_offset = face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
+    const size_t face_offset = face_cell_offset(face, n);
     const size_t cell = face_offset + (size_t)j * n + i;
     ids[cell] = best < 0 ? HR_EMPTY : (best_back ? HR_BLOCKER : best);
     if (best >= 0) atom_add(&sums[best_back ? shot->elements : best], delta_fixed[cell]);
@@ -536,22 +554,15 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     __global const HrShot* shots, __global const HrRecord* records, __global const HrBox* boxes,
     __global const uint* offsets, __global const uint* lists,
     __global const long* delta_fixed, __global int* ids, __global long* sums) {
-    const size_t b = get_global_id(1);
-    const HrShot shot_value = shots[b];
+    const HrShot shot_value = shots[get_global_id(1)];
     const HrShot* shot = &shot_value;
-    records += b * record_stride(shot);
-    boxes += b * record_stride(shot);
-    offsets += b * (counter_stride(shot) + 1);
-    lists += b * (size_t)shot->list_capacity;
-    ids += b * cell_stride(shot);
-    sums += b * sum_stride(shot);
+    raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
     const int tile = (int)get_global_id(0);
     const int tiles = shot->tile_base[HR_FACES];
     if (tile >= tiles) return;
     if (offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity)
         return;  // overflowed: the host grows the lists, reruns
-    int face = 0;
-    while (face < HR_FACES - 1 && tile >= shot->tile_base[face + 1]) ++face;
+    const int face = tile_face(shot, tile);
     const int in_face = tile - shot->tile_base[face];
     const int n = shot->n;
     const int ci0 = (in_face % shot->tiles_x) * HEMIRAD_TILE, cj0 = (in_face / shot->tiles_x) * HEMIRAD_TILE;
@@ -570,7 +581,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     }
     double column_s[HEMIRAD_TILE + HEMIRAD_LANES - 1];  // s = x / per_unit - 1 of the tile's columns
     for (int c = 0; c < HEMIRAD_TILE + HEMIRAD_LANES - 1; ++c) column_s[c] = (ci0 + c + 0.5) / per_unit - 1.0;
-    const size_t face_offset = face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
+    const size_t face_offset = face_cell_offset(face, n);
     __global const long* delta_face = delta_fixed + face_offset;
 
     const uint end = offsets[(tile + 1) * HEMIRAD_COUNT_COPIES];
