@@ -258,12 +258,14 @@ void run_bake(const BakeOptions& o) {
     t0 = Clock::now();
     solve::Progressive solver(mesh, engine, solve_settings);
     ProgressLine progress(o.progress);
-    long previews = 0;
+    long previews = 0;  // preview frames written: one each time the passes cross a multiple of K
     while (solver.step()) {
         if (o.interrupted && *o.interrupted) throw Interrupted();
         progress.update(solver, o.threshold);
-        if (o.preview_every > 0 && solver.passes() / o.preview_every > previews && (previews = solver.passes() / o.preview_every))
+        if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
+            previews = solver.passes() / o.preview_every;
             write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
+        }
     }
     progress.update(solver, o.threshold);
     progress.finish();

@@ -178,27 +178,25 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
 
     cl::Context& cl_context = context.context();
     cl::CommandQueue& queue = context.queue();
-    const std::size_t record_slots = std::max<std::size_t>(1, mesh.elements.size() * kFaces);
     elements_ = upload(cl_context, queue, elements);
     patches_ = upload(cl_context, queue, patches);
     delta_fixed_ = upload(cl_context, queue, delta_fixed);
     // Most records cover a tile or two; a shot that needs more grows the lists and reruns.
     list_capacity_ = tuning.list_capacity > 0
                          ? tuning.list_capacity
-                         : static_cast<std::uint32_t>(std::max<std::size_t>(1u << 16, 4 * record_slots));
+                         : static_cast<std::uint32_t>(std::max<std::size_t>(1u << 16, 4 * record_slots()));
     allocate_batch(1);
 }
 
 void OpenCLEngine::allocate_batch(std::size_t shots) {
     cl::Context& cl_context = context_.context();
-    const std::size_t record_slots = std::max<std::size_t>(1, mesh_.elements.size() * kFaces);
     const std::size_t counters = static_cast<std::size_t>(tile_base_[kFaces]) * static_cast<std::size_t>(tuning_.count_copies);
     const auto buffer = [&](std::size_t per_shot_bytes) {
         return cl::Buffer(cl_context, CL_MEM_READ_WRITE, shots * per_shot_bytes);
     };
     shots_ = buffer(sizeof(HrShot));
-    records_ = buffer(record_slots * sizeof(HrRecord));
-    boxes_ = buffer(record_slots * sizeof(HrBox));
+    records_ = buffer(record_slots() * sizeof(HrRecord));
+    boxes_ = buffer(record_slots() * sizeof(HrBox));
     record_count_ = buffer(sizeof(hr_uint));
     tile_counts_ = buffer(counters * sizeof(hr_uint));
     offsets_ = buffer((counters + 1) * sizeof(hr_uint));
@@ -218,14 +216,17 @@ std::size_t OpenCLEngine::raster_group_size() const {
 }
 
 std::size_t OpenCLEngine::max_batch() const {
-    const std::size_t record_slots = std::max<std::size_t>(1, mesh_.elements.size() * kFaces);
-    const std::size_t per_shot = record_slots * (sizeof(HrRecord) + sizeof(HrBox)) +
+    const std::size_t per_shot = record_slots() * (sizeof(HrRecord) + sizeof(HrBox)) +
                                  std::size_t{list_capacity_} * sizeof(hr_uint) + delta_.cells() * sizeof(hr_int) +
                                  sum_stride() * sizeof(hr_long);
     const std::size_t budget = tuning_.batch_memory > 0
                                    ? tuning_.batch_memory
                                    : std::min<std::size_t>(std::size_t{1} << 30, context_.info().global_memory / 4);
     return std::max<std::size_t>(1, budget / per_shot);
+}
+
+std::size_t OpenCLEngine::record_slots() const {
+    return std::max<std::size_t>(1, mesh_.elements.size() * kFaces);  // a record per element and face at most
 }
 
 std::size_t OpenCLEngine::sum_stride() const {

@@ -89,6 +89,7 @@ private:
     mutable std::vector<bool> ids_stale_;
 
     std::size_t raster_group_size() const;
+    std::size_t record_slots() const;  // per shot
     std::size_t sum_stride() const;
     std::size_t max_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);

@@ -41,9 +41,12 @@ bool Progressive::step() {
     if (done()) return false;
 
     // The patches with the most unshot flux; ties go to the lower index.
+    std::vector<double> flux(unshot_.size());
     std::vector<std::size_t> order;
-    for (std::size_t p = 0; p < unshot_.size(); ++p)
-        if (sum(unshot_[p]) * mesh_.patches[p].area > 0.0) order.push_back(p);
+    for (std::size_t p = 0; p < unshot_.size(); ++p) {
+        flux[p] = sum(unshot_[p]) * mesh_.patches[p].area;
+        if (flux[p] > 0.0) order.push_back(p);
+    }
     if (order.empty()) {
         converged_ = true;
         return false;
@@ -51,8 +54,7 @@ bool Progressive::step() {
     long count = std::min<long>(std::max(1, settings_.batch), static_cast<long>(order.size()));
     if (settings_.max_passes > 0) count = std::min(count, settings_.max_passes - passes_);
     const auto more_flux = [&](std::size_t a, std::size_t b) {
-        const double fa = sum(unshot_[a]) * mesh_.patches[a].area, fb = sum(unshot_[b]) * mesh_.patches[b].area;
-        return fa > fb || (fa == fb && a < b);
+        return flux[a] > flux[b] || (flux[a] == flux[b] && a < b);
     };
     std::partial_sort(order.begin(), order.begin() + count, order.end(), more_flux);
 
