@@ -177,39 +177,11 @@ int counter_copy(int tiles) {
     return (int)(get_group_id(0) % HEMIRAD_COUNT_COPIES) * tiles;
 }
 
-// One work-item per element: a record, and its cell box, for each face on which the element
-// may cover a cell centre, packed at the next free index (record_count[0], zero before the
-// shot). Also zeroes the tile counts and the sums for the kernels after it.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
-    __global const HrShot* shots, __global const HrElement* elements, __global const HrPatch* patches,
-    __global HrRecord* records, __global HrBox* boxes, __global uint* record_count, __global uint* tile_counts,
-    __global long* sums) {
-    const size_t b = get_global_id(1);
-    const HrShot shot_value = shots[b];
-    const HrShot* shot = &shot_value;
-    records += b * record_stride(shot);
-    boxes += b * record_stride(shot);
-    record_count += b;
-    tile_counts += b * counter_stride(shot);
-    sums += b * sum_stride(shot);
-    const int k = (int)get_global_id(0);
-    // The shot's clears, ahead of count and raster in the queue.
-    const int counters = shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
-    for (int c = k; c < counters; c += (int)get_global_size(0)) tile_counts[c] = 0;
-    for (int c = k; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
-    if (k >= shot->elements) return;
-
-    __global const HrElement* e = elements + k;
-    if (e->patch == shot->shooter) return;  // the shooter's own elements lie in its base plane
+// Element k's records, and their cell boxes, for each face on which it may cover a cell centre,
+// packed at the next free index (record_count[0], zero before the shot).
+void setup_element(const HrShot* shot, __global const HrElement* e, int k, __global HrRecord* records,
+                   __global HrBox* boxes, __global uint* record_count) {
     const double eps = shot->eps;
-    // Elements tile their patch: when the patch is below the base plane, so are they.
-    __global const HrPatch* patch = patches + e->patch;
-    bool patch_above = false;
-    for (int i = 0; i < patch->n; ++i)
-        patch_above =
-            patch_above || to_local(shot, vec(patch->v[3 * i], patch->v[3 * i + 1], patch->v[3 * i + 2])).z > eps;
-    if (!patch_above) return;
-
     const Vec normal = vec(e->normal[0], e->normal[1], e->normal[2]);
     const Vec origin = vec(shot->origin[0], shot->origin[1], shot->origin[2]);
     const double facing =
@@ -260,7 +232,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
             visible = clip_if_needed(&poly, plane, face, eps);
         if (!visible || poly.n > HR_MAX_CLIPPED) continue;
 
-        // The plane n.p = c in face coordinates gives 1/depth = (n_u s + n_v t + n_d) / c.
+        // The plane n.p = c in face coordinates gives 1/depth = (n_u s + n_v t + n_d) / c, stored
+        // divided through (the reference's `plane`).
         const Vec nf = to_face(face, normal_local);
         const double c = dot3(nf, poly.v[0]);
         if (fabs(c) <= eps * 1e-3) continue;  // seen edge-on: covers no area
@@ -319,10 +292,9 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
             owns |= owns_edge_point(bx - ax, by - ay) ? 1 << edges : 0;
             ++edges;
         }
-        r->nf[0] = nf.x;
-        r->nf[1] = nf.y;
-        r->nf[2] = nf.z;
-        r->c = c;
+        r->plane[0] = nf.x / c;
+        r->plane[1] = nf.y / c;
+        r->plane[2] = nf.z / c;
         r->element = k;
         r->back = is_back;
         r->edges = edges;
@@ -334,6 +306,39 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         box->j0 = j0;
         box->j1 = j1;
     }
+}
+
+// One work-item per patch: the records of its elements (setup_element), unless the patch is the
+// shooter or lies below its base plane. Also zeroes the tile counts and the sums for the kernels
+// after it.
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
+    __global const HrShot* shots, __global const HrElement* elements, __global const HrPatch* patches,
+    __global HrRecord* records, __global HrBox* boxes, __global uint* record_count, __global uint* tile_counts,
+    __global long* sums) {
+    const size_t b = get_global_id(1);
+    const HrShot shot_value = shots[b];
+    const HrShot* shot = &shot_value;
+    records += b * record_stride(shot);
+    boxes += b * record_stride(shot);
+    record_count += b;
+    tile_counts += b * counter_stride(shot);
+    sums += b * sum_stride(shot);
+    const int p = (int)get_global_id(0);
+    // The shot's clears, ahead of count and raster in the queue.
+    const int counters = shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
+    for (int c = p; c < counters; c += (int)get_global_size(0)) tile_counts[c] = 0;
+    for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
+    if (p >= shot->patches || p == shot->shooter) return;  // the shooter's elements lie in its base plane
+
+    // Elements tile their patch: when the patch is below the base plane, so are they.
+    __global const HrPatch* patch = patches + p;
+    bool patch_above = false;
+    for (int i = 0; i < patch->n; ++i)
+        patch_above = patch_above ||
+                      to_local(shot, vec(patch->v[3 * i], patch->v[3 * i + 1], patch->v[3 * i + 2])).z > shot->eps;
+    if (!patch_above) return;
+    for (int k = patch->first_element; k < patch->first_element + patch->elements; ++k)
+        setup_element(shot, elements + k, k, records, boxes, record_count);
 }
 
 // One count per tile each record may cover, in the counter copy of the work-group. Apart from
@@ -503,7 +508,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
             inside = edge > 0.0 || (edge == 0.0 && ((r->owns >> e) & 1));
         }
         if (!inside) continue;
-        const double inv_depth = (r->nf[0] * s + r->nf[1] * t + r->nf[2]) / r->c;
+        const double inv_depth = r->plane[0] * s + r->plane[1] * t + r->plane[2];
         const int k = r->element;
         if (best < 0 || inv_depth > best_depth || (inv_depth == best_depth && k < best)) {
             best = k;
@@ -601,7 +606,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
             dy[e] = r->edge[e].dy;
             owns[e] = -(long)((r->owns >> e) & 1);
         }
-        const double nf0 = r->nf[0], nf1 = r->nf[1], nf2 = r->nf[2], c = r->c;
+        const double depth_s = r->plane[0], depth_t = r->plane[1], depth_1 = r->plane[2];
         const int k = r->element;
         const int id = r->back ? HR_BLOCKER : k;
         lane_long won = 0;  // the delta form factors of the cells this record takes, per lane
@@ -609,7 +614,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
             const double y = j + 0.5;
             double row[HR_MAX_CLIPPED];  // each edge's dx * (y - oy), shared by the row
             for (int e = 0; e < count; ++e) row[e] = dx[e] * (y - oy[e]);
-            const double row_depth = nf1 * (y / per_unit - t0);
+            const double row_depth = depth_t * (y / per_unit - t0);
             const int base = (j - cj0) * HEMIRAD_TILE - ci0;
             for (int i = i0; i <= i1; i += HEMIRAD_LANES) {
                 const lane_double x = (double)i + LANE_CENTRES;
@@ -620,7 +625,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
                 }
                 if (!any(in)) continue;
                 const lane_double s = vload_lanes(0, column_s + (i - ci0));
-                const lane_double inv_depth = (nf0 * s + row_depth + nf2) / c;
+                const lane_double inv_depth = depth_s * s + row_depth + depth_1;
                 const int cell = base + i;
                 const lane_int old = vload_lanes(0, best + cell);
                 const lane_double old_depth = vload_lanes(0, best_depth + cell);

@@ -42,7 +42,9 @@ typedef struct {
 typedef struct {
     hr_double v[12];
     hr_int n;
-    hr_int pad[3];
+    hr_int first_element;  // its elements are first_element .. first_element + elements - 1
+    hr_int elements;
+    hr_int pad;
 } HrPatch;
 
 // Everything one shot needs besides the buffers: the frame (from formfactor::make_frame on the
@@ -53,10 +55,10 @@ typedef struct {
     hr_int n;                               // hemicube resolution N (top NxN, sides NxN/2)
     hr_int shooter;                         // patch index of the shooter
     hr_int elements;                        // element count
+    hr_int patches;                         // patch count
     hr_int tiles_x;                         // tiles across a face: ceil(N / TILE)
     hr_int tile_base[HR_FACES + 1];         // first tile of each face, then the tile count
     hr_uint list_capacity;                  // entries the per-tile record lists can hold
-    hr_int pad;
 } HrShot;
 
 // One edge of a record's inside test: at a cell centre (x, y) its value is
@@ -77,12 +79,11 @@ typedef struct {
 // inside where every edge is > 0, or == 0 with the edge's bit set in `owns`. The fixed fields
 // come first, so a triangle's record spans three cache lines.
 typedef struct {
-    hr_double nf[3];  // element normal in face coordinates
-    hr_double c;      // plane offset: nf.p = c
-    hr_int element;   // element index
-    hr_int back;      // 1: the back of a one-sided surface (a blocker)
-    hr_int edges;     // edge count, degenerate edges dropped
-    hr_int owns;      // bit e: a centre exactly on edge e is inside (the top-left rule)
+    hr_double plane[3];  // 1/depth = plane[0] s + plane[1] t + plane[2] at face coordinates (s, t)
+    hr_int element;      // element index
+    hr_int back;         // 1: the back of a one-sided surface (a blocker)
+    hr_int edges;        // edge count, degenerate edges dropped
+    hr_int owns;         // bit e: a centre exactly on edge e is inside (the top-left rule)
     hr_int face;
     hr_int pad;
     HrEdge edge[HR_MAX_CLIPPED];

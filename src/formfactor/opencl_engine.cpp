@@ -19,13 +19,13 @@ namespace {
 // The layout header is the contract with the kernel: pin it down.
 static_assert(sizeof(HrElement) == 160 && offsetof(HrElement, normal) == 96 && offsetof(HrElement, centroid) == 120 &&
               offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 152);
-static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96);
+static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(HrPatch, elements) == 104);
 static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
-              offsetof(HrShot, tiles_x) == 116 && offsetof(HrShot, tile_base) == 120 &&
-              offsetof(HrShot, list_capacity) == 144);
+              offsetof(HrShot, patches) == 116 && offsetof(HrShot, tiles_x) == 120 &&
+              offsetof(HrShot, tile_base) == 124 && offsetof(HrShot, list_capacity) == 148);
 static_assert(sizeof(HrEdge) == 32 && sizeof(HrBox) == 16);
-static_assert(sizeof(HrRecord) == 344 && offsetof(HrRecord, c) == 24 && offsetof(HrRecord, element) == 32 &&
-              offsetof(HrRecord, owns) == 44 && offsetof(HrRecord, edge) == 56);
+static_assert(sizeof(HrRecord) == 336 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, owns) == 36 &&
+              offsetof(HrRecord, edge) == 48);
 static_assert(HR_FACES == kFaces);
 static_assert(HR_EMPTY == OpenCLEngine::kEmpty && HR_BLOCKER == OpenCLEngine::kBlocker);
 
@@ -169,6 +169,8 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         patches[p] = {};
         copy_polygon(mesh.patches[p].poly, patches[p].v);
         patches[p].n = mesh.patches[p].poly.n;
+        patches[p].first_element = static_cast<hr_int>(mesh.patches[p].first_element);
+        patches[p].elements = static_cast<hr_int>(mesh.patches[p].element_count);
     }
     // Fixed point: 2^62 per unit of form factor; the whole table sums to 1, far below 2^63.
     // Zero-padded: raster_records reads whole lane groups, up to 7 entries past the last cell.
@@ -248,6 +250,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         shot.n = settings_.hemicube;
         shot.shooter = static_cast<hr_int>(requests[i].patch);
         shot.elements = static_cast<hr_int>(mesh_.elements.size());
+        shot.patches = static_cast<hr_int>(mesh_.patches.size());
         shot.tiles_x = tiles_x_;
         std::copy(tile_base_.begin(), tile_base_.end(), shot.tile_base);
         shot.list_capacity = list_capacity_;
@@ -274,7 +277,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(items, batch), cl::NDRange(group, 1), nullptr,
                                    event);
     };
-    run(setup_, round_up(elements, wg), wg, &events[0]);
+    run(setup_, round_up(mesh_.patches.size(), wg), wg, &events[0]);
     run(count_, round_up(elements, wg), wg, &events[1]);
     run(scan_, scan_wg, scan_wg, &events[2]);
     run(scatter_, round_up(elements, wg), wg, &events[3]);

@@ -138,11 +138,12 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
                                  (face != 0 || clip_if_needed(poly, bottom));
             if (!visible) continue;
 
-            // The element's plane n·p = c in face coordinates gives depth exactly:
-            // with s = u/d, t = v/d, 1/d = (n_u s + n_v t + n_d) / c.
+            // The element's plane n·p = c in face coordinates gives depth exactly: with
+            // s = u/d, t = v/d, 1/d = (n_u s + n_v t + n_d) / c, a linear function of s and t.
             const glm::dvec3 nf = to_face(face, normal_local);
             const double c = glm::dot(nf, poly.v[0]);
             if (std::abs(c) <= eps_ * 1e-3) continue;  // seen edge-on: covers no area
+            const glm::dvec3 plane{nf.x / c, nf.y / c, nf.z / c};
 
             // Project to cell coordinates: x in [0, n), y in [0, rows).
             const double t0 = face == 0 ? 1.0 : 0.0;
@@ -186,7 +187,7 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
                     }
                     if (!inside) continue;
                     const double s = x / half - 1.0, t = y / half - t0;
-                    const double inv_depth = (nf.x * s + nf.y * t + nf.z) / c;
+                    const double inv_depth = plane.x * s + plane.y * t + plane.z;
                     const std::size_t cell = base + static_cast<std::size_t>(j) * n + i;
                     const bool nearer = inv_depth > depth_[cell] ||
                                         (inv_depth == depth_[cell] && owner_[cell] > static_cast<std::int32_t>(k));
