@@ -1,6 +1,7 @@
 // Hemicube form factors on an OpenCL device, cell for cell the scalar reference's result
 // (src/formfactor/reference.cpp): the same double-precision operations in the same order, no
-// contraction into FMAs. For a batch of shots (dimension 1 of every NDRange), per shot: setup
+// contraction into FMAs, up to the projected vertices, which are snapped to fixed point; from
+// there the inside test is exact integer arithmetic, evaluated in any order. For a batch of shots (dimension 1 of every NDRange), per shot: setup
 // (cull, clip and project each element on each face into packed records with their cell boxes)
 // -> count (records per tile) -> scan (per-tile list offsets) -> scatter (record indices into
 // per-tile lists) -> raster, on GPUs one work-group per tile and one work-item per cell, on
@@ -17,7 +18,7 @@
 #define HEMIRAD_TILE 16  // raster tile edge in cells: a raster work-group is TILE*TILE items
 #endif
 #ifndef HEMIRAD_WG
-#define HEMIRAD_WG 64  // work-group size of the per-element and per-record kernels
+#define HEMIRAD_WG 64  // work-group size of the per-patch and per-record kernels
 #endif
 #ifndef HEMIRAD_RASTER_WG
 #define HEMIRAD_RASTER_WG 4  // work-group size of raster_records (one work-item per tile)
@@ -143,8 +144,21 @@ uint outside_bits(Vec p, double eps) {
 
 // Top-left rule for a counter-clockwise polygon: a centre on an edge belongs to it only for
 // edges going down, or going right along a horizontal.
-bool owns_edge_point(double dx, double dy) {
-    return dy < 0.0 || (dy == 0.0 && dx > 0.0);
+bool owns_edge_point(long dx, long dy) {
+    return dy < 0 || (dy == 0 && dx > 0);
+}
+
+// The reference's fixed-point snap and cell ranges (kSubcell = 2^HR_SUBCELL_BITS units per cell).
+long snap(double cells) {
+    return (long)floor(cells * (double)(1L << HR_SUBCELL_BITS) + 0.5);
+}
+int first_centre(long lo) {
+    const long S = 1L << HR_SUBCELL_BITS;
+    return (int)ceil((double)(lo - S / 2) / (double)S);
+}
+int last_centre(long hi) {
+    const long S = 1L << HR_SUBCELL_BITS;
+    return (int)floor((double)(hi - S / 2) / (double)S);
 }
 
 Vec element_vertex(__global const HrElement* e, int i) {
@@ -238,59 +252,54 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
         const double c = dot3(nf, poly.v[0]);
         if (fabs(c) <= eps * 1e-3) continue;  // seen edge-on: covers no area
 
-        // Cell coordinates: x in [0, n), y in [0, rows).
+        // Cell coordinates, x in [0, n) and y in [0, rows), snapped to fixed point (the
+        // reference's snap): from here on the inside test is exact integer arithmetic.
         const double t0 = face == 0 ? 1.0 : 0.0;
-        double px[HR_MAX_CLIPPED], py[HR_MAX_CLIPPED];
+        long px[HR_MAX_CLIPPED], py[HR_MAX_CLIPPED];
         for (int i = 0; i < poly.n; ++i) {
-            px[i] = (poly.v[i].x / poly.v[i].z + 1.0) * per_unit;
-            py[i] = (poly.v[i].y / poly.v[i].z + t0) * per_unit;
+            px[i] = snap((poly.v[i].x / poly.v[i].z + 1.0) * per_unit);
+            py[i] = snap((poly.v[i].y / poly.v[i].z + t0) * per_unit);
         }
-        double area2 = 0.0;
+        long area2 = 0;
         for (int i = 0; i < poly.n; ++i) {
             const int j = (i + 1) % poly.n;
             area2 += px[i] * py[j] - px[j] * py[i];
         }
-        if (area2 == 0.0) continue;
-        const bool reverse = area2 < 0.0;  // make counter-clockwise
-        double x[HR_MAX_CLIPPED], y[HR_MAX_CLIPPED];
-        double xmin = px[0], xmax = px[0], ymin = py[0], ymax = py[0];
+        if (area2 == 0) continue;
+        const bool reverse = area2 < 0;  // make counter-clockwise
+        long x[HR_MAX_CLIPPED], y[HR_MAX_CLIPPED];
+        long xmin = px[0], xmax = px[0], ymin = py[0], ymax = py[0];
         for (int i = 0; i < poly.n; ++i) {
             const int from = reverse ? poly.n - 1 - i : i;
             x[i] = px[from];
             y[i] = py[from];
-            xmin = px[i] < xmin ? px[i] : xmin;
-            xmax = xmax < px[i] ? px[i] : xmax;
-            ymin = py[i] < ymin ? py[i] : ymin;
-            ymax = ymax < py[i] ? py[i] : ymax;
+            xmin = min(xmin, px[i]);
+            xmax = max(xmax, px[i]);
+            ymin = min(ymin, py[i]);
+            ymax = max(ymax, py[i]);
         }
         const int rows = face_rows(face, n);
-        const int i0 = max(0, (int)floor(xmin - 0.5));
-        const int i1 = min(n - 1, (int)ceil(xmax - 0.5));
-        const int j0 = max(0, (int)floor(ymin - 0.5));
-        const int j1 = min(rows - 1, (int)ceil(ymax - 0.5));
+        const int i0 = max(0, first_centre(xmin)), i1 = min(n - 1, last_centre(xmax));
+        const int j0 = max(0, first_centre(ymin)), j1 = min(rows - 1, last_centre(ymax));
         if (i0 > i1 || j0 > j1) continue;  // no cell centre on the face: no record
 
         // The next free record: records are packed, so the raster reads little memory. Their
         // order varies from run to run; the raster's result does not depend on it.
         const uint slot = atomic_inc(&record_count[0]);
         __global HrRecord* r = records + slot;
-        // The edges of the inside test. edge_function evaluates each edge from its endpoint lower
-        // in (y, x), so that the two polygons sharing an edge get exactly opposite values; from
-        // the other endpoint it negates, which is exact and commutes with rounding
-        // (fl(-a * b) = -fl(a * b), fl(-a - -b) = -fl(a - b)): folded into dx and dy.
-        int edges = 0, owns = 0;
-        for (int a = 0; a < poly.n; ++a) {
-            const int b = a + 1 == poly.n ? 0 : a + 1;
-            const double ax = x[a], ay = y[a], bx = x[b], by = y[b];
-            if (ax == bx && ay == by) continue;  // clipping can repeat a vertex
-            const bool forward = ay < by || (ay == by && ax < bx);
-            __global HrEdge* edge = &r->edge[edges];
-            edge->ox = forward ? ax : bx;
-            edge->oy = forward ? ay : by;
-            edge->dx = forward ? bx - ax : -(ax - bx);
-            edge->dy = forward ? by - ay : -(ay - by);
-            owns |= owns_edge_point(bx - ax, by - ay) ? 1 << edges : 0;
-            ++edges;
+        // The edges of the inside test: the reference's dx * (Y - ay) - dy * (X - ax) at the
+        // centre X = S i + S/2, Y = S j + S/2, as a i + b j + c, plus 1 for an edge the top-left
+        // rule gives its centres (integers: value >= 0 there is value + 1 > 0).
+        const long S = 1L << HR_SUBCELL_BITS, half_cell = S / 2;
+        int edges = 0;
+        for (int e = 0; e < poly.n; ++e) {
+            const int f = e + 1 == poly.n ? 0 : e + 1;
+            const long dx = x[f] - x[e], dy = y[f] - y[e];
+            if (dx == 0 && dy == 0) continue;  // clipping or snapping can repeat a vertex
+            __global HrEdge* edge = &r->edge[edges++];
+            edge->a = -dy * S;
+            edge->b = dx * S;
+            edge->c = dx * (half_cell - y[e]) - dy * (half_cell - x[e]) + (owns_edge_point(dx, dy) ? 1 : 0);
         }
         r->plane[0] = nf.x / c;
         r->plane[1] = nf.y / c;
@@ -298,7 +307,6 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
         r->element = k;
         r->back = is_back;
         r->edges = edges;
-        r->owns = owns;
         r->face = face;
         __global HrBox* box = boxes + slot;
         box->i0 = i0;
@@ -503,10 +511,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
         if (i < box.i0 || i > box.i1 || j < box.j0 || j > box.j1) continue;
         __global const HrRecord* r = records + slot;
         bool inside = true;
-        for (int e = 0; e < r->edges && inside; ++e) {
-            const double edge = r->edge[e].dx * (y - r->edge[e].oy) - r->edge[e].dy * (x - r->edge[e].ox);
-            inside = edge > 0.0 || (edge == 0.0 && ((r->owns >> e) & 1));
-        }
+        for (int e = 0; e < r->edges && inside; ++e) inside = r->edge[e].a * i + r->edge[e].b * j + r->edge[e].c > 0;
         if (!inside) continue;
         const double inv_depth = r->plane[0] * s + r->plane[1] * t + r->plane[2];
         const int k = r->element;
@@ -525,17 +530,18 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
 // For CPU devices: one work-item per tile walks the records of its list in turn, each over
 // only its bounding box within the tile, keeping the winners in private arrays (the
 // reference's loop order, parallel across tiles). Records are small (a few cells a row), so
-// each row is tested LANES cells at a time without branches: the same double operations per
-// lane as the scalar test. The winner is the reference's: the nearest at the cell centre,
-// ties to the lower element index. Each record adds the delta form factors of the cells it
-// takes to its element's sum with one atomic, and a cell taken from an earlier record (a rare
-// overdraw) is given back by that record's element.
+// each row is tested LANES cells at a time without branches: each edge's exact integer value,
+// stepped along the row and down the rows, and the same double depth as the scalar test. The
+// winner is the reference's: the nearest at the cell centre, ties to the lower element index.
+// Each record adds the delta form factors of the cells it takes to its element's sum with one
+// atomic, and a cell taken from an earlier record (a rare overdraw) is given back by that
+// record's element.
 #if HEMIRAD_LANES == 8
 typedef double8 lane_double;
 typedef long8 lane_long;
 typedef int8 lane_int;
-#define LANE_CENTRES ((double8)(0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5))
 #define LANE_INDEX ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#define LANE_INDEX_LONG ((long8)(0, 1, 2, 3, 4, 5, 6, 7))
 #define vload_lanes vload8
 #define vstore_lanes vstore8
 #define convert_lane_long convert_long8
@@ -544,8 +550,8 @@ typedef int8 lane_int;
 typedef double4 lane_double;
 typedef long4 lane_long;
 typedef int4 lane_int;
-#define LANE_CENTRES ((double4)(0.5, 1.5, 2.5, 3.5))
 #define LANE_INDEX ((int4)(0, 1, 2, 3))
+#define LANE_INDEX_LONG ((long4)(0, 1, 2, 3))
 #define vload_lanes vload4
 #define vstore_lanes vstore4
 #define convert_lane_long convert_long4
@@ -596,15 +602,15 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
         const int i0 = max(box.i0, ci0), i1 = min(box.i1, ci1), j0 = max(box.j0, cj0), j1 = min(box.j1, cj1);
         if (i0 > i1 || j0 > j1) continue;
         __global const HrRecord* r = records + slot;
+        // Edge values at (i0, j) of the current row, and per lane their offsets along it.
         const int count = r->edges;
-        double ox[HR_MAX_CLIPPED], oy[HR_MAX_CLIPPED], dx[HR_MAX_CLIPPED], dy[HR_MAX_CLIPPED];
-        long owns[HR_MAX_CLIPPED];  // all bits set where a centre on the edge is inside
+        long a[HR_MAX_CLIPPED], b[HR_MAX_CLIPPED], row[HR_MAX_CLIPPED];
+        lane_long lane_a[HR_MAX_CLIPPED];
         for (int e = 0; e < count; ++e) {
-            ox[e] = r->edge[e].ox;
-            oy[e] = r->edge[e].oy;
-            dx[e] = r->edge[e].dx;
-            dy[e] = r->edge[e].dy;
-            owns[e] = -(long)((r->owns >> e) & 1);
+            a[e] = r->edge[e].a;
+            b[e] = r->edge[e].b;
+            row[e] = a[e] * i0 + b[e] * j0 + r->edge[e].c;
+            lane_a[e] = a[e] * LANE_INDEX_LONG;
         }
         const double depth_s = r->plane[0], depth_t = r->plane[1], depth_1 = r->plane[2];
         const int k = r->element;
@@ -612,17 +618,11 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
         lane_long won = 0;  // the delta form factors of the cells this record takes, per lane
         for (int j = j0; j <= j1; ++j) {
             const double y = j + 0.5;
-            double row[HR_MAX_CLIPPED];  // each edge's dx * (y - oy), shared by the row
-            for (int e = 0; e < count; ++e) row[e] = dx[e] * (y - oy[e]);
             const double row_depth = depth_t * (y / per_unit - t0);
             const int base = (j - cj0) * HEMIRAD_TILE - ci0;
             for (int i = i0; i <= i1; i += HEMIRAD_LANES) {
-                const lane_double x = (double)i + LANE_CENTRES;
                 lane_long in = convert_lane_long((lane_int)(i) + LANE_INDEX <= (lane_int)(i1));
-                for (int e = 0; e < count; ++e) {
-                    const lane_double edge = row[e] - dy[e] * (x - ox[e]);
-                    in &= (edge > 0.0) | ((edge == 0.0) & (lane_long)(owns[e]));
-                }
+                for (int e = 0; e < count; ++e) in &= (lane_long)(row[e] + a[e] * (i - i0)) + lane_a[e] > 0;
                 if (!any(in)) continue;
                 const lane_double s = vload_lanes(0, column_s + (i - ci0));
                 const lane_double inv_depth = depth_s * s + row_depth + depth_1;
@@ -646,6 +646,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
                 vstore_lanes(select(old_id, (lane_int)(id), take_int), 0, best_id + cell);
                 vstore_lanes(select(old_depth, inv_depth, take), 0, best_depth + cell);
             }
+            for (int e = 0; e < count; ++e) row[e] += b[e];
         }
         // Integer sums: the order of these atomics (and of the lists) cannot change the result.
 #if HEMIRAD_LANES == 8

@@ -26,6 +26,8 @@ typedef std::int64_t hr_long;
 // Delta form factors are summed in 64-bit fixed point (integer addition is associative, so
 // the atomic sums are bit-identical run to run): one unit of form factor is 2^62.
 #define HR_FIXED_SHIFT 62
+// Projected vertices are snapped to 2^16 units per cell (formfactor::kSubcell).
+#define HR_SUBCELL_BITS 16
 
 // One receiver element: a planar convex triangle or quad, counter-clockwise from its front.
 typedef struct {
@@ -61,11 +63,11 @@ typedef struct {
     hr_uint list_capacity;                  // entries the per-tile record lists can hold
 } HrShot;
 
-// One edge of a record's inside test: at a cell centre (x, y) its value is
-// dx * (y - oy) - dy * (x - ox), exactly the reference's edge_function for the polygon's edge
-// (the sign folded into dx and dy).
+// One edge of a record's inside test, exact in 64-bit integers: at cell (i, j) its value is
+// a i + b j + c, the reference's edge function of the polygon's snapped edge at the cell centre
+// plus 1 where the top-left rule gives the edge its centres, so that inside is value > 0.
 typedef struct {
-    hr_double ox, oy, dx, dy;
+    hr_long a, b, c;
 } HrEdge;
 
 // The cells a record may cover, inclusive (its cell bounding box on its face): what the tile
@@ -76,16 +78,14 @@ typedef struct {
 
 // One element seen on one face: its clipped polygon in cell coordinates (x in [0, N), y in
 // [0, rows)) as the edges of the inside test, and its plane for the depth. A cell centre is
-// inside where every edge is > 0, or == 0 with the edge's bit set in `owns`. The fixed fields
-// come first, so a triangle's record spans three cache lines.
+// inside where every edge is > 0. The fixed fields come first; a quad's record spans two
+// cache lines and a half.
 typedef struct {
     hr_double plane[3];  // 1/depth = plane[0] s + plane[1] t + plane[2] at face coordinates (s, t)
     hr_int element;      // element index
     hr_int back;         // 1: the back of a one-sided surface (a blocker)
     hr_int edges;        // edge count, degenerate edges dropped
-    hr_int owns;         // bit e: a centre exactly on edge e is inside (the top-left rule)
     hr_int face;
-    hr_int pad;
     HrEdge edge[HR_MAX_CLIPPED];
 } HrRecord;
 

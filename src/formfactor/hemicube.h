@@ -39,6 +39,13 @@ private:
     std::vector<double> table_;
 };
 
+// Projected polygons are snapped to a fixed-point grid of kSubcell units per cell before the
+// inside test, so that edge functions are exact 64-bit integers: two polygons sharing an edge
+// get exactly opposite values, and any evaluation order (per cell, incremental, vectorized)
+// gives the same answer. 2^16 units per cell keep |edge function| < 2^58 up to N = 4096.
+inline constexpr std::int64_t kSubcell = std::int64_t{1} << 16;
+inline constexpr int kMaxHemicube = 4096;
+
 // Distance above the shooter's plane below which geometry is clipped (the base plane), relative
 // to the scene's coordinates so that geometry in the shooter's plane is clipped however far the
 // scene lies from the origin. Every engine must use exactly this value to agree cell for cell.

@@ -23,9 +23,10 @@ static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(H
 static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
               offsetof(HrShot, patches) == 116 && offsetof(HrShot, tiles_x) == 120 &&
               offsetof(HrShot, tile_base) == 124 && offsetof(HrShot, list_capacity) == 148);
-static_assert(sizeof(HrEdge) == 32 && sizeof(HrBox) == 16);
-static_assert(sizeof(HrRecord) == 336 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, owns) == 36 &&
-              offsetof(HrRecord, edge) == 48);
+static_assert(sizeof(HrEdge) == 24 && sizeof(HrBox) == 16);
+static_assert(sizeof(HrRecord) == 256 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, face) == 36 &&
+              offsetof(HrRecord, edge) == 40);
+static_assert(std::int64_t{1} << HR_SUBCELL_BITS == kSubcell);
 static_assert(HR_FACES == kFaces);
 static_assert(HR_EMPTY == OpenCLEngine::kEmpty && HR_BLOCKER == OpenCLEngine::kBlocker);
 
@@ -38,8 +39,9 @@ const TuningEntry kTuningTable[] = {
     // Not yet measured: 256-cell raster groups, 4 warps per 1D group.
     {"gpu", {16, false, 4, 128, 256, 1, 4, "", 0}},
     // PoCL, 2 cores (Cornell, N = 256): the per-record raster ~2.5x faster than per-cell;
-    // tiles 16 a little ahead of 8 and 32; a raster group of 1 ahead of 4 and 16.
-    {"cpu", {16, true, 1, 64, 256, 8, 8, "", 0}},
+    // with integer edges, tiles of 32 ~20% ahead of 16 and level with 64 (fewer record-tile
+    // pieces); a raster group of 1 ahead of 4 and 16.
+    {"cpu", {32, true, 1, 64, 256, 8, 8, "", 0}},
 };
 
 // Binds a kernel's arguments in order: the one place each kernel's signature is spelled out.
@@ -101,8 +103,8 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
                            const OpenCLTuning& tuning)
     : mesh_(mesh), context_(context), settings_(settings), tuning_(tuning), delta_(std::max(settings.hemicube, 2)) {
     const ocl::DeviceInfo& info = context.info();
-    if (settings.hemicube < 8 || settings.hemicube % 2 != 0)
-        throw InternalError("hemicube resolution must be even and at least 8");
+    if (settings.hemicube < 8 || settings.hemicube % 2 != 0 || settings.hemicube > kMaxHemicube)
+        throw InternalError("hemicube resolution must be even, at least 8 and at most 4096");
     if (!info.fp64)
         throw InternalError(
             fmt::format("{}: needs cl_khr_fp64 (double precision) for results that match the reference", info.name));

@@ -18,7 +18,7 @@ struct OpenCLTuning {
     int tile = 16;                    // raster tile edge in cells
     bool raster_per_record = false;   // raster_records (a work-item per tile, CPUs) instead of raster (a cell each)
     int raster_work_group = 4;        // work-group size of raster_records; raster's is tile×tile
-    int work_group = 64;              // work-group size of the per-element and per-record kernels
+    int work_group = 64;              // work-group size of the per-patch and per-record kernels
     int scan_work_group = 256;        // the one work-group of the tile-offset scan, a power of two
     int count_copies = 1;             // copies of the per-tile counters (work-group mod copies): less contention
     int lanes = 4;                    // cells per row step of raster_records: 4 or 8

@@ -61,15 +61,14 @@ bool clip_if_needed(ClipPolygon& poly, Plane plane) {
 // Top-left rule for a counter-clockwise polygon: a cell centre exactly on an edge belongs to
 // the polygon only for edges going down, or going right along a horizontal; the neighbour
 // that shares the edge walks it the other way, so exactly one of the two owns the centre.
-bool owns_edge_point(double dx, double dy) { return dy < 0.0 || (dy == 0.0 && dx > 0.0); }
+bool owns_edge_point(std::int64_t dx, std::int64_t dy) { return dy < 0 || (dy == 0 && dx > 0); }
 
-// Signed area of (a, b, p), positive when p is left of a→b. Evaluated from the endpoint that is
-// lower in (y, x) order, so the two polygons sharing an edge get exactly opposite values.
-double edge_function(double ax, double ay, double bx, double by, double x, double y) {
-    const bool forward = ay < by || (ay == by && ax < bx);
-    if (!forward) return -edge_function(bx, by, ax, ay, x, y);
-    return (bx - ax) * (y - ay) - (by - ay) * (x - ax);
-}
+// A cell coordinate in fixed point (kSubcell units per cell), rounded to nearest.
+std::int64_t snap(double cells) { return static_cast<std::int64_t>(std::floor(cells * kSubcell + 0.5)); }
+
+// The first and the last cell whose centre (index + 1/2) lies at or above lo, at or below hi.
+int first_centre(std::int64_t lo) { return static_cast<int>(std::ceil(static_cast<double>(lo - kSubcell / 2) / kSubcell)); }
+int last_centre(std::int64_t hi) { return static_cast<int>(std::floor(static_cast<double>(hi - kSubcell / 2) / kSubcell)); }
 
 }  // namespace
 
@@ -81,8 +80,8 @@ bool ReferenceEngine::above_base_plane(const mesh::Polygon& poly, const Frame& f
 
 ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& settings)
     : mesh_(mesh), settings_(settings), delta_(settings.hemicube) {
-    if (settings.hemicube < 8 || settings.hemicube % 2 != 0)
-        throw InternalError("hemicube resolution must be even and at least 8");
+    if (settings.hemicube < 8 || settings.hemicube % 2 != 0 || settings.hemicube > kMaxHemicube)
+        throw InternalError("hemicube resolution must be even, at least 8 and at most 4096");
     eps_ = base_plane_epsilon(mesh);
     ids_.assign(delta_.cells(), kEmpty);
     depth_.assign(delta_.cells(), 0.0);
@@ -145,48 +144,45 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
             if (std::abs(c) <= eps_ * 1e-3) continue;  // seen edge-on: covers no area
             const glm::dvec3 plane{nf.x / c, nf.y / c, nf.z / c};
 
-            // Project to cell coordinates: x in [0, n), y in [0, rows).
+            // Project to cell coordinates, x in [0, n) and y in [0, rows), snapped to fixed point.
             const double t0 = face == 0 ? 1.0 : 0.0;
-            double px[kMaxClipped], py[kMaxClipped];
-            double area2 = 0.0;
+            std::int64_t px[kMaxClipped], py[kMaxClipped];
             for (int i = 0; i < poly.n; ++i) {
-                px[i] = (poly.v[i].x / poly.v[i].z + 1.0) * half;
-                py[i] = (poly.v[i].y / poly.v[i].z + t0) * half;
+                px[i] = snap((poly.v[i].x / poly.v[i].z + 1.0) * half);
+                py[i] = snap((poly.v[i].y / poly.v[i].z + t0) * half);
             }
+            std::int64_t area2 = 0;
             for (int i = 0; i < poly.n; ++i) {
                 const int j = (i + 1) % poly.n;
                 area2 += px[i] * py[j] - px[j] * py[i];
             }
-            if (area2 == 0.0) continue;
-            if (area2 < 0.0) {  // make counter-clockwise
+            if (area2 == 0) continue;
+            if (area2 < 0) {  // make counter-clockwise
                 std::reverse(px, px + poly.n);
                 std::reverse(py, py + poly.n);
             }
-            double xmin = px[0], xmax = px[0], ymin = py[0], ymax = py[0];
-            for (int i = 1; i < poly.n; ++i) {
-                xmin = std::min(xmin, px[i]); xmax = std::max(xmax, px[i]);
-                ymin = std::min(ymin, py[i]); ymax = std::max(ymax, py[i]);
-            }
+            // The cells whose centres (i + 1/2, j + 1/2) lie in the polygon's bounding box.
+            const std::int64_t xmin = *std::min_element(px, px + poly.n), xmax = *std::max_element(px, px + poly.n);
+            const std::int64_t ymin = *std::min_element(py, py + poly.n), ymax = *std::max_element(py, py + poly.n);
             const int rows = delta_.rows(face);
-            const int i0 = std::max(0, static_cast<int>(std::floor(xmin - 0.5)));
-            const int i1 = std::min(n - 1, static_cast<int>(std::ceil(xmax - 0.5)));
-            const int j0 = std::max(0, static_cast<int>(std::floor(ymin - 0.5)));
-            const int j1 = std::min(rows - 1, static_cast<int>(std::ceil(ymax - 0.5)));
+            const int i0 = std::max(0, first_centre(xmin)), i1 = std::min(n - 1, last_centre(xmax));
+            const int j0 = std::max(0, first_centre(ymin)), j1 = std::min(rows - 1, last_centre(ymax));
             const std::size_t base = delta_.offset(face);
 
             for (int j = j0; j <= j1; ++j) {
-                const double y = j + 0.5;
+                const std::int64_t y = j * kSubcell + kSubcell / 2;
                 for (int i = i0; i <= i1; ++i) {
-                    const double x = i + 0.5;
+                    const std::int64_t x = i * kSubcell + kSubcell / 2;
                     bool inside = true;
                     for (int a = 0; a < poly.n && inside; ++a) {
                         const int b = (a + 1) % poly.n;
-                        if (px[a] == px[b] && py[a] == py[b]) continue;  // clipping can repeat a vertex
-                        const double edge = edge_function(px[a], py[a], px[b], py[b], x, y);
-                        inside = edge > 0.0 || (edge == 0.0 && owns_edge_point(px[b] - px[a], py[b] - py[a]));
+                        const std::int64_t dx = px[b] - px[a], dy = py[b] - py[a];
+                        if (dx == 0 && dy == 0) continue;  // clipping or snapping can repeat a vertex
+                        const std::int64_t edge = dx * (y - py[a]) - dy * (x - px[a]);  // exact
+                        inside = edge > 0 || (edge == 0 && owns_edge_point(dx, dy));
                     }
                     if (!inside) continue;
-                    const double s = x / half - 1.0, t = y / half - t0;
+                    const double s = (i + 0.5) / half - 1.0, t = (j + 0.5) / half - t0;
                     const double inv_depth = plane.x * s + plane.y * t + plane.z;
                     const std::size_t cell = base + static_cast<std::size_t>(j) * n + i;
                     const bool nearer = inv_depth > depth_[cell] ||
