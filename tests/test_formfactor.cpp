@@ -212,3 +212,57 @@ TEST_CASE("hemicube: the same seed and shot give the same bits", "[formfactor]")
     CHECK(ra.F == rb.F);
     CHECK(ra.F != rc.F);  // another seed rotates the hemicube differently
 }
+
+namespace {
+
+// A point in cells, as the reference's fixed point.
+std::int64_t fixed(double cells) { return static_cast<std::int64_t>(cells * formfactor::kSubcell); }
+
+struct Poly {
+    std::vector<std::int64_t> x, y;
+};
+
+Poly poly(std::initializer_list<std::pair<double, double>> cells) {
+    Poly p;
+    for (const auto& [x, y] : cells) {
+        p.x.push_back(fixed(x));
+        p.y.push_back(fixed(y));
+    }
+    return p;
+}
+
+}  // namespace
+
+TEST_CASE("hemicube: centres exactly on shared edges and vertices are taken exactly once (top-left rule)",
+          "[formfactor]") {
+    // A square with its corners on cell centres, so that its edges run through centres: by the
+    // top-left rule it takes the centres on its bottom and left edges (counter-clockwise, y up),
+    // not those on its top and right, so exactly the 6 x 6 cells with centres in [1.5, 7.5)^2.
+    const Poly square = poly({{1.5, 1.5}, {7.5, 1.5}, {7.5, 7.5}, {1.5, 7.5}});
+    // Partitions of it whose inner edges and vertices also lie on centres: the two triangles of
+    // the diagonal (through the centres (k + 1/2, k + 1/2)), a fan of four triangles around the
+    // centre (4.5, 4.5), four sub-squares, and a pair split along a slope-2 line.
+    const std::vector<std::vector<Poly>> partitions = {
+        {poly({{1.5, 1.5}, {7.5, 1.5}, {7.5, 7.5}}), poly({{1.5, 1.5}, {7.5, 7.5}, {1.5, 7.5}})},
+        {poly({{1.5, 1.5}, {7.5, 1.5}, {4.5, 4.5}}), poly({{7.5, 1.5}, {7.5, 7.5}, {4.5, 4.5}}),
+         poly({{7.5, 7.5}, {1.5, 7.5}, {4.5, 4.5}}), poly({{1.5, 7.5}, {1.5, 1.5}, {4.5, 4.5}})},
+        {poly({{1.5, 1.5}, {4.5, 1.5}, {4.5, 4.5}, {1.5, 4.5}}), poly({{4.5, 1.5}, {7.5, 1.5}, {7.5, 4.5}, {4.5, 4.5}}),
+         poly({{4.5, 4.5}, {7.5, 4.5}, {7.5, 7.5}, {4.5, 7.5}}), poly({{1.5, 4.5}, {4.5, 4.5}, {4.5, 7.5}, {1.5, 7.5}})},
+        {poly({{1.5, 1.5}, {4.5, 1.5}, {7.5, 7.5}, {1.5, 7.5}}), poly({{4.5, 1.5}, {7.5, 1.5}, {7.5, 7.5}})},
+    };
+    const auto covers = [](const Poly& p, int i, int j) {
+        return formfactor::covers_cell(p.x.data(), p.y.data(), static_cast<int>(p.x.size()), i, j);
+    };
+    for (int j = 0; j < 10; ++j) {
+        for (int i = 0; i < 10; ++i) {
+            const bool expected = i >= 1 && i <= 6 && j >= 1 && j <= 6;
+            REQUIRE(covers(square, i, j) == expected);
+            for (const auto& parts : partitions) {
+                int takers = 0;
+                for (const Poly& p : parts) takers += covers(p, i, j) ? 1 : 0;
+                INFO("cell " << i << ", " << j);
+                REQUIRE(takers == (expected ? 1 : 0));
+            }
+        }
+    }
+}

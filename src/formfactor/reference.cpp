@@ -72,6 +72,18 @@ int last_centre(std::int64_t hi) { return static_cast<int>(std::floor(static_cas
 
 }  // namespace
 
+bool covers_cell(const std::int64_t* px, const std::int64_t* py, int n, int i, int j) {
+    const std::int64_t x = i * kSubcell + kSubcell / 2, y = j * kSubcell + kSubcell / 2;
+    for (int a = 0; a < n; ++a) {
+        const int b = (a + 1) % n;
+        const std::int64_t dx = px[b] - px[a], dy = py[b] - py[a];
+        if (dx == 0 && dy == 0) continue;  // clipping or snapping can repeat a vertex
+        const std::int64_t edge = dx * (y - py[a]) - dy * (x - px[a]);  // exact
+        if (!(edge > 0 || (edge == 0 && owns_edge_point(dx, dy)))) return false;
+    }
+    return true;
+}
+
 bool ReferenceEngine::above_base_plane(const mesh::Polygon& poly, const Frame& frame) const {
     for (int i = 0; i < poly.n; ++i)
         if (frame.to_local(poly.v[i]).z > eps_) return true;
@@ -170,18 +182,8 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
             const std::size_t base = delta_.offset(face);
 
             for (int j = j0; j <= j1; ++j) {
-                const std::int64_t y = j * kSubcell + kSubcell / 2;
                 for (int i = i0; i <= i1; ++i) {
-                    const std::int64_t x = i * kSubcell + kSubcell / 2;
-                    bool inside = true;
-                    for (int a = 0; a < poly.n && inside; ++a) {
-                        const int b = (a + 1) % poly.n;
-                        const std::int64_t dx = px[b] - px[a], dy = py[b] - py[a];
-                        if (dx == 0 && dy == 0) continue;  // clipping or snapping can repeat a vertex
-                        const std::int64_t edge = dx * (y - py[a]) - dy * (x - px[a]);  // exact
-                        inside = edge > 0 || (edge == 0 && owns_edge_point(dx, dy));
-                    }
-                    if (!inside) continue;
+                    if (!covers_cell(px, py, poly.n, i, j)) continue;
                     const double s = (i + 0.5) / half - 1.0, t = (j + 0.5) / half - t0;
                     const double inv_depth = plane.x * s + plane.y * t + plane.z;
                     const std::size_t cell = base + static_cast<std::size_t>(j) * n + i;

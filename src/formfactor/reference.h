@@ -7,6 +7,12 @@
 
 namespace hemirad::formfactor {
 
+// The reference's inside test: whether the centre of cell (i, j) lies inside the
+// counter-clockwise polygon px, py (n vertices in kSubcell units per cell), or on an edge that
+// the top-left rule gives it. Exact: two polygons sharing an edge never both take a centre on
+// it, and together they leave none of them out.
+bool covers_cell(const std::int64_t* px, const std::int64_t* py, int n, int i, int j);
+
 class ReferenceEngine final : public Engine {
 public:
     ReferenceEngine(const mesh::Mesh& mesh, const Settings& settings);
