@@ -1,12 +1,13 @@
 // Hemicube form factors on an OpenCL device, cell for cell the scalar reference's result
 // (src/formfactor/reference.cpp): the same double-precision operations in the same order, no
 // contraction into FMAs, up to the projected vertices, which are snapped to fixed point; from
-// there the inside test is exact integer arithmetic, evaluated in any order. For a batch of shots (dimension 1 of every NDRange), per shot: setup
-// (cull, clip and project each element on each face into packed records with their cell boxes)
-// -> count (records per tile) -> scan (per-tile list offsets) -> scatter (record indices into
-// per-tile lists) -> raster, on GPUs one work-group per tile and one work-item per cell, on
-// CPUs (raster_records) one work-item per tile walking its records: inside and depth tests, the
-// cell's id, the winner's delta form factor added in 64-bit fixed point.
+// there the inside test is exact integer arithmetic, evaluated in any order. For a batch of
+// shots (dimension 1 of every NDRange), per shot: setup (cull, clip and project each element on
+// each face into packed records with their cell boxes) -> count (records per tile) -> scan
+// (per-tile list offsets) -> scatter (record indices into per-tile lists) -> raster, on GPUs one
+// work-group per tile and one work-item per cell, on CPUs (raster_records) one work-item per
+// tile walking its records: inside and depth tests, the cell's id, the winner's delta form
+// factor added in 64-bit fixed point.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 #pragma OPENCL FP_CONTRACT OFF

@@ -67,8 +67,12 @@ bool owns_edge_point(std::int64_t dx, std::int64_t dy) { return dy < 0 || (dy ==
 std::int64_t snap(double cells) { return static_cast<std::int64_t>(std::floor(cells * kSubcell + 0.5)); }
 
 // The first and the last cell whose centre (index + 1/2) lies at or above lo, at or below hi.
-int first_centre(std::int64_t lo) { return static_cast<int>(std::ceil(static_cast<double>(lo - kSubcell / 2) / kSubcell)); }
-int last_centre(std::int64_t hi) { return static_cast<int>(std::floor(static_cast<double>(hi - kSubcell / 2) / kSubcell)); }
+int first_centre(std::int64_t lo) {
+    return static_cast<int>(std::ceil(static_cast<double>(lo - kSubcell / 2) / kSubcell));
+}
+int last_centre(std::int64_t hi) {
+    return static_cast<int>(std::floor(static_cast<double>(hi - kSubcell / 2) / kSubcell));
+}
 
 }  // namespace
 
