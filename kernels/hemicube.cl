@@ -149,17 +149,16 @@ bool owns_edge_point(long dx, long dy) {
     return dy < 0 || (dy == 0 && dx > 0);
 }
 
-// The reference's fixed-point snap and cell ranges (kSubcell = 2^HR_SUBCELL_BITS units per cell).
+// The reference's fixed-point snap and cell ranges, SUBCELL (formfactor::kSubcell) units per cell.
+#define SUBCELL (1L << HR_SUBCELL_BITS)
 long snap(double cells) {
-    return (long)floor(cells * (double)(1L << HR_SUBCELL_BITS) + 0.5);
+    return (long)floor(cells * (double)SUBCELL + 0.5);
 }
 int first_centre(long lo) {
-    const long S = 1L << HR_SUBCELL_BITS;
-    return (int)ceil((double)(lo - S / 2) / (double)S);
+    return (int)ceil((double)(lo - SUBCELL / 2) / (double)SUBCELL);
 }
 int last_centre(long hi) {
-    const long S = 1L << HR_SUBCELL_BITS;
-    return (int)floor((double)(hi - S / 2) / (double)S);
+    return (int)floor((double)(hi - SUBCELL / 2) / (double)SUBCELL);
 }
 
 Vec element_vertex(__global const HrElement* e, int i) {
@@ -289,17 +288,17 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
         const uint slot = atomic_inc(&record_count[0]);
         __global HrRecord* r = records + slot;
         // The edges of the inside test: the reference's dx * (Y - ay) - dy * (X - ax) at the
-        // centre X = S i + S/2, Y = S j + S/2, as a i + b j + c, plus 1 for an edge the top-left
-        // rule gives its centres (integers: value >= 0 there is value + 1 > 0).
-        const long S = 1L << HR_SUBCELL_BITS, half_cell = S / 2;
+        // centre X = S i + S/2, Y = S j + S/2 (S = SUBCELL), as a i + b j + c, plus 1 for an
+        // edge the top-left rule gives its centres (integers: value >= 0 there is value + 1 > 0).
+        const long half_cell = SUBCELL / 2;
         int edges = 0;
         for (int e = 0; e < poly.n; ++e) {
             const int f = e + 1 == poly.n ? 0 : e + 1;
             const long dx = x[f] - x[e], dy = y[f] - y[e];
             if (dx == 0 && dy == 0) continue;  // clipping or snapping can repeat a vertex
             __global HrEdge* edge = &r->edge[edges++];
-            edge->a = -dy * S;
-            edge->b = dx * S;
+            edge->a = -dy * SUBCELL;
+            edge->b = dx * SUBCELL;
             edge->c = dx * (half_cell - y[e]) - dy * (half_cell - x[e]) + (owns_edge_point(dx, dy) ? 1 : 0);
         }
         r->plane[0] = nf.x / c;

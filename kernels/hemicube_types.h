@@ -35,9 +35,8 @@ typedef struct {
     hr_double normal[3];  // unit, front side
     hr_double centroid[3];
     hr_int n;         // 3 or 4
-    hr_int patch;     // parent patch
     hr_int has_twin;  // 1: a doubleSided twin draws this surface's back
-    hr_int pad;
+    hr_int pad[2];
 } HrElement;
 
 // One patch: its polygon decides whether all of its elements lie below the base plane.

@@ -18,7 +18,7 @@ namespace {
 
 // The layout header is the contract with the kernel: pin it down.
 static_assert(sizeof(HrElement) == 160 && offsetof(HrElement, normal) == 96 && offsetof(HrElement, centroid) == 120 &&
-              offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 152);
+              offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 148);
 static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(HrPatch, elements) == 104);
 static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
               offsetof(HrShot, patches) == 116 && offsetof(HrShot, tiles_x) == 120 &&
@@ -163,7 +163,6 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         copy3(e.normal, h.normal);
         copy3(e.centroid, h.centroid);
         h.n = e.poly.n;
-        h.patch = static_cast<hr_int>(e.patch);
         h.has_twin = e.has_twin ? 1 : 0;
     }
     std::vector<HrPatch> patches(mesh.patches.size());
