@@ -192,9 +192,9 @@ int counter_copy(int tiles) {
 }
 
 // Element k's records, and their cell boxes, for each face on which it may cover a cell centre,
-// packed at the next free index (record_count[0], zero before the shot).
+// packed in its work-group's region of the record slots: at records[*used], *used counting up.
 void setup_element(const HrShot* shot, __global const HrElement* e, int k, __global HrRecord* records,
-                   __global HrBox* boxes, __global uint* record_count) {
+                   __global HrBox* boxes, __local uint* used) {
     const double eps = shot->eps;
     const Vec normal = vec(e->normal[0], e->normal[1], e->normal[2]);
     const Vec origin = vec(shot->origin[0], shot->origin[1], shot->origin[2]);
@@ -283,9 +283,10 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
         const int j0 = max(0, first_centre(ymin)), j1 = min(rows - 1, last_centre(ymax));
         if (i0 > i1 || j0 > j1) continue;  // no cell centre on the face: no record
 
-        // The next free record: records are packed, so the raster reads little memory. Their
-        // order varies from run to run; the raster's result does not depend on it.
-        const uint slot = atomic_inc(&record_count[0]);
+        // The next slot of the work-group's region: a counter no other core touches, and the
+        // records stay packed, so the raster reads little memory. Their order may vary from
+        // run to run; the raster's result does not depend on it.
+        const uint slot = atomic_inc(used);
         __global HrRecord* r = records + slot;
         // The edges of the inside test: the reference's dx * (Y - ay) - dy * (X - ax) at the
         // centre X = S i + S/2, Y = S j + S/2 (S = SUBCELL), as a i + b j + c, plus 1 for an
@@ -307,68 +308,80 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
         r->element = k;
         r->back = is_back;
         r->edges = edges;
-        r->face = face;
         __global HrBox* box = boxes + slot;
         box->i0 = i0;
         box->i1 = i1;
         box->j0 = j0;
         box->j1 = j1;
+        box->face = face;
     }
 }
 
-// One work-item per patch: the records of its elements (setup_element), unless the patch is the
-// shooter or lies below its base plane. Also zeroes the tile counts and the sums for the kernels
+// The record slots of work-group g of setup (count and scatter): five per element of its
+// patches, from five times the first element of its first patch.
+uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g) {
+    return shot->patches == 0 ? 0u : (uint)(HR_FACES * patches[min(g * HEMIRAD_WG, shot->patches - 1)].first_element);
+}
+
+// One work-item per patch: the records of its elements (setup_element), none when the patch is
+// the shooter or lies below its base plane, packed per work-group: group_records[g] says how
+// many the region of group g holds. Also zeroes the tile counts and the sums for the kernels
 // after it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     __global const HrShot* shots, __global const HrElement* elements, __global const HrPatch* patches,
-    __global HrRecord* records, __global HrBox* boxes, __global uint* record_count, __global uint* tile_counts,
+    __global HrRecord* records, __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts,
     __global long* sums) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
     records += b * record_stride(shot);
     boxes += b * record_stride(shot);
-    record_count += b;
+    group_records += b * get_num_groups(0);
     tile_counts += b * counter_stride(shot);
     sums += b * sum_stride(shot);
+    __local uint used;
+    if (get_local_id(0) == 0) used = group_first_slot(shot, patches, (int)get_group_id(0));
+    barrier(CLK_LOCAL_MEM_FENCE);
     const int p = (int)get_global_id(0);
     // The shot's clears, ahead of count and raster in the queue.
     const int counters = shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
     for (int c = p; c < counters; c += (int)get_global_size(0)) tile_counts[c] = 0;
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
-    if (p >= shot->patches || p == shot->shooter) return;  // the shooter's elements lie in its base plane
-
-    // Elements tile their patch: when the patch is below the base plane, so are they.
-    __global const HrPatch* patch = patches + p;
-    bool patch_above = false;
-    for (int i = 0; i < patch->n; ++i)
-        patch_above = patch_above ||
-                      to_local(shot, vec(patch->v[3 * i], patch->v[3 * i + 1], patch->v[3 * i + 2])).z > shot->eps;
-    if (!patch_above) return;
-    for (int k = patch->first_element; k < patch->first_element + patch->elements; ++k)
-        setup_element(shot, elements + k, k, records, boxes, record_count);
+    if (p < shot->patches && p != shot->shooter) {  // the shooter's elements lie in its base plane
+        // Elements tile their patch: when the patch is below the base plane, so are they.
+        __global const HrPatch* patch = patches + p;
+        bool patch_above = false;
+        for (int i = 0; i < patch->n; ++i)
+            patch_above = patch_above || to_local(shot, vec(patch->v[3 * i], patch->v[3 * i + 1], patch->v[3 * i + 2]))
+                                                 .z > shot->eps;
+        for (int k = patch->first_element; patch_above && k < patch->first_element + patch->elements; ++k)
+            setup_element(shot, elements + k, k, records, boxes, &used);
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (get_local_id(0) == 0)
+        group_records[get_group_id(0)] = used - group_first_slot(shot, patches, (int)get_group_id(0));
 }
 
 // One count per tile each record may cover, in the counter copy of the work-group. Apart from
-// setup, whose record stores would otherwise drain at every atomic. Work-items stride over
-// the packed records, as many as setup made.
+// setup, whose record stores would otherwise drain at every atomic. Work-group g reads the
+// boxes of setup's work-group g.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(__global const HrShot* shots,
-                                                                            __global const HrRecord* records,
+                                                                            __global const HrPatch* patches,
                                                                             __global const HrBox* boxes,
-                                                                            __global const uint* record_count,
+                                                                            __global const uint* group_records,
                                                                             __global uint* tile_counts) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
-    records += b * record_stride(shot);
     boxes += b * record_stride(shot);
-    record_count += b;
+    group_records += b * get_num_groups(0);
     tile_counts += b * counter_stride(shot);
     __global uint* copy = tile_counts + counter_copy(shot->tile_base[HR_FACES]);
-    const uint used = record_count[0];
-    for (uint slot = get_global_id(0); slot < used; slot += get_global_size(0)) {
+    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
+    const uint used = group_records[get_group_id(0)];
+    for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
         const HrBox box = boxes[slot];
-        __global uint* counts = copy + shot->tile_base[records[slot].face];
+        __global uint* counts = copy + shot->tile_base[box.face];
         for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
             for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx)
                 atomic_inc(&counts[ty * shot->tiles_x + tx]);
@@ -424,24 +437,24 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
 // list of every tile it may cover. The order within a list varies from run to run; the
 // raster's result does not depend on it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(__global const HrShot* shots,
-                                                                              __global const HrRecord* records,
+                                                                              __global const HrPatch* patches,
                                                                               __global const HrBox* boxes,
-                                                                              __global const uint* record_count,
+                                                                              __global const uint* group_records,
                                                                               __global uint* cursors,
                                                                               __global uint* lists) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
-    records += b * record_stride(shot);
     boxes += b * record_stride(shot);
-    record_count += b;
+    group_records += b * get_num_groups(0);
     cursors += b * counter_stride(shot);
     lists += b * (size_t)shot->list_capacity;
     __global uint* copy = cursors + counter_copy(shot->tile_base[HR_FACES]);
-    const uint used = record_count[0];
-    for (uint slot = get_global_id(0); slot < used; slot += get_global_size(0)) {
+    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
+    const uint used = group_records[get_group_id(0)];
+    for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
         const HrBox box = boxes[slot];
-        __global uint* face_cursors = copy + shot->tile_base[records[slot].face];
+        __global uint* face_cursors = copy + shot->tile_base[box.face];
         for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
             for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx) {
                 const uint at = atomic_inc(&face_cursors[ty * shot->tiles_x + tx]);

@@ -73,18 +73,20 @@ typedef struct {
 // binning reads, apart from the records.
 typedef struct {
     hr_int i0, i1, j0, j1;
+    hr_int face;
+    hr_int pad;
 } HrBox;
 
-// One element seen on one face: its clipped polygon in cell coordinates (x in [0, N), y in
-// [0, rows)) as the edges of the inside test, and its plane for the depth. A cell centre is
-// inside where every edge is > 0. The fixed fields come first; a quad's record spans two
-// cache lines and a half.
+// One element seen on one face: its clipped polygon in cell
+// coordinates (x in [0, N), y in [0, rows)) as the edges of the inside test, and its plane for
+// the depth. A cell centre is inside where every edge is > 0. The fixed fields come first; a
+// quad's record spans two cache lines and a half.
 typedef struct {
     hr_double plane[3];  // 1/depth = plane[0] s + plane[1] t + plane[2] at face coordinates (s, t)
     hr_int element;      // element index
     hr_int back;         // 1: the back of a one-sided surface (a blocker)
     hr_int edges;        // edge count, degenerate edges dropped
-    hr_int face;
+    hr_int pad;
     HrEdge edge[HR_MAX_CLIPPED];
 } HrRecord;
 

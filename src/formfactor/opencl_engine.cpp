@@ -23,8 +23,8 @@ static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(H
 static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
               offsetof(HrShot, patches) == 116 && offsetof(HrShot, tiles_x) == 120 &&
               offsetof(HrShot, tile_base) == 124 && offsetof(HrShot, list_capacity) == 148);
-static_assert(sizeof(HrEdge) == 24 && sizeof(HrBox) == 16);
-static_assert(sizeof(HrRecord) == 256 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, face) == 36 &&
+static_assert(sizeof(HrEdge) == 24 && sizeof(HrBox) == 24);
+static_assert(sizeof(HrRecord) == 256 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, edges) == 32 &&
               offsetof(HrRecord, edge) == 40);
 static_assert(std::int64_t{1} << HR_SUBCELL_BITS == kSubcell);
 static_assert(HR_FACES == kFaces);
@@ -200,7 +200,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     shots_ = buffer(sizeof(HrShot));
     records_ = buffer(record_slots() * sizeof(HrRecord));
     boxes_ = buffer(record_slots() * sizeof(HrBox));
-    record_count_ = buffer(sizeof(hr_uint));
+    group_records_ = buffer(setup_groups() * sizeof(hr_uint));
     tile_counts_ = buffer(counters * sizeof(hr_uint));
     offsets_ = buffer((counters + 1) * sizeof(hr_uint));
     cursors_ = buffer(counters * sizeof(hr_uint));
@@ -232,6 +232,11 @@ std::size_t OpenCLEngine::record_slots() const {
     return std::max<std::size_t>(1, mesh_.elements.size() * kFaces);  // a record per element and face at most
 }
 
+std::size_t OpenCLEngine::setup_groups() const {
+    const std::size_t wg = static_cast<std::size_t>(tuning_.work_group);
+    return std::max<std::size_t>(1, (mesh_.patches.size() + wg - 1) / wg);
+}
+
 std::size_t OpenCLEngine::sum_stride() const {
     return mesh_.elements.size() + 2;  // per element, the blocked share, the list entries needed
 }
@@ -257,10 +262,10 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         shot.list_capacity = list_capacity_;
     }
     // Every kernel's arguments, bound here only.
-    bind(setup_, shots_, elements_, patches_, records_, boxes_, record_count_, tile_counts_, sums_);
-    bind(count_, shots_, records_, boxes_, record_count_, tile_counts_);
+    bind(setup_, shots_, elements_, patches_, records_, boxes_, group_records_, tile_counts_, sums_);
+    bind(count_, shots_, patches_, boxes_, group_records_, tile_counts_);
     bind(scan_, shots_, tile_counts_, offsets_, cursors_, sums_);
-    bind(scatter_, shots_, records_, boxes_, record_count_, cursors_, lists_);
+    bind(scatter_, shots_, patches_, boxes_, group_records_, cursors_, lists_);
     bind(raster_, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
 
     // Dimension 1 of every kernel is the shot within the batch.
@@ -273,15 +278,16 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     const std::size_t raster_items = tuning_.raster_per_record ? round_up(tiles, raster_wg) : tiles * raster_wg;
     std::array<cl::Event, kStages> events;
     queue.enqueueWriteBuffer(shots_, CL_FALSE, 0, batch * sizeof(HrShot), shots.data());
-    queue.enqueueFillBuffer(record_count_, hr_uint{0}, 0, batch * sizeof(hr_uint));
     const auto run = [&](cl::Kernel& kernel, std::size_t items, std::size_t group, cl::Event* event) {
         queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(items, batch), cl::NDRange(group, 1), nullptr,
                                    event);
     };
-    run(setup_, round_up(mesh_.patches.size(), wg), wg, &events[0]);
-    run(count_, round_up(elements, wg), wg, &events[1]);
+    // count and scatter read the records of setup's work-groups, one work-group each.
+    const std::size_t patch_items = setup_groups() * wg;
+    run(setup_, patch_items, wg, &events[0]);
+    run(count_, patch_items, wg, &events[1]);
     run(scan_, scan_wg, scan_wg, &events[2]);
-    run(scatter_, round_up(elements, wg), wg, &events[3]);
+    run(scatter_, patch_items, wg, &events[3]);
     run(raster_, raster_items, raster_wg, &events[4]);
     // The sums, then per shot the list entries it needed (from scan).
     queue.enqueueReadBuffer(sums_, CL_TRUE, 0, batch * sum_stride() * sizeof(hr_long), sums_host_.data(), nullptr,

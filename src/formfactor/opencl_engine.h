@@ -76,7 +76,7 @@ private:
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
 
     cl::Kernel setup_, count_, scan_, scatter_, raster_;  // raster_: raster or raster_records
-    cl::Buffer shots_, elements_, patches_, records_, boxes_, record_count_, tile_counts_, offsets_, cursors_, lists_,
+    cl::Buffer shots_, elements_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_, cursors_, lists_,
         delta_fixed_, ids_buffer_, sums_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
     std::size_t batch_capacity_ = 0;       // shots the per-shot buffers hold
@@ -90,6 +90,7 @@ private:
 
     std::size_t raster_group_size() const;
     std::size_t record_slots() const;  // per shot
+    std::size_t setup_groups() const;  // work-groups of setup, count and scatter: one work-item per patch
     std::size_t sum_stride() const;
     std::size_t max_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
