@@ -547,8 +547,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
 // stepped along the row and down the rows, and the same double depth as the scalar test. The
 // winner is the reference's: the nearest at the cell centre, ties to the lower element index.
 // Each record adds the delta form factors of the cells it takes to its element's sum with one
-// atomic, and a cell taken from an earlier record (a rare overdraw) is given back by that
-// record's element.
+// atomic; a cell taken from an earlier record (overdraw) is given back by that record's
+// element, through a small private table of such corrections flushed to the sums at the end.
 #if HEMIRAD_LANES == 8
 typedef double8 lane_double;
 typedef long8 lane_long;
@@ -573,6 +573,40 @@ typedef int4 lane_int;
 #error HEMIRAD_LANES must be 4 or 8
 #endif
 #define TILE_CELLS (HEMIRAD_TILE * HEMIRAD_TILE)
+#define HR_SUM_TABLE 64  // entries of raster_records' table of give-backs, a power of two
+
+// The sum a raster_records winner 2 k + back adds to: its element's, or the blockers'.
+int owner_sum(const HrShot* shot, int owner) {
+    return (owner & 1) ? shot->elements : owner >> 1;
+}
+
+// Pending additions to the sums of a few winners, direct-mapped by the winner's low bits;
+// owner -1 marks a free entry.
+typedef struct {
+    int owner[HR_SUM_TABLE];
+    long sum[HR_SUM_TABLE];
+} SumTable;
+
+// Adds `value` to the pending sum of `owner`, first moving the entry's earlier owner, if
+// another, to the global sums.
+void table_add(SumTable* table, const HrShot* shot, __global long* sums, int owner, long value) {
+    const int t = owner & (HR_SUM_TABLE - 1);
+    if (table->owner[t] != owner) {
+        if (table->owner[t] >= 0) atom_add(&sums[owner_sum(shot, table->owner[t])], table->sum[t]);
+        table->owner[t] = owner;
+        table->sum[t] = 0;
+    }
+    table->sum[t] += value;
+}
+
+long sum_lanes(lane_long v) {
+#if HEMIRAD_LANES == 8
+    const long4 folded = v.lo + v.hi;
+#else
+    const long4 folded = v;
+#endif
+    return folded.x + folded.y + folded.z + folded.w;
+}
 
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
     __global const HrShot* shots, __global const HrRecord* records, __global const HrBox* boxes,
@@ -595,14 +629,16 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     const double t0 = face == 0 ? 1.0 : 0.0;
 
     // Row-major tile cells; the last row's last group may reach LANES - 1 past the end. Per
-    // cell: the winning element (for ties), its depth, and the id the cell reports.
-    int best[TILE_CELLS + HEMIRAD_LANES - 1], best_id[TILE_CELLS + HEMIRAD_LANES - 1];
+    // cell: the winner as 2 k + back (the record of element k, back 1 for a blocker; -1 none;
+    // in the order of k, for ties) and its 1/depth.
+    int best[TILE_CELLS + HEMIRAD_LANES - 1];
     double best_depth[TILE_CELLS + HEMIRAD_LANES - 1];
     for (int c = 0; c < TILE_CELLS + HEMIRAD_LANES - 1; ++c) {
         best[c] = -1;
-        best_id[c] = HR_EMPTY;
         best_depth[c] = 0.0;
     }
+    SumTable give_back;
+    for (int t = 0; t < HR_SUM_TABLE; ++t) give_back.owner[t] = -1;
     double column_s[HEMIRAD_TILE + HEMIRAD_LANES - 1];  // s = x / per_unit - 1 of the tile's columns
     for (int c = 0; c < HEMIRAD_TILE + HEMIRAD_LANES - 1; ++c) column_s[c] = (ci0 + c + 0.5) / per_unit - 1.0;
     const size_t face_offset = face_cell_offset(face, n);
@@ -626,8 +662,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
             lane_a[e] = a[e] * LANE_INDEX_LONG;
         }
         const double depth_s = r->plane[0], depth_t = r->plane[1], depth_1 = r->plane[2];
-        const int k = r->element;
-        const int id = r->back ? HR_BLOCKER : k;
+        const int owner = 2 * r->element + r->back;
         lane_long won = 0;  // the delta form factors of the cells this record takes, per lane
         for (int j = j0; j <= j1; ++j) {
             const double y = j + 0.5;
@@ -643,37 +678,33 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
                 const lane_int old = vload_lanes(0, best + cell);
                 const lane_double old_depth = vload_lanes(0, best_depth + cell);
                 const lane_long take = in & (convert_lane_long(old < 0) | (inv_depth > old_depth) |
-                                             ((inv_depth == old_depth) & convert_lane_long((lane_int)(k) < old)));
+                                             ((inv_depth == old_depth) & convert_lane_long((lane_int)(owner) < old)));
                 if (!any(take)) continue;
                 const lane_int take_int = convert_lane_int(take);
                 const lane_long delta = vload_lanes(0, delta_face + (size_t)j * n + i);  // may read past the row
                 won += select((lane_long)(0), delta, take);
-                // Cells taken from an earlier record (overdraw, rare): its element gives them back.
-                const lane_int old_id = vload_lanes(0, best_id + cell);
+                // Cells taken from an earlier record (overdraw): its element gives them back.
                 if (any(take_int & (old >= 0))) {
                     for (int lane = 0; lane < HEMIRAD_LANES; ++lane)
-                        if (take_int[lane] && old[lane] >= 0)
-                            atom_add(&sums[old_id[lane] == HR_BLOCKER ? shot->elements : old[lane]], -delta[lane]);
+                        if (take_int[lane] && old[lane] >= 0) table_add(&give_back, shot, sums, old[lane], -delta[lane]);
                 }
-                vstore_lanes(select(old, (lane_int)(k), take_int), 0, best + cell);
-                vstore_lanes(select(old_id, (lane_int)(id), take_int), 0, best_id + cell);
+                vstore_lanes(select(old, (lane_int)(owner), take_int), 0, best + cell);
                 vstore_lanes(select(old_depth, inv_depth, take), 0, best_depth + cell);
             }
             for (int e = 0; e < count; ++e) row[e] += b[e];
         }
         // Integer sums: the order of these atomics (and of the lists) cannot change the result.
-#if HEMIRAD_LANES == 8
-        const long4 half_sum = won.lo + won.hi;
-#else
-        const long4 half_sum = won;
-#endif
-        const long total = half_sum.x + half_sum.y + half_sum.z + half_sum.w;
-        if (total != 0) atom_add(&sums[id == HR_BLOCKER ? shot->elements : k], total);
+        const long total = sum_lanes(won);
+        if (total != 0) atom_add(&sums[owner_sum(shot, owner)], total);
     }
+    for (int t = 0; t < HR_SUM_TABLE; ++t)
+        if (give_back.owner[t] >= 0) atom_add(&sums[owner_sum(shot, give_back.owner[t])], give_back.sum[t]);
 
     for (int j = cj0; j <= cj1; ++j)
-        for (int i = ci0; i <= ci1; ++i)
-            ids[face_offset + (size_t)j * n + i] = best_id[(j - cj0) * HEMIRAD_TILE + (i - ci0)];
+        for (int i = ci0; i <= ci1; ++i) {
+            const int owner = best[(j - cj0) * HEMIRAD_TILE + (i - ci0)];
+            ids[face_offset + (size_t)j * n + i] = owner < 0 ? HR_EMPTY : ((owner & 1) ? HR_BLOCKER : owner >> 1);
+        }
 }
 
 // The sizes of the shared structs as this compiler lays them out; the host compares them with
