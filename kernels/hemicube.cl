@@ -30,6 +30,9 @@
 #ifndef HEMIRAD_LANES
 #define HEMIRAD_LANES 4  // cells per row step of raster_records: 4 or 8 (double8 on AVX-512)
 #endif
+#ifndef HEMIRAD_SETUP_LANES
+#define HEMIRAD_SETUP_LANES 0  // 1: setup takes HR_SETUP_LANES elements per work-item in double8 (CPUs)
+#endif
 #ifndef HEMIRAD_SCAN_WG
 #define HEMIRAD_SCAN_WG 256  // the single work-group of the tile-offset scan, a power of two
 #endif
@@ -317,20 +320,206 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
     }
 }
 
-// The record slots of work-group g of setup (count and scatter): five per element of its
-// patches, from five times the first element of its first patch.
-uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g) {
-    return shot->patches == 0 ? 0u : (uint)(HR_FACES * patches[min(g * HEMIRAD_WG, shot->patches - 1)].first_element);
+#if HEMIRAD_SETUP_LANES
+// setup_lanes: HR_SETUP_LANES elements per work-item, each lane an element, in the operations
+// (and order) of setup_element. The common case takes no branch per element: an element
+// wholly inside one face's frustum and hidden on the other four (by the rule setup_element
+// follows: the first plane any vertex is outside of has every vertex outside) needs no
+// clipping. The other lanes go through setup_element.
+typedef double8 ldouble;
+typedef long8 llong;
+
+// Where face == f (per lane), these values, as to_face permutes and negates.
+void to_face_lanes(llong face, ldouble x, ldouble y, ldouble z, ldouble* u, ldouble* v, ldouble* d) {
+    *u = select(select(select(select(x, -x, face == 3), -y, face == 2), y, face == 1), x, face == 0);
+    *v = select(z, y, face == 0);
+    *d = select(select(select(select(-y, y, face == 3), -x, face == 2), x, face == 1), z, face == 0);
 }
 
-// One work-item per patch: the records of its elements (setup_element), none when the patch is
-// the shooter or lies below its base plane, packed per work-group: group_records[g] says how
-// many the region of group g holds. Also zeroes the tile counts and the sums for the kernels
-// after it.
+// outside_bits, a lane per element.
+llong outside_bits_lanes(ldouble x, ldouble y, ldouble z, double eps) {
+    const llong base = (z - eps < 0.0) & 1;
+    const ldouble zmx = z - x, zpx = z + x, zmy = z - y, zpy = z + y, xmy = x - y, xpy = x + y;
+    const llong face0 = base | ((zmx < 0.0) & 2) | ((zpx < 0.0) & 4) | ((zmy < 0.0) & 8) | ((zpy < 0.0) & 16);
+    const llong face1 = base | ((xmy < 0.0) & 2) | ((xpy < 0.0) & 4) | ((zmx > 0.0) & 8);
+    const llong face2 = base | ((xmy > 0.0) & 2) | ((xpy > 0.0) & 4) | ((zpx > 0.0) & 8);
+    const llong face3 = base | ((xpy < 0.0) & 2) | ((xmy > 0.0) & 4) | ((zmy > 0.0) & 8);
+    const llong face4 = base | ((xpy > 0.0) & 2) | ((xmy < 0.0) & 4) | ((zpy > 0.0) & 8);
+    return face0 | face1 << 5 | face2 << 10 | face3 << 15 | face4 << 20;
+}
+
+llong snap_lanes(ldouble cells) {
+    return convert_long8(floor(cells * (double)SUBCELL + 0.5));
+}
+
+void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int first, __global const HrElement* elements,
+                 __global HrRecord* records, __global HrBox* boxes, __local uint* used) {
+    const double eps = shot->eps;
+    const llong n_lanes = convert_long8(vload8(0, group->n));
+    const llong mine = convert_long8(vload8(0, group->patch) == (int8)(shot->shooter));
+    const llong has_twin = convert_long8(vload8(0, group->has_twin) != 0);
+    const ldouble normal_x = vload8(0, group->normal), normal_y = vload8(1, group->normal),
+                  normal_z = vload8(2, group->normal);
+    const ldouble facing = normal_x * (shot->origin[0] - vload8(0, group->centroid)) +
+                           normal_y * (shot->origin[1] - vload8(1, group->centroid)) +
+                           normal_z * (shot->origin[2] - vload8(2, group->centroid));
+    const llong is_back = facing < 0.0;
+    llong live = (n_lanes > 0) & ~mine & ~(is_back & has_twin);
+
+    // to_local, four vertices (a triangle's last repeated: the same values, the same bits).
+    ldouble lx[4], ly[4], lz[4];
+    llong above = 0, outside_all = -1, outside_any = 0;
+    for (int i = 0; i < 4; ++i) {
+        const ldouble dx = vload8(3 * i, group->v) - shot->origin[0];
+        const ldouble dy = vload8(3 * i + 1, group->v) - shot->origin[1];
+        const ldouble dz = vload8(3 * i + 2, group->v) - shot->origin[2];
+        lx[i] = dx * shot->u[0] + dy * shot->u[1] + dz * shot->u[2];
+        ly[i] = dx * shot->v[0] + dy * shot->v[1] + dz * shot->v[2];
+        lz[i] = dx * shot->w[0] + dy * shot->w[1] + dz * shot->w[2];
+        above |= lz[i] > eps;
+        const llong bits = outside_bits_lanes(lx[i], ly[i], lz[i], eps);
+        outside_all &= bits;
+        outside_any |= bits;
+    }
+    live &= above;
+
+    // The one face with no vertex outside, every other hidden: the first of its planes any
+    // vertex is outside of (lowest bit) has all outside.
+    llong face = -1, fast = live;
+    for (int f = 0; f < HR_FACES; ++f) {
+        const long planes = f == 0 ? 0x1f : 0x0f;
+        const llong any_out = (outside_any >> (5 * f)) & planes, all_out = (outside_all >> (5 * f)) & planes;
+        const llong inside = any_out == 0;
+        fast &= ~(inside & (face >= 0));  // two such faces: leave it to setup_element
+        face = select(face, (llong)(f), inside);
+        fast &= inside | ((any_out & -any_out & all_out) != 0);
+    }
+    fast &= face >= 0;
+
+    const ldouble normal_u = normal_x * shot->u[0] + normal_y * shot->u[1] + normal_z * shot->u[2];
+    const ldouble normal_v = normal_x * shot->v[0] + normal_y * shot->v[1] + normal_z * shot->v[2];
+    const ldouble normal_w = normal_x * shot->w[0] + normal_y * shot->w[1] + normal_z * shot->w[2];
+    ldouble nu, nv, nd;
+    to_face_lanes(face, normal_u, normal_v, normal_w, &nu, &nv, &nd);
+    const double per_unit = 0.5 * shot->n;
+    const ldouble t0 = select((ldouble)(0.0), (ldouble)(1.0), face == 0);
+    llong px[4], py[4];
+    ldouble c = 0.0;
+    for (int i = 0; i < 4; ++i) {
+        ldouble u, v, d;
+        to_face_lanes(face, lx[i], ly[i], lz[i], &u, &v, &d);
+        if (i == 0) c = nu * u + nv * v + nd * d;
+        px[i] = snap_lanes((u / d + 1.0) * per_unit);
+        py[i] = snap_lanes((v / d + t0) * per_unit);
+    }
+    llong record = fast & (fabs(c) > eps * 1e-3);  // else seen edge-on: covers no area
+    llong area2 = 0;
+    for (int i = 0; i < 4; ++i) area2 += px[i] * py[(i + 1) & 3] - px[(i + 1) & 3] * py[i];
+    record &= area2 != 0;
+    const llong reverse = area2 < 0;  // make counter-clockwise
+    llong x[4], y[4];
+    llong xmin = px[0], xmax = px[0], ymin = py[0], ymax = py[0];
+    for (int i = 0; i < 4; ++i) {
+        x[i] = select(px[i], px[3 - i], reverse);
+        y[i] = select(py[i], py[3 - i], reverse);
+        xmin = min(xmin, px[i]);
+        xmax = max(xmax, px[i]);
+        ymin = min(ymin, py[i]);
+        ymax = max(ymax, py[i]);
+    }
+    const double sub = (double)SUBCELL;
+    const llong rows = select((llong)(shot->n / 2), (llong)(shot->n), face == 0);
+    const llong i0 = max((llong)(0), convert_long8(ceil(convert_double8(xmin - SUBCELL / 2) / sub)));
+    const llong i1 = min((llong)(shot->n - 1), convert_long8(floor(convert_double8(xmax - SUBCELL / 2) / sub)));
+    const llong j0 = max((llong)(0), convert_long8(ceil(convert_double8(ymin - SUBCELL / 2) / sub)));
+    const llong j1 = min(rows - 1, convert_long8(floor(convert_double8(ymax - SUBCELL / 2) / sub)));
+    record &= (i0 <= i1) & (j0 <= j1);
+
+    // Per lane from here, through private copies (portable OpenCL C indexes no vector).
+    long a_lane[4][HR_SETUP_LANES], b_lane[4][HR_SETUP_LANES], c_lane[4][HR_SETUP_LANES];
+    for (int e = 0; e < 4; ++e) {
+        const int f = (e + 1) & 3;
+        const llong dx = x[f] - x[e], dy = y[f] - y[e];
+        const llong owns = (dy < 0) | ((dy == 0) & (dx > 0));  // owns_edge_point
+        const long half_cell = SUBCELL / 2;
+        // A repeated vertex (a triangle's, or one snapping made) gives no edge: a = b = 0 marks it.
+        vstore8(-dy * SUBCELL, 0, a_lane[e]);
+        vstore8(dx * SUBCELL, 0, b_lane[e]);
+        vstore8(dx * (half_cell - y[e]) - dy * (half_cell - x[e]) + (owns & 1), 0, c_lane[e]);
+    }
+    double plane[3][HR_SETUP_LANES];
+    vstore8(nu / c, 0, plane[0]);
+    vstore8(nv / c, 0, plane[1]);
+    vstore8(nd / c, 0, plane[2]);
+    long flags[5][HR_SETUP_LANES];  // live, fast, record, face, back
+    vstore8(live, 0, flags[0]);
+    vstore8(fast, 0, flags[1]);
+    vstore8(record, 0, flags[2]);
+    vstore8(face, 0, flags[3]);
+    vstore8(is_back, 0, flags[4]);
+    long box_lane[4][HR_SETUP_LANES];
+    vstore8(i0, 0, box_lane[0]);
+    vstore8(i1, 0, box_lane[1]);
+    vstore8(j0, 0, box_lane[2]);
+    vstore8(j1, 0, box_lane[3]);
+
+    // One atomic for the records of all fast lanes: on CPUs an atomic waits for the stores
+    // before it, so one per record would cost more than the record.
+    uint fast_records = 0;
+    for (int l = 0; l < HR_SETUP_LANES; ++l) fast_records += flags[2][l] != 0;
+    uint slot = fast_records > 0 ? atomic_add(used, fast_records) : 0u;
+    for (int l = 0; l < HR_SETUP_LANES; ++l) {
+        const int k = first + l;
+        if (!flags[0][l]) continue;
+        if (!flags[1][l]) {
+            setup_element(shot, elements + k, k, records, boxes, used);
+            continue;
+        }
+        if (!flags[2][l]) continue;
+        __global HrRecord* r = records + slot;
+        int edges = 0;
+        for (int e = 0; e < 4; ++e) {
+            if (a_lane[e][l] == 0 && b_lane[e][l] == 0) continue;
+            __global HrEdge* edge = &r->edge[edges++];
+            edge->a = a_lane[e][l];
+            edge->b = b_lane[e][l];
+            edge->c = c_lane[e][l];
+        }
+        r->plane[0] = plane[0][l];
+        r->plane[1] = plane[1][l];
+        r->plane[2] = plane[2][l];
+        r->element = k;
+        r->back = flags[4][l] != 0;
+        r->edges = edges;
+        __global HrBox* box = boxes + slot;
+        box->i0 = (int)box_lane[0][l];
+        box->i1 = (int)box_lane[1][l];
+        box->j0 = (int)box_lane[2][l];
+        box->j1 = (int)box_lane[3][l];
+        box->face = (int)flags[3][l];
+        ++slot;
+    }
+}
+#endif
+
+// The record slots of work-group g of setup (count and scatter): five per element it sets up,
+// from five times its first element.
+uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g) {
+#if HEMIRAD_SETUP_LANES
+    return (uint)(HR_FACES * g * HEMIRAD_WG * HR_SETUP_LANES);
+#else
+    return shot->patches == 0 ? 0u : (uint)(HR_FACES * patches[min(g * HEMIRAD_WG, shot->patches - 1)].first_element);
+#endif
+}
+
+// One work-item per patch (setup_element for its elements, none when the patch is the shooter
+// or lies below its base plane) or, with SETUP_LANES, per HR_SETUP_LANES elements
+// (setup_lanes); the records packed per work-group: group_records[g] says how many the region
+// of group g holds. Also zeroes the tile counts and the sums for the kernels after it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
-    __global const HrShot* shots, __global const HrElement* elements, __global const HrPatch* patches,
-    __global HrRecord* records, __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts,
-    __global long* sums) {
+    __global const HrShot* shots, __global const HrElement* elements, __global const HrElementLanes* element_lanes,
+    __global const HrPatch* patches, __global HrRecord* records, __global HrBox* boxes, __global uint* group_records,
+    __global uint* tile_counts, __global long* sums) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = shots[b];
     const HrShot* shot = &shot_value;
@@ -347,6 +536,10 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const int counters = shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
     for (int c = p; c < counters; c += (int)get_global_size(0)) tile_counts[c] = 0;
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
+#if HEMIRAD_SETUP_LANES
+    if (p * HR_SETUP_LANES < shot->elements)
+        setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, elements, records, boxes, &used);
+#else
     if (p < shot->patches && p != shot->shooter) {  // the shooter's elements lie in its base plane
         // Elements tile their patch: when the patch is below the base plane, so are they.
         __global const HrPatch* patch = patches + p;
@@ -357,6 +550,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         for (int k = patch->first_element; patch_above && k < patch->first_element + patch->elements; ++k)
             setup_element(shot, elements + k, k, records, boxes, &used);
     }
+#endif
     barrier(CLK_LOCAL_MEM_FENCE);
     if (get_local_id(0) == 0)
         group_records[get_group_id(0)] = used - group_first_slot(shot, patches, (int)get_group_id(0));

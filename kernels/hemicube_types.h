@@ -39,6 +39,20 @@ typedef struct {
     hr_int pad[2];
 } HrElement;
 
+// Elements in groups of HR_SETUP_LANES as structures of arrays, what the CPU setup loads a
+// vector at a time: lane l of group g is element g * HR_SETUP_LANES + l. A triangle repeats its
+// last vertex; lanes past the last element have n = 0.
+#define HR_SETUP_LANES 8
+typedef struct {
+    hr_double v[4 * 3 * HR_SETUP_LANES];  // [vertex][x, y, z][lane], world space
+    hr_double normal[3 * HR_SETUP_LANES];
+    hr_double centroid[3 * HR_SETUP_LANES];
+    hr_int n[HR_SETUP_LANES];  // 3 or 4; 0 for no element
+    hr_int has_twin[HR_SETUP_LANES];
+    hr_int patch[HR_SETUP_LANES];
+    hr_int pad[HR_SETUP_LANES];
+} HrElementLanes;
+
 // One patch: its polygon decides whether all of its elements lie below the base plane.
 typedef struct {
     hr_double v[12];

@@ -98,6 +98,8 @@ std::vector<Case> comparison_cases() {
         test::add_quad(s, {0.4, 0.4, 0.99}, {0.4, 0.6, 0.99}, {0.6, 0.6, 0.99}, {0.6, 0.4, 0.99}, light, "light");
         add_block(s, {0.15, 0.2, 0.0}, {0.45, 0.5, 0.6}, white, "tall");
         add_block(s, {0.55, 0.5, 0.0}, {0.85, 0.8, 0.3}, white, "short");
+        // Triangle elements (setup_lanes repeats their last vertex), one across the middle.
+        test::add_triangle(s, {0.1, 0.9, 0.7}, {0.9, 0.9, 0.7}, {0.5, 0.1, 0.75}, white, "wedge");
         test::finish(s);
         cases.push_back({"cornell-like box", s, {0.2, 0.1}});
     }
@@ -373,24 +375,28 @@ TEST_CASE("opencl: batched shooting converges to the same furnace and books as o
     CHECK(batching < 2.0 * reseeding);
 }
 
-TEST_CASE("opencl: the GPU raster kernel (one work-item per cell) gives the reference's cells too", "[opencl]") {
+TEST_CASE("opencl: the GPU kernels (setup per patch, raster per cell) give the reference's cells too", "[opencl]") {
     HEMIRAD_REQUIRE_DEVICE(ctx);
-    // Whatever the device, run the tuning a GPU gets, so the kernel is checked where no GPU is.
+    // Whatever the device, run the tuning a GPU gets, so the kernels are checked where no GPU
+    // is; and on a GPU, setup in lanes as CPUs run it.
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
-    formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
-    tuning.raster_per_record = false;
-    tuning.tile = 8;  // 64-item work-groups: within any device's limit
-    formfactor::OpenCLEngine gpu_style(m, *ctx, {64, 2}, tuning);
     formfactor::ReferenceEngine ref(m, {64, 2});
     const std::vector<formfactor::ShotRequest> requests{{0, 0}, {3, 1}, {static_cast<std::uint32_t>(m.patches.size() - 1), 2}};
-    std::vector<formfactor::ShotResult> results;
-    gpu_style.shoot_batch(requests, results);
-    for (std::size_t i = 0; i < requests.size(); ++i) {
-        formfactor::ShotResult want;
-        ref.shoot(requests[i].patch, requests[i].shot, want);
-        CAPTURE(i);
-        CHECK(*gpu_style.last_ids(i) == *ref.last_ids());
-        CHECK(formfactor::compare_shot(results[i], want).empty());
+    for (const bool setup_lanes : {false, true}) {
+        formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+        tuning.raster_per_record = false;
+        tuning.setup_lanes = setup_lanes;
+        tuning.tile = 8;  // 64-item work-groups: within any device's limit
+        formfactor::OpenCLEngine gpu_style(m, *ctx, {64, 2}, tuning);
+        std::vector<formfactor::ShotResult> results;
+        gpu_style.shoot_batch(requests, results);
+        for (std::size_t i = 0; i < requests.size(); ++i) {
+            formfactor::ShotResult want;
+            ref.shoot(requests[i].patch, requests[i].shot, want);
+            CAPTURE(setup_lanes, i);
+            CHECK(*gpu_style.last_ids(i) == *ref.last_ids());
+            CHECK(formfactor::compare_shot(results[i], want).empty());
+        }
     }
 }

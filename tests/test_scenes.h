@@ -30,6 +30,15 @@ inline void add_quad(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p
     s.triangles.push_back({{p0, p2, p3}, {rho, rho, rho}, material, node, prim});
 }
 
+// A lone triangle p0 p1 p2, counter-clockwise seen from its front: meshed as triangles.
+inline void add_triangle(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, std::uint32_t material,
+                         const std::string& node_name) {
+    const std::uint32_t node = static_cast<std::uint32_t>(s.nodes.size());
+    s.nodes.push_back({node_name, static_cast<int>(node)});
+    const glm::dvec3 rho = s.materials[material].base_color;
+    s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, node});
+}
+
 inline void finish(scene::Scene& s) {
     s.bbox_min = glm::dvec3(1e300);
     s.bbox_max = glm::dvec3(-1e300);

@@ -22,6 +22,7 @@ struct OpenCLTuning {
     int scan_work_group = 256;        // the one work-group of the tile-offset scan, a power of two
     int count_copies = 1;             // copies of the per-tile counters (work-group mod copies): less contention
     int lanes = 4;                    // cells per row step of raster_records: 4 or 8
+    bool setup_lanes = false;         // setup takes 8 elements per work-item in double8 lanes (CPUs)
     std::string extra_options;        // appended to the build options (more -D overrides)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
     std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: 1 GiB or device memory / 4
@@ -76,7 +77,7 @@ private:
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
 
     cl::Kernel setup_, count_, scan_, scatter_, raster_;  // raster_: raster or raster_records
-    cl::Buffer shots_, elements_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_, cursors_, lists_,
+    cl::Buffer shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_, cursors_, lists_,
         delta_fixed_, ids_buffer_, sums_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
     std::size_t batch_capacity_ = 0;       // shots the per-shot buffers hold
@@ -90,7 +91,7 @@ private:
 
     std::size_t raster_group_size() const;
     std::size_t record_slots() const;  // per shot
-    std::size_t setup_groups() const;  // work-groups of setup, count and scatter: one work-item per patch
+    std::size_t setup_groups() const;  // work-groups of setup, count and scatter: a work-item per patch or lane group
     std::size_t sum_stride() const;
     std::size_t max_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
