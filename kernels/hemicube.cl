@@ -352,8 +352,9 @@ llong snap_lanes(ldouble cells) {
     return convert_long8(floor(cells * (double)SUBCELL + 0.5));
 }
 
-void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int first, __global const HrElement* elements,
-                 __global HrRecord* records, __global HrBox* boxes, __local uint* used) {
+void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int first,
+                 __global const HrElement* elements, __global HrRecord* records, __global HrBox* boxes,
+                 __local uint* used) {
     const double eps = shot->eps;
     const llong n_lanes = convert_long8(vload8(0, group->n));
     const llong mine = convert_long8(vload8(0, group->patch) == (int8)(shot->shooter));
@@ -878,9 +879,16 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
                 const lane_long delta = vload_lanes(0, delta_face + (size_t)j * n + i);  // may read past the row
                 won += select((lane_long)(0), delta, take);
                 // Cells taken from an earlier record (overdraw): its element gives them back.
+                // Per lane through private copies: portable OpenCL C indexes no vector.
                 if (any(take_int & (old >= 0))) {
+                    int taken[HEMIRAD_LANES], previous[HEMIRAD_LANES];
+                    long given[HEMIRAD_LANES];
+                    vstore_lanes(take_int, 0, taken);
+                    vstore_lanes(old, 0, previous);
+                    vstore_lanes(delta, 0, given);
                     for (int lane = 0; lane < HEMIRAD_LANES; ++lane)
-                        if (take_int[lane] && old[lane] >= 0) table_add(&give_back, shot, sums, old[lane], -delta[lane]);
+                        if (taken[lane] && previous[lane] >= 0)
+                            table_add(&give_back, shot, sums, previous[lane], -given[lane]);
                 }
                 vstore_lanes(select(old, (lane_int)(owner), take_int), 0, best + cell);
                 vstore_lanes(select(old_depth, inv_depth, take), 0, best_depth + cell);

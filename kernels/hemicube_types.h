@@ -91,10 +91,10 @@ typedef struct {
     hr_int pad;
 } HrBox;
 
-// One element seen on one face: its clipped polygon in cell
-// coordinates (x in [0, N), y in [0, rows)) as the edges of the inside test, and its plane for
-// the depth. A cell centre is inside where every edge is > 0. The fixed fields come first; a
-// quad's record spans two cache lines and a half.
+// One element seen on one face: its clipped polygon in cell coordinates (x in [0, N), y in
+// [0, rows)) as the edges of the inside test, and its plane for the depth. A cell centre is
+// inside where every edge is > 0. The fixed fields come first; a quad's record spans two
+// cache lines and a half.
 typedef struct {
     hr_double plane[3];  // 1/depth = plane[0] s + plane[1] t + plane[2] at face coordinates (s, t)
     hr_int element;      // element index

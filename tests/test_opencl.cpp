@@ -1,9 +1,8 @@
 // The OpenCL hemicube engine against the scalar reference (cell for cell) and analytic answers.
 // Runs on the first OpenCL device (PoCL in CI); every test warns and skips without one.
-#include <catch2/catch.hpp>
-
 #include <algorithm>
 #include <array>
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
 #include <optional>
@@ -149,7 +148,6 @@ Comparison compare(const mesh::Mesh& m, formfactor::ReferenceEngine& ref, formfa
     }
     return c;
 }
-
 
 }  // namespace
 
@@ -302,8 +300,8 @@ TEST_CASE("opencl: a batch of shots gives exactly the shots one at a time", "[op
     formfactor::ReferenceEngine ref(m, {128, 5});
     // Different shooters and shot counters, one patch twice; then a smaller batch reusing the buffers.
     for (const std::vector<formfactor::ShotRequest>& requests :
-         {std::vector<formfactor::ShotRequest>{{0, 3}, {5, 4}, {static_cast<std::uint32_t>(m.patches.size() - 1), 5},
-                                               {5, 6}, {2, 7}},
+         {std::vector<formfactor::ShotRequest>{
+              {0, 3}, {5, 4}, {static_cast<std::uint32_t>(m.patches.size() - 1), 5}, {5, 6}, {2, 7}},
           std::vector<formfactor::ShotRequest>{{1, 8}, {3, 9}}}) {
         std::vector<formfactor::ShotResult> results, split_results;
         batched.shoot_batch(requests, results);
@@ -337,7 +335,8 @@ TEST_CASE("opencl: batched shooting converges to the same furnace and books as o
     scene::Scene s;
     const auto wall = test::add_material(s, glm::dvec3(rho), glm::dvec3(0.0));
     const auto light = test::add_material(s, glm::dvec3(rho), glm::dvec3(2.0));
-    s = test::closed_box({1.0, 0.8, 1.2}, [&](int face) { return face == 3 ? light : wall; }, s);
+    s = test::closed_box(
+        {1.0, 0.8, 1.2}, [&](int face) { return face == 3 ? light : wall; }, s);
     const mesh::Mesh m = mesh::build(s, {0.2, 0.1});
     // Runs: one at a time, batches of 8, one at a time with another seed (other hemicube
     // rotations: the scale of the aliasing noise that any change of shot order brings).
@@ -382,7 +381,8 @@ TEST_CASE("opencl: the GPU kernels (setup per patch, raster per cell) give the r
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::ReferenceEngine ref(m, {64, 2});
-    const std::vector<formfactor::ShotRequest> requests{{0, 0}, {3, 1}, {static_cast<std::uint32_t>(m.patches.size() - 1), 2}};
+    const std::vector<formfactor::ShotRequest> requests{
+        {0, 0}, {3, 1}, {static_cast<std::uint32_t>(m.patches.size() - 1), 2}};
     for (const bool setup_lanes : {false, true}) {
         formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
         tuning.raster_per_record = false;

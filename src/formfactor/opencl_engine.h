@@ -60,8 +60,8 @@ public:
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
     static constexpr int kStages = 6;
-    static constexpr std::array<const char*, kStages> kStageNames = {"setup", "count", "scan", "scatter", "raster",
-                                                                     "read"};
+    static constexpr std::array<const char*, kStages> kStageNames = {"setup",   "count",  "scan",
+                                                                     "scatter", "raster", "read"};
     const std::array<double, kStages>& stage_seconds() const { return stage_seconds_; }
 
 private:
@@ -77,8 +77,8 @@ private:
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
 
     cl::Kernel setup_, count_, scan_, scatter_, raster_;  // raster_: raster or raster_records
-    cl::Buffer shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_, cursors_, lists_,
-        delta_fixed_, ids_buffer_, sums_;
+    cl::Buffer shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_,
+        cursors_, lists_, delta_fixed_, ids_buffer_, sums_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
     std::size_t batch_capacity_ = 0;       // shots the per-shot buffers hold
     std::size_t last_batch_ = 0;           // shots of the last launch
