@@ -194,6 +194,22 @@ int counter_copy(int tiles) {
     return (int)(get_group_id(0) % HEMIRAD_COUNT_COPIES) * tiles;
 }
 
+// A record's fields besides its edges, and its cell box (both setups write records through this).
+void store_record_fields(__global HrRecord* r, __global HrBox* box, double plane_s, double plane_t, double plane_1,
+                         int k, int back, int edges, int i0, int i1, int j0, int j1, int face) {
+    r->plane[0] = plane_s;
+    r->plane[1] = plane_t;
+    r->plane[2] = plane_1;
+    r->element = k;
+    r->back = back;
+    r->edges = edges;
+    box->i0 = i0;
+    box->i1 = i1;
+    box->j0 = j0;
+    box->j1 = j1;
+    box->face = face;
+}
+
 // Element k's records, and their cell boxes, for each face on which it may cover a cell centre,
 // packed in its work-group's region of the record slots: at records[*used], *used counting up.
 void setup_element(const HrShot* shot, __global const HrElement* e, int k, __global HrRecord* records,
@@ -305,18 +321,7 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
             edge->b = dx * SUBCELL;
             edge->c = dx * (half_cell - y[e]) - dy * (half_cell - x[e]) + (owns_edge_point(dx, dy) ? 1 : 0);
         }
-        r->plane[0] = nf.x / c;
-        r->plane[1] = nf.y / c;
-        r->plane[2] = nf.z / c;
-        r->element = k;
-        r->back = is_back;
-        r->edges = edges;
-        __global HrBox* box = boxes + slot;
-        box->i0 = i0;
-        box->i1 = i1;
-        box->j0 = j0;
-        box->j1 = j1;
-        box->face = face;
+        store_record_fields(r, boxes + slot, nf.x / c, nf.y / c, nf.z / c, k, is_back, edges, i0, i1, j0, j1, face);
     }
 }
 
@@ -486,18 +491,9 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
             edge->b = b_lane[e][l];
             edge->c = c_lane[e][l];
         }
-        r->plane[0] = plane[0][l];
-        r->plane[1] = plane[1][l];
-        r->plane[2] = plane[2][l];
-        r->element = k;
-        r->back = flags[4][l] != 0;
-        r->edges = edges;
-        __global HrBox* box = boxes + slot;
-        box->i0 = (int)box_lane[0][l];
-        box->i1 = (int)box_lane[1][l];
-        box->j0 = (int)box_lane[2][l];
-        box->j1 = (int)box_lane[3][l];
-        box->face = (int)flags[3][l];
+        store_record_fields(r, boxes + slot, plane[0][l], plane[1][l], plane[2][l], k, flags[4][l] != 0, edges,
+                            (int)box_lane[0][l], (int)box_lane[1][l], (int)box_lane[2][l], (int)box_lane[3][l],
+                            (int)flags[3][l]);
         ++slot;
     }
 }
@@ -557,6 +553,25 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         group_records[get_group_id(0)] = used - group_first_slot(shot, patches, (int)get_group_id(0));
 }
 
+// count and scatter: for each record of setup's work-group g (this work-group's), an atomic
+// increment of the counter of every tile its box touches, in the work-group's counter copy;
+// with lists, the counter is a cursor and the record's index goes into the list at it.
+void bin_records(const HrShot* shot, __global const HrPatch* patches, __global const HrBox* boxes,
+                 __global const uint* group_records, __global uint* counters, __global uint* lists) {
+    __global uint* copy = counters + counter_copy(shot->tile_base[HR_FACES]);
+    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
+    const uint used = group_records[get_group_id(0)];
+    for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
+        const HrBox box = boxes[slot];
+        __global uint* face_counters = copy + shot->tile_base[box.face];
+        for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
+            for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx) {
+                const uint at = atomic_inc(&face_counters[ty * shot->tiles_x + tx]);
+                if (lists != 0 && at < shot->list_capacity) lists[at] = slot;
+            }
+    }
+}
+
 // One count per tile each record may cover, in the counter copy of the work-group. Apart from
 // setup, whose record stores would otherwise drain at every atomic. Work-group g reads the
 // boxes of setup's work-group g.
@@ -571,16 +586,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(__gl
     boxes += b * record_stride(shot);
     group_records += b * get_num_groups(0);
     tile_counts += b * counter_stride(shot);
-    __global uint* copy = tile_counts + counter_copy(shot->tile_base[HR_FACES]);
-    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
-    const uint used = group_records[get_group_id(0)];
-    for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
-        const HrBox box = boxes[slot];
-        __global uint* counts = copy + shot->tile_base[box.face];
-        for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
-            for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx)
-                atomic_inc(&counts[ty * shot->tiles_x + tx]);
-    }
+    bin_records(shot, patches, boxes, group_records, tile_counts, 0);
 }
 
 // One work-group: exclusive prefix sum of the tile counts, tile by tile and within a tile copy
@@ -644,18 +650,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(__
     group_records += b * get_num_groups(0);
     cursors += b * counter_stride(shot);
     lists += b * (size_t)shot->list_capacity;
-    __global uint* copy = cursors + counter_copy(shot->tile_base[HR_FACES]);
-    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
-    const uint used = group_records[get_group_id(0)];
-    for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
-        const HrBox box = boxes[slot];
-        __global uint* face_cursors = copy + shot->tile_base[box.face];
-        for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
-            for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx) {
-                const uint at = atomic_inc(&face_cursors[ty * shot->tiles_x + tx]);
-                if (at < shot->list_capacity) lists[at] = slot;
-            }
-    }
+    bin_records(shot, patches, boxes, group_records, cursors, lists);
 }
 
 // What both raster kernels read and write of shot b of the batch: its slices of the per-shot
