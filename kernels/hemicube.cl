@@ -732,10 +732,12 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
 
 // For CPU devices: one work-item per tile walks the records of its list in turn, each over
 // only its bounding box within the tile, keeping the winners in private arrays (the
-// reference's loop order, parallel across tiles). Records are small (a few cells a row), so
-// each row is tested LANES cells at a time without branches: each edge's exact integer value,
-// stepped along the row and down the rows, and the same double depth as the scalar test. The
-// winner is the reference's: the nearest at the cell centre, ties to the lower element index.
+// reference's loop order, parallel across tiles). The inside test becomes, row by row, the
+// span of cells between the record's left and right edges, exact in integers (an edge's
+// quotient and remainder stepped down the rows, all edges of a side in one vector); the span
+// is depth-tested LANES cells at a time without branches, in the same double arithmetic as
+// the scalar test. The winner is the reference's: the nearest at the cell centre, ties to the
+// lower element index.
 // Each record adds the delta form factors of the cells it takes to its element's sum with one
 // atomic; a cell taken from an earlier record (overdraw) is given back by that record's
 // element, through a small private table of such corrections flushed to the sums at the end.
@@ -789,6 +791,39 @@ void table_add(SumTable* table, const HrShot* shot, __global long* sums, int own
     table->sum[t] += value;
 }
 
+// floor(m / d) for d > 0, and m - d floor(m / d) in *rem: the double quotient truncated, within
+// one of it for |m| < 2^62 and d >= 2^16, corrected in integers.
+long floor_div(long m, long d, long* rem) {
+    long q = convert_long_rtz((double)m / (double)d);
+    long r = m - q * d;
+    if (r < 0) {
+        q -= 1;
+        r += d;
+    } else if (r >= d) {
+        q += 1;
+        r -= d;
+    }
+    *rem = r;
+    return q;
+}
+
+long max_lanes(long8 v) {
+    const long4 a = max(v.lo, v.hi);
+    const long2 b = max(a.lo, a.hi);
+    return max(b.x, b.y);
+}
+
+// Whether any lane is set (-1), folded with | and tested once: any() can become a branch per lane.
+bool any_lanes(lane_long v) {
+#if HEMIRAD_LANES == 8
+    const long4 folded = v.lo | v.hi;
+#else
+    const long4 folded = v;
+#endif
+    const long2 pair = folded.lo | folded.hi;
+    return (pair.x | pair.y) != 0;
+}
+
 long sum_lanes(lane_long v) {
 #if HEMIRAD_LANES == 8
     const long4 folded = v.lo + v.hi;
@@ -831,6 +866,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     for (int t = 0; t < HR_SUM_TABLE; ++t) give_back.owner[t] = -1;
     double column_s[HEMIRAD_TILE + HEMIRAD_LANES - 1];  // s = x / per_unit - 1 of the tile's columns
     for (int c = 0; c < HEMIRAD_TILE + HEMIRAD_LANES - 1; ++c) column_s[c] = (ci0 + c + 0.5) / per_unit - 1.0;
+    double row_t[HEMIRAD_TILE];  // t = y / per_unit - t0 of its rows
+    for (int c = 0; c < HEMIRAD_TILE; ++c) row_t[c] = (cj0 + c + 0.5) / per_unit - t0;
     const size_t face_offset = face_cell_offset(face, n);
     __global const long* delta_face = delta_fixed + face_offset;
 
@@ -838,30 +875,69 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     for (uint at = offsets[tile * HEMIRAD_COUNT_COPIES]; at < end; ++at) {
         const uint slot = lists[at];
         const HrBox box = boxes[slot];
-        const int i0 = max(box.i0, ci0), i1 = min(box.i1, ci1), j0 = max(box.j0, cj0), j1 = min(box.j1, cj1);
+        const int count = records[slot].edges;
+        const int i0 = max(box.i0, ci0), i1 = min(box.i1, ci1);
+        long j0 = max(box.j0, cj0), j1 = min(box.j1, cj1);
         if (i0 > i1 || j0 > j1) continue;
         __global const HrRecord* r = records + slot;
-        // Edge values at (i0, j) of the current row, and per lane their offsets along it.
-        const int count = r->edges;
-        long a[HR_MAX_CLIPPED], b[HR_MAX_CLIPPED], row[HR_MAX_CLIPPED];
-        lane_long lane_a[HR_MAX_CLIPPED];
+        // The inside test edge by edge, as bounds: a i + b j + c > 0 is, with m = -(b j + c),
+        // i > m / a where a > 0 (a left edge), i < -m / -a where a < 0 (a right edge) and, for
+        // a horizontal edge (a = 0), a bound on the rows. Exact integer quotients (floor_div),
+        // stepped from row to row as m falls by b (quotient and remainder of b added in turn).
         for (int e = 0; e < count; ++e) {
-            a[e] = r->edge[e].a;
-            b[e] = r->edge[e].b;
-            row[e] = a[e] * i0 + b[e] * j0 + r->edge[e].c;
-            lane_a[e] = a[e] * LANE_INDEX_LONG;
+            const long b = r->edge[e].b, c = r->edge[e].c;
+            if (r->edge[e].a != 0) continue;
+            long rem;
+            const long q = floor_div(-c, b > 0 ? b : -b, &rem);
+            if (b > 0) j0 = max(j0, q + 1);
+            else j1 = min(j1, -q - 1);
         }
+        if (j0 > j1) continue;
+        // Left edges in one vector, right edges in another (a convex polygon has at most 8 on
+        // a side), stepped together; unused lanes never bind (quotient -2^40, steps 0).
+        long edge_q[2][8], edge_r[2][8], edge_d[2][8], edge_sq[2][8], edge_sr[2][8];
+        for (int e = 0; e < 8; ++e)
+            for (int side = 0; side < 2; ++side) {
+                edge_q[side][e] = -((long)1 << 40);
+                edge_r[side][e] = 0;
+                edge_d[side][e] = 1;
+                edge_sq[side][e] = 0;
+                edge_sr[side][e] = 0;
+            }
+        int used_side[2] = {0, 0};
+        for (int e = 0; e < count; ++e) {
+            const long a = r->edge[e].a, b = r->edge[e].b, c = r->edge[e].c;
+            if (a == 0) continue;
+            const int side = a > 0 ? 0 : 1;
+            const int k = used_side[side]++;
+            const long d = a > 0 ? a : -a;
+            edge_d[side][k] = d;
+            edge_sq[side][k] = floor_div(b, d, &edge_sr[side][k]);
+            edge_q[side][k] = floor_div(-(b * j0 + c), d, &edge_r[side][k]);
+        }
+        long8 left_q = vload8(0, edge_q[0]), left_r = vload8(0, edge_r[0]);
+        long8 right_q = vload8(0, edge_q[1]), right_r = vload8(0, edge_r[1]);
+        const long8 left_d = vload8(0, edge_d[0]), left_sq = vload8(0, edge_sq[0]), left_sr = vload8(0, edge_sr[0]);
+        const long8 right_d = vload8(0, edge_d[1]), right_sq = vload8(0, edge_sq[1]), right_sr = vload8(0, edge_sr[1]);
         const double depth_s = r->plane[0], depth_t = r->plane[1], depth_1 = r->plane[2];
         const int owner = 2 * r->element + r->back;
         lane_long won = 0;  // the delta form factors of the cells this record takes, per lane
-        for (int j = j0; j <= j1; ++j) {
-            const double y = j + 0.5;
-            const double row_depth = depth_t * (y / per_unit - t0);
+        for (int j = (int)j0; j <= (int)j1; ++j) {
+            const long lo = max((long)i0, max_lanes(left_q) + 1), hi = min((long)i1, -max_lanes(right_q) - 1);
+            // The next row: m falls by b; a borrow (-1 in a vector comparison) takes one more off.
+            left_r -= left_sr;
+            const long8 left_borrow = left_r < 0;
+            left_r += left_d & left_borrow;
+            left_q += left_borrow - left_sq;
+            right_r -= right_sr;
+            const long8 right_borrow = right_r < 0;
+            right_r += right_d & right_borrow;
+            right_q += right_borrow - right_sq;
+            if (lo > hi) continue;
+            const double row_depth = depth_t * row_t[j - cj0];
             const int base = (j - cj0) * HEMIRAD_TILE - ci0;
-            for (int i = i0; i <= i1; i += HEMIRAD_LANES) {
-                lane_long in = convert_lane_long((lane_int)(i) + LANE_INDEX <= (lane_int)(i1));
-                for (int e = 0; e < count; ++e) in &= (lane_long)(row[e] + a[e] * (i - i0)) + lane_a[e] > 0;
-                if (!any(in)) continue;
+            for (int i = (int)lo; i <= (int)hi; i += HEMIRAD_LANES) {
+                const lane_long in = (lane_long)(i) + LANE_INDEX_LONG <= (lane_long)(hi);
                 const lane_double s = vload_lanes(0, column_s + (i - ci0));
                 const lane_double inv_depth = depth_s * s + row_depth + depth_1;
                 const int cell = base + i;
@@ -869,13 +945,13 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
                 const lane_double old_depth = vload_lanes(0, best_depth + cell);
                 const lane_long take = in & (convert_lane_long(old < 0) | (inv_depth > old_depth) |
                                              ((inv_depth == old_depth) & convert_lane_long((lane_int)(owner) < old)));
-                if (!any(take)) continue;
+                if (!any_lanes(take)) continue;
                 const lane_int take_int = convert_lane_int(take);
                 const lane_long delta = vload_lanes(0, delta_face + (size_t)j * n + i);  // may read past the row
                 won += select((lane_long)(0), delta, take);
                 // Cells taken from an earlier record (overdraw): its element gives them back.
                 // Per lane through private copies: portable OpenCL C indexes no vector.
-                if (any(take_int & (old >= 0))) {
+                if (any_lanes(take & convert_lane_long(old >= 0))) {
                     int taken[HEMIRAD_LANES], previous[HEMIRAD_LANES];
                     long given[HEMIRAD_LANES];
                     vstore_lanes(take_int, 0, taken);
@@ -888,7 +964,6 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
                 vstore_lanes(select(old, (lane_int)(owner), take_int), 0, best + cell);
                 vstore_lanes(select(old_depth, inv_depth, take), 0, best_depth + cell);
             }
-            for (int e = 0; e < count; ++e) row[e] += b[e];
         }
         // Integer sums: the order of these atomics (and of the lists) cannot change the result.
         const long total = sum_lanes(won);
