@@ -3,6 +3,9 @@
 // Every timed shot of every engine is also compared with the reference, so a fast wrong engine
 // cannot win. Usage: hemirad_bench_engines [SCENE] [--hemicube N] [--patch-size S]
 //   [--element-size S] [--shots K] [--repeats R] [--batch K] [--json FILE]
+#include <fmt/core.h>
+
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -10,14 +13,12 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
-#include <CLI/CLI.hpp>
-#include <fmt/core.h>
-#include <nlohmann/json.hpp>
-
 #include "cl/runtime.h"
+#include "core/error.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
@@ -39,6 +40,9 @@ Stats stats(std::vector<double> v) {
     return {v.front(), v[v.size() / 2], mean > 0.0 ? 100.0 * std::sqrt(var) / mean : 0.0};
 }
 
+int run_bench(const std::string& scene_file, const std::string& json_file, int hemicube, int shots, int repeats,
+              int batch, double patch, double element);
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -57,7 +61,26 @@ int main(int argc, char** argv) {
         ->check(CLI::PositiveNumber);
     app.add_option("--json", json_file, "also write the results here");
     CLI11_PARSE(app, argc, argv);
+    // One line for what stops a run, as the CLI does: a bad scene (2), a kernel that does not
+    // build or anything else (1).
+    try {
+        return run_bench(scene_file, json_file, hemicube, shots, repeats, batch, patch, element);
+    } catch (const InputError& e) {
+        std::cerr << "bench: " << e.what() << "\n";
+        return 2;
+    } catch (const ocl::BuildError& e) {
+        std::cerr << "bench: " << e.what() << "\n";
+        return 1;
+    } catch (const std::exception& e) {
+        std::cerr << "bench: " << e.what() << "\n";
+        return 1;
+    }
+}
 
+namespace {
+
+int run_bench(const std::string& scene_file, const std::string& json_file, int hemicube, int shots, int repeats,
+              int batch, double patch, double element) {
     const scene::Scene s = scene::load(scene_file);
     const mesh::Mesh m = mesh::build(s, {patch, element});
     const formfactor::Settings settings{hemicube, 1};
@@ -69,7 +92,8 @@ int main(int argc, char** argv) {
         std::vector<double> ms_per_shot;  // one value per repeat
     };
     std::vector<Entry> entries;
-    entries.push_back({"ref", "host (1 thread)", nullptr, std::make_unique<formfactor::ReferenceEngine>(m, settings), {}});
+    entries.push_back(
+        {"ref", "host (1 thread)", nullptr, std::make_unique<formfactor::ReferenceEngine>(m, settings), {}});
     for (const auto& d : ocl::list_devices()) {
         Entry e{"opencl", d.name + " (" + d.id() + ")", std::make_unique<ocl::Context>(d), nullptr, {}};
         e.engine_ptr = std::make_unique<formfactor::OpenCLEngine>(m, *e.context, settings);
@@ -109,8 +133,9 @@ int main(int argc, char** argv) {
     }
 
     const Stats ref = stats(entries[0].ms_per_shot);
-    std::cout << fmt::format("{}: {} patches, {} elements, N = {}, {} shots × {} repeats, batches of {} (worst |ΔF| vs ref {:.1e})\n\n",
-                             scene_file, m.patches.size(), m.elements.size(), hemicube, shots, repeats, batch, worst_error);
+    std::cout << fmt::format(
+        "{}: {} patches, {} elements, N = {}, {} shots × {} repeats, batches of {} (worst |ΔF| vs ref {:.1e})\n\n",
+        scene_file, m.patches.size(), m.elements.size(), hemicube, shots, repeats, batch, worst_error);
     std::cout << "| engine | device | ms/shot median (min, σ) | shots/s | hemicube samples/s | vs ref |\n";
     std::cout << "|---|---|---|---|---|---|\n";
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
@@ -118,13 +143,20 @@ int main(int argc, char** argv) {
         const Stats st = stats(e.ms_per_shot);
         const double shots_per_s = 1000.0 / st.median;
         const double samples = 3.0 * hemicube * hemicube * shots_per_s;
-        std::cout << fmt::format("| {} | {} | {:.2f} ({:.2f}, ±{:.0f}%) | {:.0f} | {:.3g} | {:.2f}× |\n", e.engine, e.device,
-                                 st.median, st.min, st.sigma_percent, shots_per_s, samples, ref.median / st.median);
-        rows.push_back({{"engine", e.engine}, {"device", e.device}, {"scene", scene_file},
-                           {"triangles", s.triangles.size()}, {"patches", m.patches.size()},
-                           {"elements", m.elements.size()}, {"hemicube", hemicube}, {"batch", batch}, {"shots_per_s", shots_per_s},
-                           {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
-                           {"speedup_vs_ref", ref.median / st.median}});
+        std::cout << fmt::format("| {} | {} | {:.2f} ({:.2f}, ±{:.0f}%) | {:.0f} | {:.3g} | {:.2f}× |\n", e.engine,
+                                 e.device, st.median, st.min, st.sigma_percent, shots_per_s, samples,
+                                 ref.median / st.median);
+        rows.push_back({{"engine", e.engine},
+                        {"device", e.device},
+                        {"scene", scene_file},
+                        {"triangles", s.triangles.size()},
+                        {"patches", m.patches.size()},
+                        {"elements", m.elements.size()},
+                        {"hemicube", hemicube},
+                        {"batch", batch},
+                        {"shots_per_s", shots_per_s},
+                        {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
+                        {"speedup_vs_ref", ref.median / st.median}});
     }
     for (const auto& e : entries) {
         const auto* cl_engine = dynamic_cast<const formfactor::OpenCLEngine*>(e.engine_ptr.get());
@@ -139,3 +171,5 @@ int main(int argc, char** argv) {
     if (!json_file.empty()) std::ofstream(json_file) << rows.dump(2) << "\n";
     return 0;
 }
+
+}  // namespace
