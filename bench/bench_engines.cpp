@@ -3,9 +3,6 @@
 // Every timed shot of every engine is also compared with the reference, so a fast wrong engine
 // cannot win. Usage: hemirad_bench_engines [SCENE] [--hemicube N] [--patch-size S]
 //   [--element-size S] [--shots K] [--repeats R] [--batch K] [--json FILE]
-#include <fmt/core.h>
-
-#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -13,9 +10,12 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
-#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include <CLI/CLI.hpp>
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
 
 #include "cl/runtime.h"
 #include "core/error.h"

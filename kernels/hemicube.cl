@@ -791,20 +791,31 @@ void table_add(SumTable* table, const HrShot* shot, __global long* sums, int own
     table->sum[t] += value;
 }
 
-// floor(m / d) for d > 0, and m - d floor(m / d) in *rem: the double quotient truncated, within
-// one of it for |m| < 2^62 and d >= 2^16, corrected in integers.
+// floor(m / d) for d > 0, and m - d floor(m / d) in *rem, exact: the double quotient truncated
+// (for |m| < 2^62 within two of the floor: the double's rounding plus truncation toward zero),
+// then corrected in integers until the remainder is in [0, d).
 long floor_div(long m, long d, long* rem) {
     long q = convert_long_rtz((double)m / (double)d);
     long r = m - q * d;
-    if (r < 0) {
+    while (r < 0) {
         q -= 1;
         r += d;
-    } else if (r >= d) {
+    }
+    while (r >= d) {
         q += 1;
         r -= d;
     }
     *rem = r;
     return q;
+}
+
+// floor_div of each pair (m[k], d[k]) into out[2 k] (quotient) and out[2 k + 1] (remainder):
+// what the tests hold to exact integer division.
+__kernel void floor_div_pairs(__global const long* m, __global const long* d, __global long* out) {
+    const size_t k = get_global_id(0);
+    long rem;
+    out[2 * k] = floor_div(m[k], d[k], &rem);
+    out[2 * k + 1] = rem;
 }
 
 long max_lanes(long8 v) {

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -259,6 +260,69 @@ TEST_CASE("opencl: a uniform closed-box furnace reaches B = E/(1 - rho)", "[open
     const glm::dvec3 expected = glm::dvec3(1.0, 0.5, 0.25) / (1.0 - rho);
     for (const auto& b : solver.radiosity(true))
         for (int c = 0; c < 3; ++c) REQUIRE_THAT(b[c], WithinRel(expected[c], 0.01));
+}
+
+// raster_records' spans rest on floor_div: a double quotient corrected in integers. Held to
+// exact integer division where the double is least exact: large |m|, small and large d, and
+// remainders 0, 1 and d - 1 on either side of zero.
+TEST_CASE("opencl: floor_div is exact integer floor division", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    std::vector<cl_long> ms, ds;
+    std::vector<std::pair<std::int64_t, std::int64_t>> expected;  // quotient, remainder
+    const std::int64_t divisors[] = {std::int64_t{1} << 16, (std::int64_t{1} << 16) + 1, 3 << 16,
+                                     (std::int64_t{1} << 40) - 1, std::int64_t{1} << 45};
+    const std::int64_t quotients[] = {
+        -(std::int64_t{1} << 44) - 3, -(std::int64_t{1} << 41) - 1, -4097, -5, -1, 0, 1, 7, 4095,
+        (std::int64_t{1} << 41) + 3,  (std::int64_t{1} << 44) + 5};
+    for (const std::int64_t d : divisors)
+        for (const std::int64_t q : quotients)
+            for (const std::int64_t r : {std::int64_t{0}, std::int64_t{1}, d - 1}) {
+                const long double m = static_cast<long double>(q) * static_cast<long double>(d) + r;
+                if (std::fabs(m) >= 4.0e18L) continue;  // |m| < 2^62
+                ms.push_back(q * d + r);
+                ds.push_back(d);
+                expected.emplace_back(q, r);
+            }
+    // Where the truncated double quotient is two above the floor (found by a search like the
+    // one below), and a seeded spread of large negative quotients with remainders near d.
+    const std::int64_t two_off[][3] = {
+        {1627377, -1554185446353, 1627341}, {405543, -8536825398791, 405535}, {5991369, -450357492379, 5991362}};
+    for (const auto& c : two_off) {
+        ms.push_back(c[1] * c[0] + c[2]);
+        ds.push_back(c[0]);
+        expected.emplace_back(c[1], c[2]);
+    }
+    std::mt19937_64 random(20261122);
+    for (int k = 0; k < 200000; ++k) {
+        const auto d = static_cast<std::int64_t>(std::uniform_int_distribution<std::int64_t>(1 << 16, 1 << 24)(random));
+        const auto q =
+            -std::uniform_int_distribution<std::int64_t>(std::int64_t{1} << 30, std::int64_t{1} << 37)(random);
+        const auto r = d - 1 - std::uniform_int_distribution<std::int64_t>(0, 100)(random);
+        ms.push_back(q * d + r);
+        ds.push_back(d);
+        expected.emplace_back(q, r);
+    }
+    REQUIRE(ms.size() > 100);
+    cl::Program& program = ctx->program(std::string(ocl::kernel_source("hemicube.cl")), "");
+    cl::Kernel kernel(program, "floor_div_pairs");
+    cl::Context& context = ctx->context();
+    cl::Buffer m_buffer(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, ms.size() * sizeof(cl_long), ms.data());
+    cl::Buffer d_buffer(context, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, ds.size() * sizeof(cl_long), ds.data());
+    cl::Buffer out_buffer(context, CL_MEM_WRITE_ONLY, 2 * ms.size() * sizeof(cl_long));
+    kernel.setArg(0, m_buffer);
+    kernel.setArg(1, d_buffer);
+    kernel.setArg(2, out_buffer);
+    ctx->queue().enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(ms.size()), cl::NullRange);
+    std::vector<cl_long> out(2 * ms.size());
+    ctx->queue().enqueueReadBuffer(out_buffer, CL_TRUE, 0, out.size() * sizeof(cl_long), out.data());
+    std::size_t wrong = 0;
+    for (std::size_t k = 0; k < ms.size(); ++k) {
+        const bool ok = out[2 * k] == expected[k].first && out[2 * k + 1] == expected[k].second;
+        if (!ok && wrong++ < 5)
+            WARN("floor_div(" << ms[k] << ", " << ds[k] << ") = " << out[2 * k] << " rem " << out[2 * k + 1]
+                              << ", expected " << expected[k].first << " rem " << expected[k].second);
+    }
+    CHECK(wrong == 0);
 }
 
 TEST_CASE("opencl: kernel build failures throw BuildError with the device and the log", "[opencl]") {
