@@ -678,6 +678,16 @@ size_t face_cell_offset(int face, int n) {
     return face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
 }
 
+// The face `tile` lies on and its index within the face; false for no tile of the shot, or
+// when the shot's lists overflowed (the host grows them and reruns).
+bool raster_tile(const HrShot* shot, __global const uint* offsets, int tile, int* face, int* in_face) {
+    const int tiles = shot->tile_base[HR_FACES];
+    if (tile >= tiles || offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity) return false;
+    *face = tile_face(shot, tile);
+    *in_face = tile - shot->tile_base[*face];
+    return true;
+}
+
 // One work-group per tile, one work-item per cell: the nearest record at the cell centre,
 // ties to the lower element index. (depth, index) is a total order, so the winner does not
 // depend on the order of the tile's list. The winner's delta form factor goes to its sum
@@ -690,11 +700,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
     const HrShot* shot = &shot_value;
     raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
     const int tile = (int)get_group_id(0);
-    const int tiles = shot->tile_base[HR_FACES];
-    if (offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity)
-        return;  // overflowed: the host grows the lists, reruns
-    const int face = tile_face(shot, tile);
-    const int in_face = tile - shot->tile_base[face];
+    int face, in_face;
+    if (!raster_tile(shot, offsets, tile, &face, &in_face)) return;
     const int lid = (int)get_local_id(0);
     const int i = (in_face % shot->tiles_x) * HEMIRAD_TILE + lid % HEMIRAD_TILE;
     const int j = (in_face / shot->tiles_x) * HEMIRAD_TILE + lid / HEMIRAD_TILE;
@@ -824,17 +831,6 @@ long max_lanes(long8 v) {
     return max(b.x, b.y);
 }
 
-// Whether any lane is set (-1), folded with | and tested once: any() can become a branch per lane.
-bool any_lanes(lane_long v) {
-#if HEMIRAD_LANES == 8
-    const long4 folded = v.lo | v.hi;
-#else
-    const long4 folded = v;
-#endif
-    const long2 pair = folded.lo | folded.hi;
-    return (pair.x | pair.y) != 0;
-}
-
 long sum_lanes(lane_long v) {
 #if HEMIRAD_LANES == 8
     const long4 folded = v.lo + v.hi;
@@ -842,6 +838,12 @@ long sum_lanes(lane_long v) {
     const long4 folded = v;
 #endif
     return folded.x + folded.y + folded.z + folded.w;
+}
+
+// Whether any lane of a mask (0 or -1 per lane) is set, as one sum tested once: any() can
+// become a branch per lane.
+bool any_lanes(lane_long mask) {
+    return sum_lanes(mask) != 0;
 }
 
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
@@ -852,12 +854,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     const HrShot* shot = &shot_value;
     raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
     const int tile = (int)get_global_id(0);
-    const int tiles = shot->tile_base[HR_FACES];
-    if (tile >= tiles) return;
-    if (offsets[tiles * HEMIRAD_COUNT_COPIES] > shot->list_capacity)
-        return;  // overflowed: the host grows the lists, reruns
-    const int face = tile_face(shot, tile);
-    const int in_face = tile - shot->tile_base[face];
+    int face, in_face;
+    if (!raster_tile(shot, offsets, tile, &face, &in_face)) return;
     const int n = shot->n;
     const int ci0 = (in_face % shot->tiles_x) * HEMIRAD_TILE, cj0 = (in_face / shot->tiles_x) * HEMIRAD_TILE;
     const int ci1 = min(ci0 + HEMIRAD_TILE, n) - 1, cj1 = min(cj0 + HEMIRAD_TILE, face_rows(face, n)) - 1;
@@ -886,11 +884,11 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     for (uint at = offsets[tile * HEMIRAD_COUNT_COPIES]; at < end; ++at) {
         const uint slot = lists[at];
         const HrBox box = boxes[slot];
-        const int count = records[slot].edges;
         const int i0 = max(box.i0, ci0), i1 = min(box.i1, ci1);
         long j0 = max(box.j0, cj0), j1 = min(box.j1, cj1);
         if (i0 > i1 || j0 > j1) continue;
         __global const HrRecord* r = records + slot;
+        const int count = r->edges;
         // The inside test edge by edge, as bounds: a i + b j + c > 0 is, with m = -(b j + c),
         // i > m / a where a > 0 (a left edge), i < -m / -a where a < 0 (a right edge) and, for
         // a horizontal edge (a = 0), a bound on the rows. Exact integer quotients (floor_div),
