@@ -464,3 +464,23 @@ TEST_CASE("opencl: the GPU kernels (setup per patch, raster per cell) give the r
         }
     }
 }
+
+TEST_CASE("opencl: PoCL's workers are pinned only where every worker's CPU is allowed", "[opencl][runtime]") {
+    // No choice of the user's: pinned when this process may use exactly CPUs 0 .. online - 1.
+    CHECK(ocl::should_pin_pocl_threads(nullptr, nullptr, nullptr, 2, 2, 2));
+    CHECK(ocl::should_pin_pocl_threads(nullptr, "1", nullptr, 4, 4, 4));
+    CHECK(ocl::should_pin_pocl_threads(nullptr, "4", nullptr, 4, 4, 4));
+    // The user's POCL_AFFINITY (either way) or thread floor stands.
+    CHECK_FALSE(ocl::should_pin_pocl_threads("0", nullptr, nullptr, 2, 2, 2));
+    CHECK_FALSE(ocl::should_pin_pocl_threads("1", nullptr, nullptr, 2, 2, 2));
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, nullptr, "8", 2, 2, 2));
+    // More workers than CPUs, or an unreadable count: a worker would ask for a CPU it cannot have.
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, "3", nullptr, 2, 2, 2));
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, "two", nullptr, 2, 2, 2));
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, "", nullptr, 2, 2, 2));
+    // A restricted process (taskset, cgroup cpuset): CPU i may not be allowed for worker i.
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, nullptr, nullptr, 2, 2, 4));
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, nullptr, nullptr, 3, 2, 4));  // CPUs 0, 1, 3
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, nullptr, nullptr, 2, 1, 2));  // online 0 and 2, not 1
+    CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, nullptr, nullptr, 0, 0, 0));
+}

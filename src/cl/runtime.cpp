@@ -4,6 +4,11 @@
 #include <cstdlib>
 #include <iostream>
 
+#if defined(__linux__)
+#include <sched.h>
+#include <unistd.h>
+#endif
+
 #include <fmt/core.h>
 
 namespace hemirad::ocl {
@@ -19,13 +24,52 @@ std::string trimmed(std::string s) {
     return s;
 }
 
+// Sets POCL_AFFINITY=1 where should_pin_pocl_threads says so, once, before the ICD loader
+// first starts PoCL (which reads its environment then).
+void prepare_pocl_environment() {
+#if defined(__linux__)
+    static const bool done = [] {
+        cpu_set_t set;
+        CPU_ZERO(&set);
+        if (sched_getaffinity(0, sizeof(set), &set) != 0) return true;
+        int prefix = 0;
+        while (prefix < CPU_SETSIZE && CPU_ISSET(prefix, &set)) ++prefix;
+        if (should_pin_pocl_threads(std::getenv("POCL_AFFINITY"), std::getenv("POCL_MAX_PTHREAD_COUNT"),
+                                    std::getenv("POCL_PTHREAD_MIN_THREADS"), CPU_COUNT(&set), prefix,
+                                    static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN))))
+            setenv("POCL_AFFINITY", "1", 0);
+        return true;
+    }();
+    (void)done;
+#endif
+}
+
+std::vector<cl::Platform> get_platforms() {
+    prepare_pocl_environment();
+    std::vector<cl::Platform> platforms;
+    cl::Platform::get(&platforms);
+    return platforms;
+}
+
 }  // namespace
+
+bool should_pin_pocl_threads(const char* affinity, const char* max_threads, const char* min_threads, int allowed,
+                             int allowed_prefix, int online) {
+    if (affinity != nullptr || min_threads != nullptr) return false;  // the user's choice
+    if (online < 1 || allowed != online || allowed_prefix != online) return false;
+    if (max_threads != nullptr) {
+        char* end = nullptr;
+        const long most = std::strtol(max_threads, &end, 10);
+        if (end == max_threads || *end != '\0' || most < 1 || most > allowed) return false;
+    }
+    return true;
+}
 
 std::vector<DeviceInfo> list_devices() {
     std::vector<DeviceInfo> out;
     std::vector<cl::Platform> platforms;
     try {
-        cl::Platform::get(&platforms);
+        platforms = get_platforms();
     } catch (const cl::Error&) {
         return out;  // no ICD loader configuration or no platform: no devices
     }
@@ -63,8 +107,7 @@ std::vector<DeviceInfo> list_devices() {
 }
 
 Context::Context(const DeviceInfo& device) : info_(device) {
-    std::vector<cl::Platform> platforms;
-    cl::Platform::get(&platforms);
+    const std::vector<cl::Platform> platforms = get_platforms();
     std::vector<cl::Device> devices;
     platforms.at(static_cast<std::size_t>(device.platform)).getDevices(CL_DEVICE_TYPE_ALL, &devices);
     device_ = devices.at(static_cast<std::size_t>(device.device));

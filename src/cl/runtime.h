@@ -28,6 +28,16 @@ struct DeviceInfo {
 // Every OpenCL device of every platform; empty (never throws) when there is no ICD or platform.
 std::vector<DeviceInfo> list_devices();
 
+// Whether hemirad should ask PoCL to pin its worker threads (POCL_AFFINITY=1, worker i on CPU
+// i), which the first OpenCL call in the process does where this says so: only when the user
+// set none of POCL_AFFINITY, POCL_MAX_PTHREAD_COUNT above `allowed`, or POCL_PTHREAD_MIN_THREADS
+// (null where unset), and this process may run on exactly CPUs 0 .. online - 1 (`allowed` of
+// them, the first `allowed_prefix` consecutive from 0), so that every worker's CPU exists and is
+// allowed. Unpinned, the workers migrated between cores and the Cornell bench ran ~1.3x slower
+// on 2 cores (README, Known limits).
+bool should_pin_pocl_threads(const char* affinity, const char* max_threads, const char* min_threads, int allowed,
+                             int allowed_prefix, int online);
+
 // A program failed to build. what() holds the device, the options and the full build log.
 class BuildError : public std::runtime_error {
 public:
