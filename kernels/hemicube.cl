@@ -196,13 +196,14 @@ int counter_copy(int tiles) {
 
 // A record's fields besides its edges, and its cell box (both setups write records through this).
 void store_record_fields(__global HrRecord* r, __global HrBox* box, double plane_s, double plane_t, double plane_1,
-                         int k, int back, int edges, int i0, int i1, int j0, int j1, int face) {
+                         int k, int back, int edges, int spans, int i0, int i1, int j0, int j1, int face) {
     r->plane[0] = plane_s;
     r->plane[1] = plane_t;
     r->plane[2] = plane_1;
     r->element = k;
     r->back = back;
     r->edges = edges;
+    r->spans = spans;
     box->i0 = i0;
     box->i1 = i1;
     box->j0 = j0;
@@ -316,12 +317,12 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
             const int f = e + 1 == poly.n ? 0 : e + 1;
             const long dx = x[f] - x[e], dy = y[f] - y[e];
             if (dx == 0 && dy == 0) continue;  // clipping or snapping can repeat a vertex
-            __global HrEdge* edge = &r->edge[edges++];
+            __global HrEdge* edge = &r->cover.edge[edges++];
             edge->a = -dy * SUBCELL;
             edge->b = dx * SUBCELL;
             edge->c = dx * (half_cell - y[e]) - dy * (half_cell - x[e]) + (owns_edge_point(dx, dy) ? 1 : 0);
         }
-        store_record_fields(r, boxes + slot, nf.x / c, nf.y / c, nf.z / c, k, is_back, edges, i0, i1, j0, j1, face);
+        store_record_fields(r, boxes + slot, nf.x / c, nf.y / c, nf.z / c, k, is_back, edges, 0, i0, i1, j0, j1, face);
     }
 }
 
@@ -351,6 +352,36 @@ llong outside_bits_lanes(ldouble x, ldouble y, ldouble z, double eps) {
     const llong face3 = base | ((xpy < 0.0) & 2) | ((xmy > 0.0) & 4) | ((zmy > 0.0) & 8);
     const llong face4 = base | ((xpy > 0.0) & 2) | ((xmy < 0.0) & 4) | ((zpy > 0.0) & 8);
     return face0 | face1 << 5 | face2 << 10 | face3 << 15 | face4 << 20;
+}
+
+// Whether any lane of a mask (0 or -1 per lane) is set, the lanes folded with | and tested once.
+bool any_of8(llong mask) {
+    const long4 a = mask.lo | mask.hi;
+    const long2 b = a.lo | a.hi;
+    return (b.x | b.y) != 0;
+}
+
+// floor_div (below) a lane at a time, for |m| < 2^53: the double quotient truncated, then
+// corrected until every remainder is in [0, d).
+llong floor_div_lanes(llong m, llong d, llong* rem) {
+    llong q = convert_long8_rtz(convert_double8(m) / convert_double8(d));
+    llong r = m - q * d;
+    while (any_of8(r < 0)) {
+        const llong under = r < 0;  // -1 in such lanes
+        q += under;
+        r += d & under;
+    }
+    while (any_of8(r >= d)) {
+        const llong over = r >= d;
+        q -= over;
+        r -= d & over;
+    }
+    *rem = r;
+    return q;
+}
+
+llong abs_lanes(llong v) {
+    return select(v, -v, v < 0);
 }
 
 llong snap_lanes(ldouble cells) {
@@ -441,18 +472,77 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     const llong j1 = min(rows - 1, convert_long8(floor(convert_double8(ymax - SUBCELL / 2) / sub)));
     record &= (i0 <= i1) & (j0 <= j1);
 
+    // The edges of the inside test, as setup_element makes them; and in lanes, divided through
+    // by SUBCELL = S (a and b are multiples of it, and for integers a' i + b' j, a i + b j + c > 0
+    // is a' i + b' j > -c / S, is a' i + b' j + ceil(c / S) > 0), which keeps the quotients
+    // below in doubles' exact range (|m| < 2^42 up to N = 4096).
     // Per lane from here, through private copies (portable OpenCL C indexes no vector).
     long a_lane[4][HR_SETUP_LANES], b_lane[4][HR_SETUP_LANES], c_lane[4][HR_SETUP_LANES];
+    llong edge_a[4], edge_b[4], edge_c[4];
     for (int e = 0; e < 4; ++e) {
         const int f = (e + 1) & 3;
         const llong dx = x[f] - x[e], dy = y[f] - y[e];
         const llong owns = (dy < 0) | ((dy == 0) & (dx > 0));  // owns_edge_point
         const long half_cell = SUBCELL / 2;
+        const llong c_full = dx * (half_cell - y[e]) - dy * (half_cell - x[e]) + (owns & 1);
         // A repeated vertex (a triangle's, or one snapping made) gives no edge: a = b = 0 marks it.
         vstore8(-dy * SUBCELL, 0, a_lane[e]);
         vstore8(dx * SUBCELL, 0, b_lane[e]);
-        vstore8(dx * (half_cell - y[e]) - dy * (half_cell - x[e]) + (owns & 1), 0, c_lane[e]);
+        vstore8(c_full, 0, c_lane[e]);
+        // Zero in lanes without a record, whose values may be anything (an element behind the
+        // shooter projects to infinities): the divisions below must end.
+        edge_a[e] = select((llong)(0), -dy, record);
+        edge_b[e] = select((llong)(0), dx, record);
+        const llong minus_c = -c_full;  // ceil(c / S) = -floor(-c / S), the floor exact in integers
+        edge_c[e] = select((llong)(0), -((minus_c - (minus_c & (SUBCELL - 1))) / SUBCELL), record);
     }
+
+    // Spans, for records of at most HR_SPAN_ROWS rows: the raster's row bounds (see
+    // raster_records), worked out here for a lane of elements at once. Horizontal edges bound
+    // the rows; on each row, left edges (a > 0) the first cell and right edges (a < 0) the last,
+    // exact quotients stepped from row to row.
+    llong row0 = j0, row1 = j1;
+    for (int e = 0; e < 4; ++e) {
+        const llong flat = (edge_a[e] == 0) & (edge_b[e] != 0);
+        llong rem;
+        const llong q = floor_div_lanes(select((llong)(0), -edge_c[e], flat),
+                                        select((llong)(1), abs_lanes(edge_b[e]), flat), &rem);
+        row0 = select(row0, max(row0, q + 1), flat & (edge_b[e] > 0));
+        row1 = select(row1, min(row1, -q - 1), flat & (edge_b[e] < 0));
+    }
+    const llong span_rows = row1 - row0 + 1;
+    const llong spans = record & (span_rows <= HR_SPAN_ROWS);
+    llong edge_q[4], edge_r[4], edge_d[4], edge_sq[4], edge_sr[4];
+    for (int e = 0; e < 4; ++e) {
+        edge_d[e] = select((llong)(1), abs_lanes(edge_a[e]), edge_a[e] != 0);
+        edge_sq[e] = floor_div_lanes(edge_b[e], edge_d[e], &edge_sr[e]);
+        edge_q[e] = floor_div_lanes(-(edge_b[e] * row0 + edge_c[e]), edge_d[e], &edge_r[e]);
+    }
+    long rows_most = 0;
+    {
+        long rows_lane[HR_SETUP_LANES];
+        vstore8(select((llong)(0), span_rows, spans), 0, rows_lane);
+        for (int l = 0; l < HR_SETUP_LANES; ++l) rows_most = max(rows_most, rows_lane[l]);
+    }
+    int span[HR_SPAN_ROWS][HR_SETUP_LANES];
+    llong span_i0 = (llong)(1 << 30), span_i1 = -1;  // the columns the spans reach
+    for (int row = 0; row < (int)rows_most; ++row) {
+        llong lo = i0, hi = i1;
+        for (int e = 0; e < 4; ++e) {
+            lo = select(lo, max(lo, edge_q[e] + 1), edge_a[e] > 0);
+            hi = select(hi, min(hi, -edge_q[e] - 1), edge_a[e] < 0);
+            // The next row: m falls by b; a borrow (-1 in a vector comparison) takes one more off.
+            edge_r[e] -= edge_sr[e];
+            const llong borrow = edge_r[e] < 0;
+            edge_r[e] += edge_d[e] & borrow;
+            edge_q[e] += borrow - edge_sq[e];
+        }
+        const llong cells = ((llong)(row) < span_rows) & (lo <= hi);
+        span_i0 = select(span_i0, min(span_i0, lo), cells);
+        span_i1 = select(span_i1, max(span_i1, hi), cells);
+        vstore8(convert_int8(select((llong)(HR_SPAN_NONE), lo | hi << 16, cells)), 0, span[row]);
+    }
+    record &= ~spans | (span_i0 <= span_i1);  // spans covering no cell centre: no record
     double plane[3][HR_SETUP_LANES];
     vstore8(nu / c, 0, plane[0]);
     vstore8(nv / c, 0, plane[1]);
@@ -463,11 +553,12 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     vstore8(record, 0, flags[2]);
     vstore8(face, 0, flags[3]);
     vstore8(is_back, 0, flags[4]);
-    long box_lane[4][HR_SETUP_LANES];
-    vstore8(i0, 0, box_lane[0]);
-    vstore8(i1, 0, box_lane[1]);
-    vstore8(j0, 0, box_lane[2]);
-    vstore8(j1, 0, box_lane[3]);
+    long box_lane[5][HR_SETUP_LANES];  // i0, i1, j0, j1; spans: 1 for a span record
+    vstore8(select(i0, span_i0, spans), 0, box_lane[0]);
+    vstore8(select(i1, span_i1, spans), 0, box_lane[1]);
+    vstore8(select(j0, row0, spans), 0, box_lane[2]);
+    vstore8(select(j1, row1, spans), 0, box_lane[3]);
+    vstore8(spans & 1, 0, box_lane[4]);
 
     // One atomic for the records of all fast lanes: on CPUs an atomic waits for the stores
     // before it, so one per record would cost more than the record.
@@ -484,16 +575,21 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
         if (!flags[2][l]) continue;
         __global HrRecord* r = records + slot;
         int edges = 0;
-        for (int e = 0; e < 4; ++e) {
-            if (a_lane[e][l] == 0 && b_lane[e][l] == 0) continue;
-            __global HrEdge* edge = &r->edge[edges++];
-            edge->a = a_lane[e][l];
-            edge->b = b_lane[e][l];
-            edge->c = c_lane[e][l];
+        if (box_lane[4][l]) {
+            const int rows = (int)(box_lane[3][l] - box_lane[2][l]) + 1;
+            for (int row = 0; row < rows; ++row) r->cover.span[row] = span[row][l];
+        } else {
+            for (int e = 0; e < 4; ++e) {
+                if (a_lane[e][l] == 0 && b_lane[e][l] == 0) continue;
+                __global HrEdge* edge = &r->cover.edge[edges++];
+                edge->a = a_lane[e][l];
+                edge->b = b_lane[e][l];
+                edge->c = c_lane[e][l];
+            }
         }
         store_record_fields(r, boxes + slot, plane[0][l], plane[1][l], plane[2][l], k, flags[4][l] != 0, edges,
-                            (int)box_lane[0][l], (int)box_lane[1][l], (int)box_lane[2][l], (int)box_lane[3][l],
-                            (int)flags[3][l]);
+                            (int)box_lane[4][l], (int)box_lane[0][l], (int)box_lane[1][l], (int)box_lane[2][l],
+                            (int)box_lane[3][l], (int)flags[3][l]);
         ++slot;
     }
 }
@@ -721,7 +817,12 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
         if (i < box.i0 || i > box.i1 || j < box.j0 || j > box.j1) continue;
         __global const HrRecord* r = records + slot;
         bool inside = true;
-        for (int e = 0; e < r->edges && inside; ++e) inside = r->edge[e].a * i + r->edge[e].b * j + r->edge[e].c > 0;
+        if (r->spans) {
+            const int span = r->cover.span[j - box.j0];
+            inside = i >= (span & 0xffff) && i <= span >> 16;
+        }
+        for (int e = 0; e < r->edges && inside; ++e)
+            inside = r->cover.edge[e].a * i + r->cover.edge[e].b * j + r->cover.edge[e].c > 0;
         if (!inside) continue;
         const double inv_depth = r->plane[0] * s + r->plane[1] * t + r->plane[2];
         const int k = r->element;
@@ -895,60 +996,80 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
         long j0 = max(box.j0, cj0), j1 = min(box.j1, cj1);
         if (i0 > i1 || j0 > j1) continue;
         __global const HrRecord* r = records + slot;
-        const int count = r->edges;
-        // The inside test edge by edge, as bounds: a i + b j + c > 0 is, with m = -(b j + c),
-        // i > m / a where a > 0 (a left edge), i < -m / -a where a < 0 (a right edge) and, for
-        // a horizontal edge (a = 0), a bound on the rows. Exact integer quotients (floor_div),
-        // stepped from row to row as m falls by b (quotient and remainder of b added in turn).
-        for (int e = 0; e < count; ++e) {
-            const long b = r->edge[e].b, c = r->edge[e].c;
-            if (r->edge[e].a != 0) continue;
-            long rem;
-            const long q = floor_div(-c, b > 0 ? b : -b, &rem);
-            if (b > 0) j0 = max(j0, q + 1);
-            else j1 = min(j1, -q - 1);
-        }
-        if (j0 > j1) continue;
-        // Left edges in one vector, right edges in another (a convex polygon has at most 8 on
-        // a side), stepped together; unused lanes never bind (quotient -2^40, steps 0).
-        long edge_q[2][8], edge_r[2][8], edge_d[2][8], edge_sq[2][8], edge_sr[2][8];
-        for (int e = 0; e < 8; ++e)
-            for (int side = 0; side < 2; ++side) {
-                edge_q[side][e] = -((long)1 << 40);
-                edge_r[side][e] = 0;
-                edge_d[side][e] = 1;
-                edge_sq[side][e] = 0;
-                edge_sr[side][e] = 0;
+        const bool spans = r->spans != 0;
+        // A span record's rows come ready from setup. Otherwise the inside test edge by edge,
+        // as bounds: a i + b j + c > 0 is, with m = -(b j + c), i > m / a where a > 0 (a left
+        // edge), i < -m / -a where a < 0 (a right edge) and, for a horizontal edge (a = 0), a
+        // bound on the rows. Exact integer quotients (floor_div), stepped from row to row as m
+        // falls by b (quotient and remainder of b added in turn). Left edges in one vector,
+        // right edges in another (a convex polygon has at most 8 on a side), stepped together;
+        // unused lanes never bind (quotient -2^40, steps 0).
+        long8 left_q = 0, left_r = 0, left_d = 1, left_sq = 0, left_sr = 0;
+        long8 right_q = 0, right_r = 0, right_d = 1, right_sq = 0, right_sr = 0;
+        if (!spans) {
+            const int count = r->edges;
+            for (int e = 0; e < count; ++e) {
+                const long b = r->cover.edge[e].b, c = r->cover.edge[e].c;
+                if (r->cover.edge[e].a != 0) continue;
+                long rem;
+                const long q = floor_div(-c, b > 0 ? b : -b, &rem);
+                if (b > 0) j0 = max(j0, q + 1);
+                else j1 = min(j1, -q - 1);
             }
-        int used_side[2] = {0, 0};
-        for (int e = 0; e < count; ++e) {
-            const long a = r->edge[e].a, b = r->edge[e].b, c = r->edge[e].c;
-            if (a == 0) continue;
-            const int side = a > 0 ? 0 : 1;
-            const int k = used_side[side]++;
-            const long d = a > 0 ? a : -a;
-            edge_d[side][k] = d;
-            edge_sq[side][k] = floor_div(b, d, &edge_sr[side][k]);
-            edge_q[side][k] = floor_div(-(b * j0 + c), d, &edge_r[side][k]);
+            if (j0 > j1) continue;
+            long edge_q[2][8], edge_r[2][8], edge_d[2][8], edge_sq[2][8], edge_sr[2][8];
+            for (int e = 0; e < 8; ++e)
+                for (int side = 0; side < 2; ++side) {
+                    edge_q[side][e] = -((long)1 << 40);
+                    edge_r[side][e] = 0;
+                    edge_d[side][e] = 1;
+                    edge_sq[side][e] = 0;
+                    edge_sr[side][e] = 0;
+                }
+            int used_side[2] = {0, 0};
+            for (int e = 0; e < count; ++e) {
+                const long a = r->cover.edge[e].a, b = r->cover.edge[e].b, c = r->cover.edge[e].c;
+                if (a == 0) continue;
+                const int side = a > 0 ? 0 : 1;
+                const int k = used_side[side]++;
+                const long d = a > 0 ? a : -a;
+                edge_d[side][k] = d;
+                edge_sq[side][k] = floor_div(b, d, &edge_sr[side][k]);
+                edge_q[side][k] = floor_div(-(b * j0 + c), d, &edge_r[side][k]);
+            }
+            left_q = vload8(0, edge_q[0]);
+            left_r = vload8(0, edge_r[0]);
+            right_q = vload8(0, edge_q[1]);
+            right_r = vload8(0, edge_r[1]);
+            left_d = vload8(0, edge_d[0]);
+            left_sq = vload8(0, edge_sq[0]);
+            left_sr = vload8(0, edge_sr[0]);
+            right_d = vload8(0, edge_d[1]);
+            right_sq = vload8(0, edge_sq[1]);
+            right_sr = vload8(0, edge_sr[1]);
         }
-        long8 left_q = vload8(0, edge_q[0]), left_r = vload8(0, edge_r[0]);
-        long8 right_q = vload8(0, edge_q[1]), right_r = vload8(0, edge_r[1]);
-        const long8 left_d = vload8(0, edge_d[0]), left_sq = vload8(0, edge_sq[0]), left_sr = vload8(0, edge_sr[0]);
-        const long8 right_d = vload8(0, edge_d[1]), right_sq = vload8(0, edge_sq[1]), right_sr = vload8(0, edge_sr[1]);
         const double depth_s = r->plane[0], depth_t = r->plane[1], depth_1 = r->plane[2];
         const int owner = 2 * r->element + r->back;
         lane_long won = 0;  // the delta form factors of the cells this record takes, per lane
         for (int j = (int)j0; j <= (int)j1; ++j) {
-            const long lo = max((long)i0, max_lanes(left_q) + 1), hi = min((long)i1, -max_lanes(right_q) - 1);
-            // The next row: m falls by b; a borrow (-1 in a vector comparison) takes one more off.
-            left_r -= left_sr;
-            const long8 left_borrow = left_r < 0;
-            left_r += left_d & left_borrow;
-            left_q += left_borrow - left_sq;
-            right_r -= right_sr;
-            const long8 right_borrow = right_r < 0;
-            right_r += right_d & right_borrow;
-            right_q += right_borrow - right_sq;
+            long lo, hi;
+            if (spans) {
+                const int span = r->cover.span[j - box.j0];
+                lo = max(i0, span & 0xffff);
+                hi = min(i1, span >> 16);
+            } else {
+                lo = max((long)i0, max_lanes(left_q) + 1);
+                hi = min((long)i1, -max_lanes(right_q) - 1);
+                // The next row: m falls by b; a borrow (-1 in a vector comparison) takes one more off.
+                left_r -= left_sr;
+                const long8 left_borrow = left_r < 0;
+                left_r += left_d & left_borrow;
+                left_q += left_borrow - left_sq;
+                right_r -= right_sr;
+                const long8 right_borrow = right_r < 0;
+                right_r += right_d & right_borrow;
+                right_q += right_borrow - right_sq;
+            }
             if (lo > hi) continue;
             const double row_depth = depth_t * row_t[j - cj0];
             const int base = (j - cj0) * HEMIRAD_TILE - ci0;

@@ -91,17 +91,26 @@ typedef struct {
     hr_int pad;
 } HrBox;
 
+// Rows a span record holds: the room of the edges it goes without.
+#define HR_SPAN_ROWS (HR_MAX_CLIPPED * (int)sizeof(HrEdge) / 4)
+// A span row: the cells lo .. hi of the row (lo > hi: none), packed as lo | hi << 16.
+#define HR_SPAN_NONE 0xffff
+
 // One element seen on one face: its clipped polygon in cell coordinates (x in [0, N), y in
-// [0, rows)) as the edges of the inside test, and its plane for the depth. A cell centre is
-// inside where every edge is > 0. The fixed fields come first; a quad's record spans two
-// cache lines and a half.
+// [0, rows)) as the edges of the inside test (a cell centre is inside where every edge is > 0)
+// or, where setup worked them out (and they fit), as the spans of cells inside on each of the
+// box's rows; and its plane for the depth. The fixed fields come first; a record spans four
+// cache lines, of which a small quad's uses two.
 typedef struct {
     hr_double plane[3];  // 1/depth = plane[0] s + plane[1] t + plane[2] at face coordinates (s, t)
     hr_int element;      // element index
     hr_int back;         // 1: the back of a one-sided surface (a blocker)
-    hr_int edges;        // edge count, degenerate edges dropped
-    hr_int pad;
-    HrEdge edge[HR_MAX_CLIPPED];
+    hr_int edges;        // edge count, degenerate edges dropped; 0 in a span record
+    hr_int spans;        // 1: cover.span[r] are the cells of row box.j0 + r, box.j0 .. box.j1
+    union {
+        HrEdge edge[HR_MAX_CLIPPED];
+        hr_int span[HR_SPAN_ROWS];
+    } cover;
 } HrRecord;
 
 #endif

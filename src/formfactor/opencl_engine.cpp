@@ -27,7 +27,8 @@ static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(H
               offsetof(HrShot, tile_base) == 124 && offsetof(HrShot, list_capacity) == 148);
 static_assert(sizeof(HrEdge) == 24 && sizeof(HrBox) == 24);
 static_assert(sizeof(HrRecord) == 256 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, edges) == 32 &&
-              offsetof(HrRecord, edge) == 40);
+              offsetof(HrRecord, spans) == 36 && offsetof(HrRecord, cover) == 40 &&
+              sizeof(HrRecord{}.cover.span) == sizeof(HrRecord{}.cover));
 static_assert(std::int64_t{1} << HR_SUBCELL_BITS == kSubcell);
 static_assert(HR_FACES == kFaces);
 static_assert(HR_EMPTY == OpenCLEngine::kEmpty && HR_BLOCKER == OpenCLEngine::kBlocker);
