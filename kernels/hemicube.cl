@@ -342,15 +342,16 @@ void to_face_lanes(llong face, ldouble x, ldouble y, ldouble z, ldouble* u, ldou
     *d = select(select(select(select(-y, y, face == 3), -x, face == 2), x, face == 1), z, face == 0);
 }
 
-// outside_bits, a lane per element.
-llong outside_bits_lanes(ldouble x, ldouble y, ldouble z, double eps) {
-    const llong base = (z - eps < 0.0) & 1;
+// outside_bits, a lane per element, where a plane value is < -margin (outside_bits: margin 0).
+llong outside_bits_lanes(ldouble x, ldouble y, ldouble z, double eps, ldouble margin) {
+    const ldouble low = -margin;
+    const llong base = (z - eps < low) & 1;
     const ldouble zmx = z - x, zpx = z + x, zmy = z - y, zpy = z + y, xmy = x - y, xpy = x + y;
-    const llong face0 = base | ((zmx < 0.0) & 2) | ((zpx < 0.0) & 4) | ((zmy < 0.0) & 8) | ((zpy < 0.0) & 16);
-    const llong face1 = base | ((xmy < 0.0) & 2) | ((xpy < 0.0) & 4) | ((zmx > 0.0) & 8);
-    const llong face2 = base | ((xmy > 0.0) & 2) | ((xpy > 0.0) & 4) | ((zpx > 0.0) & 8);
-    const llong face3 = base | ((xpy < 0.0) & 2) | ((xmy > 0.0) & 4) | ((zmy > 0.0) & 8);
-    const llong face4 = base | ((xpy > 0.0) & 2) | ((xmy < 0.0) & 4) | ((zpy > 0.0) & 8);
+    const llong face0 = base | ((zmx < low) & 2) | ((zpx < low) & 4) | ((zmy < low) & 8) | ((zpy < low) & 16);
+    const llong face1 = base | ((xmy < low) & 2) | ((xpy < low) & 4) | ((zmx > margin) & 8);
+    const llong face2 = base | ((xmy > margin) & 2) | ((xpy > margin) & 4) | ((zpx > margin) & 8);
+    const llong face3 = base | ((xpy < low) & 2) | ((xmy > margin) & 4) | ((zmy > margin) & 8);
+    const llong face4 = base | ((xpy > margin) & 2) | ((xmy < low) & 4) | ((zpy > margin) & 8);
     return face0 | face1 << 5 | face2 << 10 | face3 << 15 | face4 << 20;
 }
 
@@ -361,10 +362,10 @@ bool any_of8(llong mask) {
     return (b.x | b.y) != 0;
 }
 
-// floor_div (below) a lane at a time, for |m| < 2^53: the double quotient truncated, then
-// corrected until every remainder is in [0, d).
-llong floor_div_lanes(llong m, llong d, llong* rem) {
-    llong q = convert_long8_rtz(convert_double8(m) / convert_double8(d));
+// floor_div (below) a lane at a time, for |m| < 2^53 and inverse ~ 1 / d: the estimate m
+// inverse truncated, then corrected until every remainder is in [0, d).
+llong floor_div_lanes(llong m, llong d, ldouble inverse, llong* rem) {
+    llong q = convert_long8_rtz(convert_double8(m) * inverse);
     llong r = m - q * d;
     while (any_of8(r < 0)) {
         const llong under = r < 0;  // -1 in such lanes
@@ -406,6 +407,7 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     // to_local, four vertices (a triangle's last repeated: the same values, the same bits).
     ldouble lx[4], ly[4], lz[4];
     llong above = 0, outside_all = -1, outside_any = 0;
+    ldouble magnitude = eps;  // of every coordinate and eps
     for (int i = 0; i < 4; ++i) {
         const ldouble dx = vload8(3 * i, group->v) - shot->origin[0];
         const ldouble dy = vload8(3 * i + 1, group->v) - shot->origin[1];
@@ -414,14 +416,27 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
         ly[i] = dx * shot->v[0] + dy * shot->v[1] + dz * shot->v[2];
         lz[i] = dx * shot->w[0] + dy * shot->w[1] + dz * shot->w[2];
         above |= lz[i] > eps;
-        const llong bits = outside_bits_lanes(lx[i], ly[i], lz[i], eps);
+        const llong bits = outside_bits_lanes(lx[i], ly[i], lz[i], eps, 0.0);
         outside_all &= bits;
         outside_any |= bits;
+        magnitude = fmax(magnitude, fmax(fabs(lx[i]), fmax(fabs(ly[i]), fabs(lz[i]))));
     }
     live &= above;
+    // Planes every vertex is outside of by more than the rounding of clipping could ever move
+    // a point: where the reference clips by earlier planes first, each new vertex is a convex
+    // combination of the element's vertices computed with an error below ~5 2^-53 M per
+    // clipping (M: the magnitude; the error of t only slides the point along its edge), at
+    // most four deep, so its computed value on such a plane stays below -margin + ~50 2^-53 M
+    // < 0: outside, and the face hidden, as a plane with every vertex out hides it at once.
+    // 2^-40 M leaves a factor of 100 (and an element that close to a face's plane is rare).
+    llong deep_all = -1;
+    {
+        const ldouble margin = magnitude * 0x1p-40;
+        for (int i = 0; i < 4; ++i) deep_all &= outside_bits_lanes(lx[i], ly[i], lz[i], eps, margin);
+    }
 
     // The one face with no vertex outside, every other hidden: the first of its planes any
-    // vertex is outside of (lowest bit) has all outside.
+    // vertex is outside of (lowest bit) has all outside, or one has all outside by the margin.
     llong face = -1, fast = live;
     for (int f = 0; f < HR_FACES; ++f) {
         const long planes = f == 0 ? 0x1f : 0x0f;
@@ -429,7 +444,8 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
         const llong inside = any_out == 0;
         fast &= ~(inside & (face >= 0));  // two such faces: leave it to setup_element
         face = select(face, (llong)(f), inside);
-        fast &= inside | ((any_out & -any_out & all_out) != 0);
+        const llong deep_out = (deep_all >> (5 * f)) & planes;
+        fast &= inside | ((any_out & -any_out & all_out) != 0) | (deep_out != 0);
     }
     fast &= face >= 0;
 
@@ -504,9 +520,10 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     llong row0 = j0, row1 = j1;
     for (int e = 0; e < 4; ++e) {
         const llong flat = (edge_a[e] == 0) & (edge_b[e] != 0);
+        if (!any_of8(flat)) continue;
         llong rem;
-        const llong q = floor_div_lanes(select((llong)(0), -edge_c[e], flat),
-                                        select((llong)(1), abs_lanes(edge_b[e]), flat), &rem);
+        const llong d = select((llong)(1), abs_lanes(edge_b[e]), flat);
+        const llong q = floor_div_lanes(select((llong)(0), -edge_c[e], flat), d, 1.0 / convert_double8(d), &rem);
         row0 = select(row0, max(row0, q + 1), flat & (edge_b[e] > 0));
         row1 = select(row1, min(row1, -q - 1), flat & (edge_b[e] < 0));
     }
@@ -515,8 +532,9 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     llong edge_q[4], edge_r[4], edge_d[4], edge_sq[4], edge_sr[4];
     for (int e = 0; e < 4; ++e) {
         edge_d[e] = select((llong)(1), abs_lanes(edge_a[e]), edge_a[e] != 0);
-        edge_sq[e] = floor_div_lanes(edge_b[e], edge_d[e], &edge_sr[e]);
-        edge_q[e] = floor_div_lanes(-(edge_b[e] * row0 + edge_c[e]), edge_d[e], &edge_r[e]);
+        const ldouble inverse = 1.0 / convert_double8(edge_d[e]);
+        edge_sq[e] = floor_div_lanes(edge_b[e], edge_d[e], inverse, &edge_sr[e]);
+        edge_q[e] = floor_div_lanes(-(edge_b[e] * row0 + edge_c[e]), edge_d[e], inverse, &edge_r[e]);
     }
     long rows_most = 0;
     {
