@@ -100,7 +100,7 @@ typedef struct {
 // [0, rows)) as the edges of the inside test (a cell centre is inside where every edge is > 0)
 // or, where setup worked them out (and they fit), as the spans of cells inside on each of the
 // box's rows; and its plane for the depth. The fixed fields come first; a record spans four
-// cache lines, of which a small quad's uses two.
+// cache lines, of which a small span record touches one or two.
 typedef struct {
     hr_double plane[3];  // 1/depth = plane[0] s + plane[1] t + plane[2] at face coordinates (s, t)
     hr_int element;      // element index
