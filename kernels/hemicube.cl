@@ -130,21 +130,33 @@ bool clip_if_needed(ClipPolygon* poly, int plane, int face, double eps) {
     return any_in && poly->n >= 3;
 }
 
-// Bit 5 * face + plane set where p (hemicube frame) is outside that plane of that face, the
-// plane values exactly those plane_value(plane, face, eps, to_face(face, p)) computes: to_face
-// only permutes and negates coordinates, so each face's value is one of seven differences
-// below or its exact negation (fl(-a - -b) = -fl(a - b)), outside where it is < 0.
-uint outside_bits(Vec p, double eps) {
+// Bit 5 * face + plane set where p (hemicube frame) is outside that plane of that face by more
+// than margin (0: outside at all), the plane values exactly those plane_value(plane, face, eps,
+// to_face(face, p)) computes: to_face only permutes and negates coordinates, so each face's
+// value is one of seven differences below or its exact negation (fl(-a - -b) = -fl(a - b)),
+// outside where it is < -margin.
+uint outside_bits(Vec p, double eps, double margin) {
+    const double low = -margin;
     const double base = p.z - eps;  // every face's base plane
     const double zmx = p.z - p.x, zpx = p.z + p.x, zmy = p.z - p.y, zpy = p.z + p.y;
     const double xmy = p.x - p.y, xpy = p.x + p.y;
-    const uint face0 = (base < 0.0) | (zmx < 0.0) << 1 | (zpx < 0.0) << 2 | (zmy < 0.0) << 3 | (zpy < 0.0) << 4;
-    const uint face1 = (base < 0.0) | (xmy < 0.0) << 1 | (xpy < 0.0) << 2 | (zmx > 0.0) << 3;    // (y, z, x)
-    const uint face2 = (base < 0.0) | (xmy > 0.0) << 1 | (xpy > 0.0) << 2 | (zpx > 0.0) << 3;    // (-y, z, -x)
-    const uint face3 = (base < 0.0) | (xpy < 0.0) << 1 | (xmy > 0.0) << 2 | (zmy > 0.0) << 3;    // (-x, z, y)
-    const uint face4 = (base < 0.0) | (xpy > 0.0) << 1 | (xmy < 0.0) << 2 | (zpy > 0.0) << 3;    // (x, z, -y)
+    const uint face0 = (base < low) | (zmx < low) << 1 | (zpx < low) << 2 | (zmy < low) << 3 | (zpy < low) << 4;
+    const uint face1 = (base < low) | (xmy < low) << 1 | (xpy < low) << 2 | (zmx > margin) << 3;  // (y, z, x)
+    const uint face2 = (base < low) | (xmy > margin) << 1 | (xpy > margin) << 2 | (zpx > margin) << 3;  // (-y, z, -x)
+    const uint face3 = (base < low) | (xpy < low) << 1 | (xmy > margin) << 2 | (zmy > margin) << 3;  // (-x, z, y)
+    const uint face4 = (base < low) | (xpy > margin) << 1 | (xmy < low) << 2 | (zpy > margin) << 3;  // (x, z, -y)
     return face0 | face1 << 5 | face2 << 10 | face3 << 15 | face4 << 20;
 }
+
+// Where every vertex of an element is outside one plane of a face by more than HIDDEN_MARGIN
+// times M (M: the largest magnitude of its coordinates and eps), the reference's clipping
+// finds the face hidden, whatever the planes before it do: where it clips by earlier planes
+// first, each new vertex is a convex combination of the element's vertices computed with an
+// error below ~5 2^-53 M per clipping (the error of t only slides the point along its edge),
+// at most four deep, so its computed value on that plane stays below -margin + ~50 2^-53 M
+// < 0: outside, and the face hidden, as a plane with every vertex out hides it at once.
+// 2^-40 leaves a factor of 100 (and an element that close to a face's plane is rare).
+#define HIDDEN_MARGIN 0x1p-40
 
 // Top-left rule for a counter-clockwise polygon: a centre on an edge belongs to it only for
 // edges going down, or going right along a horizontal.
@@ -164,8 +176,36 @@ int last_centre(long hi) {
     return (int)floor((double)(hi - SUBCELL / 2) / (double)SUBCELL);
 }
 
-Vec element_vertex(__global const HrElement* e, int i) {
-    return vec(e->v[3 * i], e->v[3 * i + 1], e->v[3 * i + 2]);
+// What setup_element reads of an element, from either of its copies in global memory.
+typedef struct {
+    Vec v[4];
+    Vec normal, centroid;
+    int n, has_twin;
+} Element;
+
+Element element_at(__global const HrElement* e) {
+    Element out;
+    for (int i = 0; i < 4; ++i) out.v[i] = vec(e->v[3 * i], e->v[3 * i + 1], e->v[3 * i + 2]);
+    out.normal = vec(e->normal[0], e->normal[1], e->normal[2]);
+    out.centroid = vec(e->centroid[0], e->centroid[1], e->centroid[2]);
+    out.n = e->n;
+    out.has_twin = e->has_twin;
+    return out;
+}
+
+// Lane l of a group (HrElementLanes), which setup_lanes has just read: in cache.
+Element element_in_lanes(__global const HrElementLanes* group, int l) {
+    Element out;
+    for (int i = 0; i < 4; ++i) {
+        __global const double* v = group->v + 3 * i * HR_SETUP_LANES + l;
+        out.v[i] = vec(v[0], v[HR_SETUP_LANES], v[2 * HR_SETUP_LANES]);
+    }
+    out.normal = vec(group->normal[l], group->normal[HR_SETUP_LANES + l], group->normal[2 * HR_SETUP_LANES + l]);
+    out.centroid =
+        vec(group->centroid[l], group->centroid[HR_SETUP_LANES + l], group->centroid[2 * HR_SETUP_LANES + l]);
+    out.n = group->n[l];
+    out.has_twin = group->has_twin[l];
+    return out;
 }
 
 int face_rows(int face, int n) {
@@ -213,20 +253,20 @@ void store_record_fields(__global HrRecord* r, __global HrBox* box, double plane
 
 // Element k's records, and their cell boxes, for each face on which it may cover a cell centre,
 // packed in its work-group's region of the record slots: at records[*used], *used counting up.
-void setup_element(const HrShot* shot, __global const HrElement* e, int k, __global HrRecord* records,
+void setup_element(const HrShot* shot, const Element* e, int k, __global HrRecord* records,
                    __global HrBox* boxes, __local uint* used) {
     const double eps = shot->eps;
-    const Vec normal = vec(e->normal[0], e->normal[1], e->normal[2]);
+    const Vec normal = e->normal;
     const Vec origin = vec(shot->origin[0], shot->origin[1], shot->origin[2]);
     const double facing =
-        dot3(normal, vec(origin.x - e->centroid[0], origin.y - e->centroid[1], origin.z - e->centroid[2]));
+        dot3(normal, vec(origin.x - e->centroid.x, origin.y - e->centroid.y, origin.z - e->centroid.z));
     const int is_back = facing < 0.0;
     if (is_back && e->has_twin) return;  // the twin draws this surface from this side
 
     Vec in_frame[4];
     bool above = false;
     for (int i = 0; i < e->n; ++i) {
-        in_frame[i] = to_local(shot, element_vertex(e, i));
+        in_frame[i] = to_local(shot, e->v[i]);
         above = above || in_frame[i].z > eps;
     }
     if (!above) return;
@@ -236,12 +276,17 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
     const int n = shot->n;
     const double per_unit = 0.5 * n;  // cells per unit of face coordinate (the reference's `half`)
 
-    // Which vertices lie outside which face planes, from the seven plane values every face shares.
-    uint outside_all = ~0u, outside_any = 0u;
+    // Which vertices lie outside which face planes, from the seven plane values every face
+    // shares; and the planes every vertex is outside of by the margin (HIDDEN_MARGIN).
+    double magnitude = eps;
+    for (int i = 0; i < e->n; ++i)
+        magnitude = fmax(magnitude, fmax(fabs(in_frame[i].x), fmax(fabs(in_frame[i].y), fabs(in_frame[i].z))));
+    uint outside_all = ~0u, outside_any = 0u, deep_all = ~0u;
     for (int i = 0; i < e->n; ++i) {
-        const uint bits = outside_bits(in_frame[i], eps);
+        const uint bits = outside_bits(in_frame[i], eps, 0.0);
         outside_all &= bits;
         outside_any |= bits;
+        deep_all &= outside_bits(in_frame[i], eps, magnitude * HIDDEN_MARGIN);
     }
 
     for (int face = 0; face < HR_FACES; ++face) {
@@ -250,6 +295,7 @@ void setup_element(const HrShot* shot, __global const HrElement* e, int k, __glo
         // hides the face, as clip_if_needed would decide. From the first plane that cuts it on,
         // the clipping itself.
         const int planes = face == 0 ? 5 : 4;
+        if ((deep_all >> (5 * face)) & ((1u << planes) - 1)) continue;  // hidden (HIDDEN_MARGIN)
         int first_cut = planes;
         bool hidden = false;
         for (int plane = 0; plane < planes && first_cut == planes && !hidden; ++plane) {
@@ -404,7 +450,7 @@ llong snap_lanes(ldouble cells) {
 }
 
 void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int first,
-                 __global const HrElement* elements, __global HrRecord* records, __global HrBox* boxes,
+                 __global HrRecord* records, __global HrBox* boxes,
                  __local uint* used) {
     const double eps = shot->eps;
     const llong n_lanes = convert_long8(vload8(0, group->n));
@@ -436,16 +482,11 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
         magnitude = fmax(magnitude, fmax(fabs(lx[i]), fmax(fabs(ly[i]), fabs(lz[i]))));
     }
     live &= above;
-    // Planes every vertex is outside of by more than the rounding of clipping could ever move
-    // a point: where the reference clips by earlier planes first, each new vertex is a convex
-    // combination of the element's vertices computed with an error below ~5 2^-53 M per
-    // clipping (M: the magnitude; the error of t only slides the point along its edge), at
-    // most four deep, so its computed value on such a plane stays below -margin + ~50 2^-53 M
-    // < 0: outside, and the face hidden, as a plane with every vertex out hides it at once.
-    // 2^-40 M leaves a factor of 100 (and an element that close to a face's plane is rare).
+    if (!any_of8(live)) return;  // all behind the base plane (or the shooter's): no record
+    // Planes every vertex is outside of by the margin: the face is hidden (HIDDEN_MARGIN).
     llong deep_all = -1;
     {
-        const ldouble margin = magnitude * 0x1p-40;
+        const ldouble margin = magnitude * HIDDEN_MARGIN;
         for (int i = 0; i < 4; ++i) deep_all &= outside_bits_lanes(lx[i], ly[i], lz[i], eps, margin);
     }
 
@@ -597,7 +638,8 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
         const int k = first + l;
         if (!flags[0][l]) continue;
         if (!flags[1][l]) {
-            setup_element(shot, elements + k, k, records, boxes, used);
+            const Element element = element_in_lanes(group, l);
+            setup_element(shot, &element, k, records, boxes, used);
             continue;
         }
         if (!flags[2][l]) continue;
@@ -659,7 +701,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
 #if HEMIRAD_SETUP_LANES
     if (p * HR_SETUP_LANES < shot->elements)
-        setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, elements, records, boxes, &used);
+        setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, records, boxes, &used);
 #else
     if (p < shot->patches && p != shot->shooter) {  // the shooter's elements lie in its base plane
         // Elements tile their patch: when the patch is below the base plane, so are they.
@@ -668,8 +710,10 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         for (int i = 0; i < patch->n; ++i)
             patch_above = patch_above || to_local(shot, vec(patch->v[3 * i], patch->v[3 * i + 1], patch->v[3 * i + 2]))
                                                  .z > shot->eps;
-        for (int k = patch->first_element; patch_above && k < patch->first_element + patch->elements; ++k)
-            setup_element(shot, elements + k, k, records, boxes, &used);
+        for (int k = patch->first_element; patch_above && k < patch->first_element + patch->elements; ++k) {
+            const Element element = element_at(elements + k);
+            setup_element(shot, &element, k, records, boxes, &used);
+        }
     }
 #endif
     barrier(CLK_LOCAL_MEM_FENCE);
