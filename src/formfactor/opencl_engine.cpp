@@ -42,8 +42,10 @@ const TuningEntry kTuningTable[] = {
     // Not yet measured: 256-cell raster groups, 4 warps per 1D group.
     {"gpu", {16, false, 4, 128, 256, 1, 4, false, "", 0}},
     // PoCL, 2 cores (Cornell, N = 256): the per-record raster ~2.5x faster than per-cell;
-    // with integer edges, tiles of 32 ~20% ahead of 16 and level with 64 (fewer record-tile
-    // pieces); a raster group of 1 ahead of 4 and 16. Setup in double8 lanes ~1.6x faster on one thread.
+    // with integer edges, tiles of 32 ~20% ahead of 16 (fewer record-tile pieces); with span
+    // records, tiles of 64 ~4% ahead in batches of 8 but ~7% behind one shot at a time, and
+    // 64x32 behind too; a raster group of 1 ahead of 4 and 16. Setup in double8 lanes ~1.6x
+    // faster on one thread.
     {"cpu", {32, true, 1, 64, 256, 8, 8, true, "", 0}},
 };
 
