@@ -26,6 +26,13 @@
 #include <OpenImageIO/imageio.h>
 #include <tiny_gltf.h>
 
+// Ends a test that needs an OpenCL device, visibly, where there is none.
+#define HEMIRAD_SKIP_WITHOUT_OPENCL()           \
+    if (hemirad::ocl::list_devices().empty()) { \
+        WARN("no OpenCL device: skipped");      \
+        return;                                 \
+    }
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -829,10 +836,7 @@ TEST_CASE("bad input after a scene warning is still one line on stderr", "[cli]"
 }
 
 TEST_CASE("an OpenCL bake under verify gives the reference bake byte for byte", "[cli]") {
-    if (hemirad::ocl::list_devices().empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
     const TempDir dir;
     const fs::path with_cl = dir / "opencl", with_ref = dir / "ref";
     const json report = bake_ok(dir, kClosedRoom, with_cl, concat(kFast, {"--device", "opencl", "--verify"}));
@@ -844,10 +848,7 @@ TEST_CASE("an OpenCL bake under verify gives the reference bake byte for byte", 
 }
 
 TEST_CASE("a batched OpenCL bake under verify gives the batched reference bake byte for byte", "[cli]") {
-    if (hemirad::ocl::list_devices().empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
     const TempDir dir;
     const fs::path with_cl = dir / "opencl", with_ref = dir / "ref";
     const json report =
@@ -877,10 +878,7 @@ TEST_CASE("HEMIRAD_DEVICE picks the device when --device is auto", "[cli]") {
 }
 
 TEST_CASE("auto falls back to the reference when the OpenCL kernels do not build", "[cli]") {
-    if (hemirad::ocl::list_devices().empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
     const TempDir dir;
     const fs::path out = dir / "out", forced = dir / "forced";
     const std::string broken = "HEMIRAD_OPENCL_OPTIONS=-DClipPolygon=42 ";  // turns a kernel typedef into nonsense
