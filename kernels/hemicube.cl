@@ -212,6 +212,14 @@ int face_rows(int face, int n) {
     return face == 0 ? n : n / 2;
 }
 
+// Shot b of a batch. The first comes by value as a kernel argument, so that a lone shot (a bake's
+// default) launches without a buffer write before it: on PoCL (2 cores, Cornell, N = 256) that
+// write cost ~0.08 ms of a 1.29 ms shot, most of it idle time between commands. The rest of the
+// batch comes from the shot buffer.
+HrShot batch_shot(const HrShot first, __global const HrShot* rest, size_t b) {
+    return b == 0 ? first : rest[b - 1];
+}
+
 // Every per-shot buffer holds a batch of shots, shot b at b times these strides; a kernel's
 // dimension 1 is the shot within the batch.
 size_t record_stride(const HrShot* shot) {
@@ -680,11 +688,11 @@ uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g
 // (setup_lanes); the records packed per work-group: group_records[g] says how many the region
 // of group g holds. Also zeroes the tile counts and the sums for the kernels after it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
-    __global const HrShot* shots, __global const HrElement* elements, __global const HrElementLanes* element_lanes,
-    __global const HrPatch* patches, __global HrRecord* records, __global HrBox* boxes, __global uint* group_records,
-    __global uint* tile_counts, __global long* sums) {
+    const HrShot first_shot, __global const HrShot* more_shots, __global const HrElement* elements,
+    __global const HrElementLanes* element_lanes, __global const HrPatch* patches, __global HrRecord* records,
+    __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts, __global long* sums) {
     const size_t b = get_global_id(1);
-    const HrShot shot_value = shots[b];
+    const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
     records += b * record_stride(shot);
     boxes += b * record_stride(shot);
@@ -743,13 +751,11 @@ void bin_records(const HrShot* shot, __global const HrPatch* patches, __global c
 // One count per tile each record may cover, in the counter copy of the work-group. Apart from
 // setup, whose record stores would otherwise drain at every atomic. Work-group g reads the
 // boxes of setup's work-group g.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(__global const HrShot* shots,
-                                                                            __global const HrPatch* patches,
-                                                                            __global const HrBox* boxes,
-                                                                            __global const uint* group_records,
-                                                                            __global uint* tile_counts) {
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(
+    const HrShot first_shot, __global const HrShot* more_shots, __global const HrPatch* patches,
+    __global const HrBox* boxes, __global const uint* group_records, __global uint* tile_counts) {
     const size_t b = get_global_id(1);
-    const HrShot shot_value = shots[b];
+    const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
     boxes += b * record_stride(shot);
     group_records += b * get_num_groups(0);
@@ -761,13 +767,11 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(__gl
 // by copy, into list offsets (and the scatter cursors, laid out as the counts): a tile's list is
 // offsets[tile * COPIES] up to offsets[(tile + 1) * COPIES]. offsets[tiles * COPIES] is the
 // total, also in sums[elements + 1], which the host checks against the list capacity.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(__global const HrShot* shots,
-                                                                                __global const uint* tile_counts,
-                                                                                __global uint* offsets,
-                                                                                __global uint* cursors,
-                                                                                __global long* sums) {
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
+    const HrShot first_shot, __global const HrShot* more_shots, __global const uint* tile_counts,
+    __global uint* offsets, __global uint* cursors, __global long* sums) {
     const size_t b = get_global_id(1);
-    const HrShot shot_value = shots[b];
+    const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
     tile_counts += b * counter_stride(shot);
     offsets += b * (counter_stride(shot) + 1);
@@ -805,14 +809,11 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
 // As count (the same work-items, so the same counter copies): the index of each record in the
 // list of every tile it may cover. The order within a list varies from run to run; the
 // raster's result does not depend on it.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(__global const HrShot* shots,
-                                                                              __global const HrPatch* patches,
-                                                                              __global const HrBox* boxes,
-                                                                              __global const uint* group_records,
-                                                                              __global uint* cursors,
-                                                                              __global uint* lists) {
+__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(
+    const HrShot first_shot, __global const HrShot* more_shots, __global const HrPatch* patches,
+    __global const HrBox* boxes, __global const uint* group_records, __global uint* cursors, __global uint* lists) {
     const size_t b = get_global_id(1);
-    const HrShot shot_value = shots[b];
+    const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
     boxes += b * record_stride(shot);
     group_records += b * get_num_groups(0);
@@ -861,10 +862,10 @@ bool raster_tile(const HrShot* shot, __global const uint* offsets, int tile, int
 // depend on the order of the tile's list. The winner's delta form factor goes to its sum
 // (sums[elements] for blockers) in fixed point: integer atomics add in any order exactly.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))) void raster(
-    __global const HrShot* shots, __global const HrRecord* records, __global const HrBox* boxes,
-    __global const uint* offsets, __global const uint* lists,
+    const HrShot first_shot, __global const HrShot* more_shots, __global const HrRecord* records,
+    __global const HrBox* boxes, __global const uint* offsets, __global const uint* lists,
     __global const long* delta_fixed, __global int* ids, __global long* sums) {
-    const HrShot shot_value = shots[get_global_id(1)];
+    const HrShot shot_value = batch_shot(first_shot, more_shots, get_global_id(1));
     const HrShot* shot = &shot_value;
     raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
     const int tile = (int)get_group_id(0);
@@ -1023,10 +1024,10 @@ bool any_lanes(lane_long mask) {
 }
 
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
-    __global const HrShot* shots, __global const HrRecord* records, __global const HrBox* boxes,
-    __global const uint* offsets, __global const uint* lists,
+    const HrShot first_shot, __global const HrShot* more_shots, __global const HrRecord* records,
+    __global const HrBox* boxes, __global const uint* offsets, __global const uint* lists,
     __global const long* delta_fixed, __global int* ids, __global long* sums) {
-    const HrShot shot_value = shots[get_global_id(1)];
+    const HrShot shot_value = batch_shot(first_shot, more_shots, get_global_id(1));
     const HrShot* shot = &shot_value;
     raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
     const int tile = (int)get_global_id(0);

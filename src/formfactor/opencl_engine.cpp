@@ -224,7 +224,8 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     const auto buffer = [&](std::size_t per_shot_bytes) {
         return cl::Buffer(cl_context, CL_MEM_READ_WRITE, shots * per_shot_bytes);
     };
-    shots_ = buffer(sizeof(HrShot));
+    // The batch's shots but the first, which goes by value (batch_shot in the kernels).
+    shots_ = cl::Buffer(cl_context, CL_MEM_READ_ONLY, std::max<std::size_t>(1, shots - 1) * sizeof(HrShot));
     records_ = buffer(record_slots() * sizeof(HrRecord));
     boxes_ = buffer(record_slots() * sizeof(HrBox));
     group_records_ = buffer(setup_groups() * sizeof(hr_uint));
@@ -291,11 +292,14 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         shot.list_capacity = list_capacity_;
     }
     // Every kernel's arguments, bound here only.
-    bind(setup_, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, sums_);
-    bind(count_, shots_, patches_, boxes_, group_records_, tile_counts_);
-    bind(scan_, shots_, tile_counts_, offsets_, cursors_, sums_);
-    bind(scatter_, shots_, patches_, boxes_, group_records_, cursors_, lists_);
-    bind(raster_, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
+    // The first shot goes by value, the rest through shots_ (see batch_shot in the kernels).
+    const HrShot& first = shots[0];
+    bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_,
+         sums_);
+    bind(count_, first, shots_, patches_, boxes_, group_records_, tile_counts_);
+    bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_);
+    bind(scatter_, first, shots_, patches_, boxes_, group_records_, cursors_, lists_);
+    bind(raster_, first, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
 
     // Dimension 1 of every kernel is the shot within the batch.
     cl::CommandQueue& queue = context_.queue();
@@ -306,7 +310,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     const std::size_t raster_wg = raster_group_size();
     const std::size_t raster_items = tuning_.raster_per_record ? round_up(tiles, raster_wg) : tiles * raster_wg;
     std::array<cl::Event, kStages> events;
-    queue.enqueueWriteBuffer(shots_, CL_FALSE, 0, batch * sizeof(HrShot), shots.data());
+    if (batch > 1) queue.enqueueWriteBuffer(shots_, CL_FALSE, 0, (batch - 1) * sizeof(HrShot), shots.data() + 1);
     const auto run = [&](cl::Kernel& kernel, std::size_t items, std::size_t group, cl::Event* event) {
         queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(items, batch), cl::NDRange(group, 1), nullptr,
                                    event);
