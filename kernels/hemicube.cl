@@ -3,7 +3,7 @@
 // contraction into FMAs, up to the projected vertices, which are snapped to fixed point; from
 // there the inside test is exact integer arithmetic, evaluated in any order. For a batch of
 // shots (dimension 1 of every NDRange), per shot: setup (cull, clip and project each element on
-// each face into packed records with their cell boxes) -> count (records per tile) -> scan
+// each face into packed records with their cell boxes, then count them per tile) -> scan
 // (per-tile list offsets) -> scatter (record indices into per-tile lists) -> raster, on GPUs one
 // work-group per tile and one work-item per cell, on CPUs (raster_records) one work-item per
 // tile walking its records: inside and depth tests, the cell's id, the winner's delta form
@@ -673,7 +673,7 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
 }
 #endif
 
-// The record slots of work-group g of setup (count and scatter): five per element it sets up,
+// The record slots of work-group g of setup (and of scatter): five per element it sets up,
 // from five times its first element.
 uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g) {
 #if HEMIRAD_SETUP_LANES
@@ -683,10 +683,30 @@ uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g
 #endif
 }
 
+// setup and scatter: for each of the `used` records of setup's work-group g (this
+// work-group's), an atomic increment of the counter of every tile its box touches, in the
+// work-group's counter copy; with lists, the counter is a cursor and the record's index goes
+// into the list at it.
+void bin_records(const HrShot* shot, __global const HrPatch* patches, __global const HrBox* boxes, uint used,
+                 __global uint* counters, __global uint* lists) {
+    __global uint* copy = counters + counter_copy(shot->tile_base[HR_FACES]);
+    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
+    for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
+        const HrBox box = boxes[slot];
+        __global uint* face_counters = copy + shot->tile_base[box.face];
+        for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
+            for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx) {
+                const uint at = atomic_inc(&face_counters[ty * shot->tiles_x + tx]);
+                if (lists != 0 && at < shot->list_capacity) lists[at] = slot;
+            }
+    }
+}
+
 // One work-item per patch (setup_element for its elements, none when the patch is the shooter
 // or lies below its base plane) or, with SETUP_LANES, per HR_SETUP_LANES elements
 // (setup_lanes); the records packed per work-group: group_records[g] says how many the region
-// of group g holds. Also zeroes the tile counts and the sums for the kernels after it.
+// of group g holds; each record then counted into the tiles it may cover (scan left the counts
+// at zero). Also zeroes the sums for the raster.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrElement* elements,
     __global const HrElementLanes* element_lanes, __global const HrPatch* patches, __global HrRecord* records,
@@ -703,9 +723,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     if (get_local_id(0) == 0) used = group_first_slot(shot, patches, (int)get_group_id(0));
     barrier(CLK_LOCAL_MEM_FENCE);
     const int p = (int)get_global_id(0);
-    // The shot's clears, ahead of count and raster in the queue.
-    const int counters = shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
-    for (int c = p; c < counters; c += (int)get_global_size(0)) tile_counts[c] = 0;
+    // The sums' clear, ahead of the raster in the queue (scan leaves the tile counts at zero).
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
 #if HEMIRAD_SETUP_LANES
     if (p * HR_SETUP_LANES < shot->elements)
@@ -724,51 +742,21 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         }
     }
 #endif
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (get_local_id(0) == 0)
-        group_records[get_group_id(0)] = used - group_first_slot(shot, patches, (int)get_group_id(0));
-}
-
-// count and scatter: for each record of setup's work-group g (this work-group's), an atomic
-// increment of the counter of every tile its box touches, in the work-group's counter copy;
-// with lists, the counter is a cursor and the record's index goes into the list at it.
-void bin_records(const HrShot* shot, __global const HrPatch* patches, __global const HrBox* boxes,
-                 __global const uint* group_records, __global uint* counters, __global uint* lists) {
-    __global uint* copy = counters + counter_copy(shot->tile_base[HR_FACES]);
-    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
-    const uint used = group_records[get_group_id(0)];
-    for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
-        const HrBox box = boxes[slot];
-        __global uint* face_counters = copy + shot->tile_base[box.face];
-        for (int ty = box.j0 / HEMIRAD_TILE; ty <= box.j1 / HEMIRAD_TILE; ++ty)
-            for (int tx = box.i0 / HEMIRAD_TILE; tx <= box.i1 / HEMIRAD_TILE; ++tx) {
-                const uint at = atomic_inc(&face_counters[ty * shot->tiles_x + tx]);
-                if (lists != 0 && at < shot->list_capacity) lists[at] = slot;
-            }
-    }
-}
-
-// One count per tile each record may cover, in the counter copy of the work-group. Apart from
-// setup, whose record stores would otherwise drain at every atomic. Work-group g reads the
-// boxes of setup's work-group g.
-__kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void count(
-    const HrShot first_shot, __global const HrShot* more_shots, __global const HrPatch* patches,
-    __global const HrBox* boxes, __global const uint* group_records, __global uint* tile_counts) {
-    const size_t b = get_global_id(1);
-    const HrShot shot_value = batch_shot(first_shot, more_shots, b);
-    const HrShot* shot = &shot_value;
-    boxes += b * record_stride(shot);
-    group_records += b * get_num_groups(0);
-    tile_counts += b * counter_stride(shot);
-    bin_records(shot, patches, boxes, group_records, tile_counts, 0);
+    // The work-group's records complete, each is counted into the tiles it may cover. After the
+    // barrier, not as it is stored: on CPUs an atomic waits for the stores before it.
+    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
+    const uint count = used - group_first_slot(shot, patches, (int)get_group_id(0));
+    if (get_local_id(0) == 0) group_records[get_group_id(0)] = count;
+    bin_records(shot, patches, boxes, count, tile_counts, 0);
 }
 
 // One work-group: exclusive prefix sum of the tile counts, tile by tile and within a tile copy
 // by copy, into list offsets (and the scatter cursors, laid out as the counts): a tile's list is
 // offsets[tile * COPIES] up to offsets[(tile + 1) * COPIES]. offsets[tiles * COPIES] is the
-// total, also in sums[elements + 1], which the host checks against the list capacity.
+// total, also in sums[elements + 1], which the host checks against the list capacity. The
+// counts are left at zero for the next shot's setup (the host zeroes them once, at allocation).
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
-    const HrShot first_shot, __global const HrShot* more_shots, __global const uint* tile_counts,
+    const HrShot first_shot, __global const HrShot* more_shots, __global uint* tile_counts,
     __global uint* offsets, __global uint* cursors, __global long* sums) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
@@ -799,6 +787,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
         offsets[t] = run;
         cursors[counter] = run;
         run += tile_counts[counter];
+        tile_counts[counter] = 0;  // for the next shot's setup, which counts into it
     }
     if (lid == HEMIRAD_SCAN_WG - 1) {
         offsets[entries] = partial[lid];
@@ -806,9 +795,9 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
     }
 }
 
-// As count (the same work-items, so the same counter copies): the index of each record in the
-// list of every tile it may cover. The order within a list varies from run to run; the
-// raster's result does not depend on it.
+// As setup's counting (the same work-groups, so the same counter copies): the index of each
+// record in the list of every tile it may cover. The order within a list varies from run to
+// run; the raster's result does not depend on it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrPatch* patches,
     __global const HrBox* boxes, __global const uint* group_records, __global uint* cursors, __global uint* lists) {
@@ -819,7 +808,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(
     group_records += b * get_num_groups(0);
     cursors += b * counter_stride(shot);
     lists += b * (size_t)shot->list_capacity;
-    bin_records(shot, patches, boxes, group_records, cursors, lists);
+    bin_records(shot, patches, boxes, group_records[get_group_id(0)], cursors, lists);
 }
 
 // What both raster kernels read and write of shot b of the batch: its slices of the per-shot

@@ -132,7 +132,6 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     if (!tuning.extra_options.empty()) options_ += " " + tuning.extra_options;
     cl::Program& program = context.program(std::string(ocl::kernel_source("hemicube.cl")), options_);
     setup_ = cl::Kernel(program, "setup");
-    count_ = cl::Kernel(program, "count");
     scan_ = cl::Kernel(program, "scan");
     scatter_ = cl::Kernel(program, "scatter");
     raster_ = cl::Kernel(program, tuning.raster_per_record ? "raster_records" : "raster");
@@ -145,7 +144,6 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
                             name, most, size));
     };
     check_group(setup_, "setup", tuning.work_group);
-    check_group(count_, "count", tuning.work_group);
     check_group(scatter_, "scatter", tuning.work_group);
     check_group(scan_, "scan", tuning.scan_work_group);
     check_group(raster_, "raster", raster_group_size());
@@ -230,6 +228,8 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     boxes_ = buffer(record_slots() * sizeof(HrBox));
     group_records_ = buffer(setup_groups() * sizeof(hr_uint));
     tile_counts_ = buffer(counters * sizeof(hr_uint));
+    // Zero once: setup counts into them, scan leaves them at zero again.
+    context_.queue().enqueueFillBuffer(tile_counts_, hr_uint{0}, 0, shots * counters * sizeof(hr_uint));
     offsets_ = buffer((counters + 1) * sizeof(hr_uint));
     cursors_ = buffer(counters * sizeof(hr_uint));
     lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
@@ -296,7 +296,6 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     const HrShot& first = shots[0];
     bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_,
          sums_);
-    bind(count_, first, shots_, patches_, boxes_, group_records_, tile_counts_);
     bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_);
     bind(scatter_, first, shots_, patches_, boxes_, group_records_, cursors_, lists_);
     bind(raster_, first, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
@@ -315,16 +314,15 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(items, batch), cl::NDRange(group, 1), nullptr,
                                    event);
     };
-    // count and scatter read the records of setup's work-groups, one work-group each.
+    // scatter reads the records of setup's work-groups, one work-group each.
     const std::size_t group_items = setup_groups() * wg;
     run(setup_, group_items, wg, &events[0]);
-    run(count_, group_items, wg, &events[1]);
-    run(scan_, scan_wg, scan_wg, &events[2]);
-    run(scatter_, group_items, wg, &events[3]);
-    run(raster_, raster_items, raster_wg, &events[4]);
+    run(scan_, scan_wg, scan_wg, &events[1]);
+    run(scatter_, group_items, wg, &events[2]);
+    run(raster_, raster_items, raster_wg, &events[3]);
     // The sums, then per shot the list entries it needed (from scan).
     queue.enqueueReadBuffer(sums_, CL_TRUE, 0, batch * sum_stride() * sizeof(hr_long), sums_host_.data(), nullptr,
-                            &events[5]);
+                            &events[4]);
     for (int s = 0; s < kStages; ++s)
         stage_seconds_[static_cast<std::size_t>(s)] +=
             1e-9 *

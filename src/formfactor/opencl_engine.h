@@ -59,9 +59,8 @@ public:
     const std::string& build_options() const { return options_; }
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
-    static constexpr int kStages = 6;
-    static constexpr std::array<const char*, kStages> kStageNames = {"setup",   "count",  "scan",
-                                                                     "scatter", "raster", "read"};
+    static constexpr int kStages = 5;
+    static constexpr std::array<const char*, kStages> kStageNames = {"setup", "scan", "scatter", "raster", "read"};
     const std::array<double, kStages>& stage_seconds() const { return stage_seconds_; }
 
 private:
@@ -76,7 +75,7 @@ private:
     int tiles_x_ = 0;
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
 
-    cl::Kernel setup_, count_, scan_, scatter_, raster_;  // raster_: raster or raster_records
+    cl::Kernel setup_, scan_, scatter_, raster_;  // raster_: raster or raster_records
     cl::Buffer shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_,
         cursors_, lists_, delta_fixed_, ids_buffer_, sums_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
