@@ -45,8 +45,9 @@ const TuningEntry kTuningTable[] = {
     // with integer edges, tiles of 32 ~20% ahead of 16 (fewer record-tile pieces); with span
     // records, tiles of 64 ~4% ahead in batches of 8 but ~7% behind one shot at a time, and
     // 64x32 behind too; a raster group of 1 ahead of 4 and 16. Setup in double8 lanes ~1.6x
-    // faster on one thread.
-    {"cpu", {32, true, 1, 64, 256, 8, 8, true, "", 0}},
+    // faster on one thread. Setup and scatter groups of 16 work-items (65 groups) ~5% ahead of
+    // 64 (17 groups, unevenly shared by 2 cores) one shot at a time, in 4 of 5 pairs; 8 no better.
+    {"cpu", {32, true, 1, 16, 256, 8, 8, true, "", 0}},
 };
 
 // Binds a kernel's arguments in order: the one place each kernel's signature is spelled out.
