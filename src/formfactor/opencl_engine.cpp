@@ -218,8 +218,7 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
 
 void OpenCLEngine::allocate_batch(std::size_t shots) {
     cl::Context& cl_context = context_.context();
-    const std::size_t counters =
-        static_cast<std::size_t>(tile_base_[kFaces]) * static_cast<std::size_t>(tuning_.count_copies);
+    const std::size_t counters = counter_entries();
     const auto buffer = [&](std::size_t per_shot_bytes) {
         return cl::Buffer(cl_context, CL_MEM_READ_WRITE, shots * per_shot_bytes);
     };
@@ -229,8 +228,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     boxes_ = buffer(record_slots() * sizeof(HrBox));
     group_records_ = buffer(setup_groups() * sizeof(hr_uint));
     tile_counts_ = buffer(counters * sizeof(hr_uint));
-    // Zero once: setup counts into them, scan leaves them at zero again.
-    context_.queue().enqueueFillBuffer(tile_counts_, hr_uint{0}, 0, shots * counters * sizeof(hr_uint));
+    counts_zero_ = false;
     offsets_ = buffer((counters + 1) * sizeof(hr_uint));
     cursors_ = buffer(counters * sizeof(hr_uint));
     lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
@@ -266,6 +264,10 @@ std::size_t OpenCLEngine::setup_groups() const {
     const std::size_t items =
         tuning_.setup_lanes ? (mesh_.elements.size() + HR_SETUP_LANES - 1) / HR_SETUP_LANES : mesh_.patches.size();
     return std::max<std::size_t>(1, (items + wg - 1) / wg);
+}
+
+std::size_t OpenCLEngine::counter_entries() const {
+    return static_cast<std::size_t>(tile_base_[kFaces]) * static_cast<std::size_t>(tuning_.count_copies);
 }
 
 std::size_t OpenCLEngine::sum_stride() const {
@@ -310,6 +312,11 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     const std::size_t raster_wg = raster_group_size();
     const std::size_t raster_items = tuning_.raster_per_record ? round_up(tiles, raster_wg) : tiles * raster_wg;
     std::array<cl::Event, kStages> events;
+    // setup counts into the tile counts and scan leaves them at zero again, so they need
+    // zeroing only when new, or when a launch before this one failed part-way.
+    if (!counts_zero_)
+        queue.enqueueFillBuffer(tile_counts_, hr_uint{0}, 0, batch_capacity_ * counter_entries() * sizeof(hr_uint));
+    counts_zero_ = false;
     if (batch > 1) queue.enqueueWriteBuffer(shots_, CL_FALSE, 0, (batch - 1) * sizeof(HrShot), shots.data() + 1);
     const auto run = [&](cl::Kernel& kernel, std::size_t items, std::size_t group, cl::Event* event) {
         queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(items, batch), cl::NDRange(group, 1), nullptr,
@@ -324,6 +331,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     // The sums, then per shot the list entries it needed (from scan).
     queue.enqueueReadBuffer(sums_, CL_TRUE, 0, batch * sum_stride() * sizeof(hr_long), sums_host_.data(), nullptr,
                             &events[4]);
+    counts_zero_ = true;  // scan has run
     for (int s = 0; s < kStages; ++s)
         stage_seconds_[static_cast<std::size_t>(s)] +=
             1e-9 *

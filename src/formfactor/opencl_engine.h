@@ -80,6 +80,7 @@ private:
         cursors_, lists_, delta_fixed_, ids_buffer_, sums_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
     std::size_t batch_capacity_ = 0;       // shots the per-shot buffers hold
+    bool counts_zero_ = false;             // tile_counts_ all zero (as every completed launch leaves them)
     std::size_t last_batch_ = 0;           // shots of the last launch
     std::size_t ids_first_ = 0;            // their first index in the last shoot_batch
     std::vector<ShotResult> batch_results_;
@@ -90,7 +91,8 @@ private:
 
     std::size_t raster_group_size() const;
     std::size_t record_slots() const;  // per shot
-    std::size_t setup_groups() const;  // work-groups of setup, count and scatter: a work-item per patch or lane group
+    std::size_t setup_groups() const;  // work-groups of setup and scatter: a work-item per patch or lane group
+    std::size_t counter_entries() const;  // per shot: tile counters of every copy
     std::size_t sum_stride() const;
     std::size_t max_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
