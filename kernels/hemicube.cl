@@ -754,7 +754,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
 // by copy, into list offsets (and the scatter cursors, laid out as the counts): a tile's list is
 // offsets[tile * COPIES] up to offsets[(tile + 1) * COPIES]. offsets[tiles * COPIES] is the
 // total, also in sums[elements + 1], which the host checks against the list capacity. The
-// counts are left at zero for the next shot's setup (the host zeroes them once, at allocation).
+// counts are left at zero for the next shot's setup (the host zeroes them only when they are
+// new, or after a launch that failed part-way).
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
     const HrShot first_shot, __global const HrShot* more_shots, __global uint* tile_counts,
     __global uint* offsets, __global uint* cursors, __global long* sums) {

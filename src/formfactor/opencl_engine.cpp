@@ -317,7 +317,8 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     if (!counts_zero_)
         queue.enqueueFillBuffer(tile_counts_, hr_uint{0}, 0, batch_capacity_ * counter_entries() * sizeof(hr_uint));
     counts_zero_ = false;
-    if (batch > 1) queue.enqueueWriteBuffer(shots_, CL_FALSE, 0, (batch - 1) * sizeof(HrShot), shots.data() + 1);
+    // Blocking: `shots` is local, and an exception thrown by a later enqueue would free it.
+    if (batch > 1) queue.enqueueWriteBuffer(shots_, CL_TRUE, 0, (batch - 1) * sizeof(HrShot), shots.data() + 1);
     const auto run = [&](cl::Kernel& kernel, std::size_t items, std::size_t group, cl::Event* event) {
         queue.enqueueNDRangeKernel(kernel, cl::NullRange, cl::NDRange(items, batch), cl::NDRange(group, 1), nullptr,
                                    event);
