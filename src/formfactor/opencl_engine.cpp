@@ -294,8 +294,8 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         std::copy(tile_base_.begin(), tile_base_.end(), shot.tile_base);
         shot.list_capacity = list_capacity_;
     }
-    // Every kernel's arguments, bound here only.
-    // The first shot goes by value, the rest through shots_ (see batch_shot in the kernels).
+    // Every kernel's arguments, bound here only: the first shot by value, the rest of the batch
+    // through shots_ (batch_shot in the kernels).
     const HrShot& first = shots[0];
     bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_,
          sums_);
