@@ -10,6 +10,8 @@ packages=(
   # OpenImageIO's CMake config also names openimageio-tools, python3-imath and OpenCV's headers.
   libopenimageio-dev openimageio-tools python3-imath libopencv-core-dev
   catch2 libcli11-dev libfmt-dev
+  # The ray-casting peer engine of bench/ (optional in CMake, installed here so CI builds it).
+  libembree-dev
 )
 
 sudo=""

@@ -18,11 +18,16 @@
 #include "mesh/mesh.h"
 #include "scene/scene.h"
 #include "solve/progressive.h"
+#include "test_compare.h"
 #include "test_scenes.h"
 
 using namespace hemirad;
 using Catch::Matchers::WithinAbs;
 using Catch::Matchers::WithinRel;
+using test::Case;
+using test::Comparison;
+using test::compare;
+using test::comparison_cases;
 
 namespace {
 
@@ -39,116 +44,6 @@ std::optional<ocl::Context> first_device() {
         WARN("no OpenCL device: skipped"); \
         return;                            \
     }
-
-// An axis-aligned block [lo, hi] standing on its base: the top and four sides, facing out.
-void add_block(scene::Scene& s, glm::dvec3 lo, glm::dvec3 hi, std::uint32_t material, const std::string& name) {
-    const double x0 = lo.x, y0 = lo.y, z0 = lo.z, x1 = hi.x, y1 = hi.y, z1 = hi.z;
-    test::add_quad(s, {x0, y0, z1}, {x1, y0, z1}, {x1, y1, z1}, {x0, y1, z1}, material, name + "_top");  // +z
-    test::add_quad(s, {x0, y0, z0}, {x1, y0, z0}, {x1, y0, z1}, {x0, y0, z1}, material, name + "_y0");   // -y
-    test::add_quad(s, {x1, y1, z0}, {x0, y1, z0}, {x0, y1, z1}, {x1, y1, z1}, material, name + "_y1");   // +y
-    test::add_quad(s, {x0, y1, z0}, {x0, y0, z0}, {x0, y0, z1}, {x0, y1, z1}, material, name + "_x0");   // -x
-    test::add_quad(s, {x1, y0, z0}, {x1, y1, z0}, {x1, y1, z1}, {x1, y0, z1}, material, name + "_x1");   // +x
-}
-
-struct Case {
-    std::string name;
-    scene::Scene scene;
-    mesh::Settings mesh;
-};
-
-// The scenes the engines are compared on: enclosures, a shared edge, one-sided occluders seen
-// from behind (blockers), a doubleSided occluder (twins), a Cornell-like box with blocks.
-std::vector<Case> comparison_cases() {
-    std::vector<Case> cases;
-    {
-        scene::Scene s;
-        const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-        cases.push_back({"closed box",
-                         test::closed_box(
-                             {1.0, 0.8, 1.2}, [&](int) { return grey; }, s),
-                         {0.25, 0.125}});
-    }
-    {
-        scene::Scene s;
-        const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-        cases.push_back(
-            {"perpendicular rectangles", test::perpendicular_rectangles(1, 1, 1, grey, grey, s), {0.25, 0.125}});
-    }
-    {
-        scene::Scene s;
-        const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-        const auto two_sided = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0), true);
-        s = test::parallel_rectangles(1, 1, 1, grey, grey, s);
-        // Facing up: the lower rectangle sees its back (a blocker), the upper its front.
-        test::add_quad(s, {0.2, 0.2, 0.4}, {0.6, 0.2, 0.4}, {0.6, 0.6, 0.4}, {0.2, 0.6, 0.4}, grey, "one_sided");
-        // Both sides are surfaces: no blocker, the twin is drawn instead.
-        test::add_quad(s, {0.4, 0.4, 0.6}, {0.4, 0.8, 0.6}, {0.8, 0.8, 0.6}, {0.8, 0.4, 0.6}, two_sided, "two_sided");
-        // The same quad twice (z-fighting): every cell is a genuine depth tie, won by the lower index.
-        for (const char* name : {"copy_a", "copy_b"})
-            test::add_quad(s, {0.1, 0.5, 0.8}, {0.1, 0.9, 0.8}, {0.5, 0.9, 0.8}, {0.5, 0.5, 0.8}, grey, name);
-        test::finish(s);
-        cases.push_back({"occluders", s, {0.2, 0.1}});
-    }
-    {
-        scene::Scene s;
-        const auto white = test::add_material(s, glm::dvec3(0.7), glm::dvec3(0.0));
-        const auto light = test::add_material(s, glm::dvec3(0.5), glm::dvec3(5.0));
-        s = test::closed_box(
-            {1.0, 1.0, 1.0}, [&](int) { return white; }, s);
-        test::add_quad(s, {0.4, 0.4, 0.99}, {0.4, 0.6, 0.99}, {0.6, 0.6, 0.99}, {0.6, 0.4, 0.99}, light, "light");
-        add_block(s, {0.15, 0.2, 0.0}, {0.45, 0.5, 0.6}, white, "tall");
-        add_block(s, {0.55, 0.5, 0.0}, {0.85, 0.8, 0.3}, white, "short");
-        // Triangle elements (setup_lanes repeats their last vertex), one across the middle.
-        test::add_triangle(s, {0.1, 0.9, 0.7}, {0.9, 0.9, 0.7}, {0.5, 0.1, 0.75}, white, "wedge");
-        test::finish(s);
-        cases.push_back({"cornell-like box", s, {0.2, 0.1}});
-    }
-    return cases;
-}
-
-struct Comparison {
-    std::size_t mismatched_cells = 0, cells = 0, shots = 0;
-    std::size_t hit_cells = 0, blocker_cells = 0;  // in the reference: the comparison is not vacuous
-    double worst_f = 0.0;      // largest relative error among the F (and blocked) off by more than 1e-6
-    double worst_total = 0.0;  // largest |(ΣF + blocked)_cl − (ΣF + blocked)_ref|
-};
-
-// Shoots `shots` patches spread over the mesh with both engines and compares everything.
-Comparison compare(const mesh::Mesh& m, formfactor::ReferenceEngine& ref, formfactor::OpenCLEngine& cl, int shots) {
-    Comparison c;
-    formfactor::ShotResult a, b;
-    const std::size_t patches = m.patches.size();
-    for (int i = 0; i < shots; ++i) {
-        const auto patch = static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u + 3u) % patches);
-        const std::uint64_t shot = 1000u + static_cast<std::uint64_t>(i);
-        ref.shoot(patch, shot, a);
-        cl.shoot(patch, shot, b);
-        const auto& ids_ref = ref.ids();
-        const auto& ids_cl = *cl.last_ids();
-        REQUIRE(ids_ref.size() == ids_cl.size());
-        for (std::size_t cell = 0; cell < ids_ref.size(); ++cell) {
-            c.mismatched_cells += ids_ref[cell] != ids_cl[cell];
-            c.hit_cells += ids_ref[cell] >= 0;
-            c.blocker_cells += ids_ref[cell] == formfactor::ReferenceEngine::kBlocker;
-        }
-        c.cells += ids_ref.size();
-        ++c.shots;
-        REQUIRE(a.F.size() == b.F.size());
-        const auto note = [&c](double expected, double got) {
-            const double err = std::abs(expected - got);
-            if (err > 1e-6) c.worst_f = std::max(c.worst_f, err / std::max(std::abs(expected), 1e-300));
-        };
-        double total_a = a.blocked, total_b = b.blocked;
-        note(a.blocked, b.blocked);
-        for (std::size_t k = 0; k < a.F.size(); ++k) {
-            note(a.F[k], b.F[k]);
-            total_a += a.F[k];
-            total_b += b.F[k];
-        }
-        c.worst_total = std::max(c.worst_total, std::abs(total_a - total_b));
-    }
-    return c;
-}
 
 // The agreement every OpenCL configuration owes the reference: the same doubles in the same
 // order and a total order on (depth, index), so not even a genuine depth tie can differ and no

@@ -1,0 +1,115 @@
+// The Embree ray-casting peer (bench/) against the scalar reference and analytic answers. Built
+// only with Embree (HEMIRAD_HAVE_EMBREE). The rays go through the cell centres that the
+// rasterizers test, so the two may differ only where float rounding moves a centre across an
+// element's edge, and on genuine depth ties (which the reference gives the lower element id,
+// and Embree to either).
+#if HEMIRAD_HAVE_EMBREE
+#include <algorithm>
+#include <catch2/catch.hpp>
+
+#include "formfactor/embree_engine.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "test_compare.h"
+#include "test_scenes.h"
+
+using namespace hemirad;
+using Catch::Matchers::WithinAbs;
+using Catch::Matchers::WithinRel;
+
+namespace {
+
+// The scene without the triangles of node `name`.
+scene::Scene without_node(scene::Scene s, const std::string& name) {
+    std::uint32_t node = 0;
+    while (node < s.nodes.size() && s.nodes[node].name != name) ++node;
+    s.triangles.erase(std::remove_if(s.triangles.begin(), s.triangles.end(),
+                                     [node](const scene::Triangle& t) { return t.node == node; }),
+                      s.triangles.end());
+    return s;
+}
+
+double node_sum(const mesh::Mesh& m, const formfactor::ShotResult& r, std::uint32_t node) {
+    double f = 0.0;
+    for (std::size_t k = 0; k < m.elements.size(); ++k)
+        if (m.elements[k].node == node) f += r.F[k];
+    return f;
+}
+
+}  // namespace
+
+TEST_CASE("embree: id buffers and form factors match the reference but for rounding", "[embree]") {
+    for (const test::Case& c : test::comparison_cases()) {
+        // Without the z-fighting copy: every cell left has one right answer.
+        const mesh::Mesh m = mesh::build(without_node(c.scene, "copy_b"), c.mesh);
+        for (int n : {8, 40, 256}) {
+            formfactor::ReferenceEngine ref(m, {n, 42});
+            formfactor::EmbreeEngine rays(m, {n, 42});
+            const test::Comparison r = test::compare(m, ref, rays, 20);
+            INFO(c.name << ": " << m.patches.size() << " patches, " << m.elements.size() << " elements, N = " << n);
+            CAPTURE(r.shots, r.cells, r.hit_cells, r.blocker_cells, r.mismatched_cells, r.worst_f, r.worst_total,
+                    r.worst_l1);
+            CHECK(r.hit_cells > r.cells / 10);
+            if (c.name == "occluders") CHECK(r.blocker_cells > 0);
+            // A centre within a float's rounding (~1e-7) of an edge: a few cells in a million.
+            CHECK(r.mismatched_cells <= r.cells / 100000);
+            CHECK(r.worst_l1 <= 1e-4);
+            CHECK(r.worst_total <= 1e-9);  // the same cells hit, whoever wins them
+        }
+    }
+}
+
+TEST_CASE("embree: depth ties go to one of the tied elements", "[embree]") {
+    const test::Case c = test::comparison_cases()[2];
+    REQUIRE(c.name == "occluders");
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    std::uint32_t copy_a = 0;
+    while (c.scene.nodes[copy_a].name != "copy_a") ++copy_a;
+    formfactor::ReferenceEngine ref(m, {64, 5});
+    formfactor::EmbreeEngine rays(m, {64, 5});
+    double seen = 0.0;
+    for (std::uint32_t patch = 0; patch < m.patches.size(); ++patch) {
+        formfactor::ShotResult a, b;
+        ref.shoot(patch, patch, a);
+        rays.shoot(patch, patch, b);
+        const double tied_ref = node_sum(m, a, copy_a) + node_sum(m, a, copy_a + 1);
+        const double tied_rays = node_sum(m, b, copy_a) + node_sum(m, b, copy_a + 1);
+        CHECK_THAT(tied_rays, WithinAbs(tied_ref, 1e-5));
+        seen += tied_ref;
+    }
+    CHECK(seen > 0.1);  // the copies are in view of some shooters
+}
+
+TEST_CASE("embree: parallel and perpendicular unit squares match the analytic form factors", "[embree]") {
+    scene::Scene base;
+    const auto grey = test::add_material(base, glm::dvec3(0.5), glm::dvec3(0.0));
+    {
+        const mesh::Mesh m = mesh::build(test::parallel_rectangles(1, 1, 1, grey, grey, base), {0.125, 0.0625});
+        formfactor::EmbreeEngine rays(m, {256, 1});
+        CHECK_THAT(test::area_form_factor(m, rays, 0, 1), WithinRel(test::parallel_rectangles_ff(1, 1, 1), 0.005));
+    }
+    {
+        const mesh::Mesh m = mesh::build(test::perpendicular_rectangles(1, 1, 2, grey, grey, base), {1.0 / 16, 1.0 / 32});
+        formfactor::EmbreeEngine rays(m, {256, 5});
+        CHECK_THAT(test::area_form_factor(m, rays, 0, 1),
+                   WithinRel(test::perpendicular_rectangles_ff(1, 1, 2), 0.005));
+    }
+}
+
+TEST_CASE("embree: results are the same bits whatever the thread count, run after run", "[embree]") {
+    const test::Case c = test::comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    formfactor::EmbreeEngine one(m, {128, 9}, 1), three(m, {128, 9}, 3);
+    for (std::uint32_t patch : {0u, 7u, 19u}) {
+        formfactor::ShotResult a, b, again;
+        one.shoot(patch, patch, a);
+        three.shoot(patch, patch, b);
+        three.shoot(patch, patch, again);
+        CHECK(*one.last_ids() == *three.last_ids());
+        CHECK(b.F == again.F);
+        CHECK(b.blocked == again.blocked);
+        // Summed in another order: the same to rounding.
+        for (std::size_t k = 0; k < a.F.size(); ++k) CHECK_THAT(b.F[k], WithinAbs(a.F[k], 1e-15));
+    }
+}
+#endif
