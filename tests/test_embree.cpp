@@ -96,7 +96,7 @@ TEST_CASE("embree: parallel and perpendicular unit squares match the analytic fo
     }
 }
 
-TEST_CASE("embree: results are the same bits whatever the thread count, run after run", "[embree]") {
+TEST_CASE("embree: the same bits run after run, and the same cells whatever the thread count", "[embree]") {
     const test::Case c = test::comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::EmbreeEngine one(m, {128, 9}, 1), three(m, {128, 9}, 3);

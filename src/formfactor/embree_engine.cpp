@@ -207,11 +207,19 @@ void EmbreeEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& ou
     std::vector<std::vector<double>> F(threads_, std::vector<double>(elements, 0.0));
     std::vector<double> blocked(threads_, 0.0);
     const auto range = [&](unsigned t) { return packets * t / threads_; };
-    std::vector<std::thread> workers;
-    for (unsigned t = 1; t < threads_; ++t)
-        workers.emplace_back([&, t] { blocked[t] = impl_->cast(frame, back, range(t), range(t + 1), ids_, F[t]); });
-    blocked[0] = impl_->cast(frame, back, range(0), range(1), ids_, F[0]);
-    for (auto& w : workers) w.join();
+    {
+        std::vector<std::thread> workers;
+        struct JoinAll {  // also when starting a thread throws: none is left running
+            std::vector<std::thread>& threads;
+            ~JoinAll() {
+                for (auto& w : threads)
+                    if (w.joinable()) w.join();
+            }
+        } join_all{workers};
+        for (unsigned t = 1; t < threads_; ++t)
+            workers.emplace_back([&, t] { blocked[t] = impl_->cast(frame, back, range(t), range(t + 1), ids_, F[t]); });
+        blocked[0] = impl_->cast(frame, back, range(0), range(1), ids_, F[0]);
+    }
     out.F = std::move(F[0]);
     out.blocked = blocked[0];
     for (unsigned t = 1; t < threads_; ++t) {
