@@ -177,18 +177,31 @@ int run_bench(const std::string& scene_file, const std::string& json_file, int h
                         {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
                         {"speedup_vs_ref", ref.median / st.median},
                         {"vs_ref", {{"worst_abs_dF", e.worst_abs}, {"worst_l1_dF", e.worst_l1}}}});
-    }
-    for (const auto& e : entries) {
+        // The OpenCL stages' device time per shot, from event profiling (the warm-up shot included).
         const auto* cl_engine = dynamic_cast<const formfactor::OpenCLEngine*>(e.engine_ptr.get());
         if (cl_engine == nullptr) continue;
         const double timed_shots = static_cast<double>(repeats) * static_cast<double>(patches.size()) + 1.0;
-        std::cout << fmt::format("\n{} device time per shot (ms, event profiling, warm-up included):", e.device);
-        for (int st = 0; st < formfactor::OpenCLEngine::kStages; ++st)
-            std::cout << fmt::format(" {} {:.3f}", formfactor::OpenCLEngine::kStageNames[static_cast<std::size_t>(st)],
-                                     1e3 * cl_engine->stage_seconds()[static_cast<std::size_t>(st)] / timed_shots);
+        nlohmann::ordered_json stages;
+        for (std::size_t st = 0; st < formfactor::OpenCLEngine::kStages; ++st)
+            stages[formfactor::OpenCLEngine::kStageNames[st]] = 1e3 * cl_engine->stage_seconds()[st] / timed_shots;
+        rows.back()["device_ms_per_shot"] = stages;
+    }
+    for (const auto& row : rows) {
+        if (!row.contains("device_ms_per_shot")) continue;
+        std::cout << fmt::format("\n{} device time per shot (ms, event profiling, warm-up included):",
+                                 row["device"].get<std::string>());
+        for (const auto& [stage, ms] : row["device_ms_per_shot"].items())
+            std::cout << fmt::format(" {} {:.3f}", stage, ms.get<double>());
         std::cout << "\n";
     }
-    if (!json_file.empty()) std::ofstream(json_file) << rows.dump(2) << "\n";
+    if (!json_file.empty()) {
+        std::ofstream out(json_file);
+        out << rows.dump(2) << "\n";
+        if (!out.good()) {
+            std::cerr << fmt::format("bench: {}: cannot write the results\n", json_file);
+            return 2;
+        }
+    }
     return 0;
 }
 
