@@ -29,13 +29,6 @@ scene::Scene without_node(scene::Scene s, const std::string& name) {
     return s;
 }
 
-double node_sum(const mesh::Mesh& m, const formfactor::ShotResult& r, std::uint32_t node) {
-    double f = 0.0;
-    for (std::size_t k = 0; k < m.elements.size(); ++k)
-        if (m.elements[k].node == node) f += r.F[k];
-    return f;
-}
-
 }  // namespace
 
 TEST_CASE("embree: id buffers and form factors match the reference but for rounding", "[embree]") {
@@ -72,8 +65,8 @@ TEST_CASE("embree: depth ties go to one of the tied elements", "[embree]") {
         formfactor::ShotResult a, b;
         ref.shoot(patch, patch, a);
         rays.shoot(patch, patch, b);
-        const double tied_ref = node_sum(m, a, copy_a) + node_sum(m, a, copy_a + 1);
-        const double tied_rays = node_sum(m, b, copy_a) + node_sum(m, b, copy_a + 1);
+        const double tied_ref = test::node_form_factor(m, a, copy_a) + test::node_form_factor(m, a, copy_a + 1);
+        const double tied_rays = test::node_form_factor(m, b, copy_a) + test::node_form_factor(m, b, copy_a + 1);
         CHECK_THAT(tied_rays, WithinAbs(tied_ref, 1e-5));
         seen += tied_ref;
     }

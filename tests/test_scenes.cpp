@@ -6,6 +6,13 @@
 
 namespace hemirad::test {
 
+double node_form_factor(const mesh::Mesh& m, const formfactor::ShotResult& r, std::uint32_t node) {
+    double f = 0.0;
+    for (std::size_t k = 0; k < m.elements.size(); ++k)
+        if (m.elements[k].node == node) f += r.F[k];
+    return f;
+}
+
 double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::uint32_t from, std::uint32_t to,
                         std::uint64_t first_shot) {
     formfactor::ShotResult r;
@@ -14,10 +21,7 @@ double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::ui
     for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
         if (m.patches[p].node != from) continue;
         engine.shoot(p, shot++, r);
-        double f = 0.0;
-        for (std::size_t k = 0; k < m.elements.size(); ++k)
-            if (m.elements[k].node == to) f += r.F[k];
-        weighted += m.patches[p].area * f;
+        weighted += m.patches[p].area * node_form_factor(m, r, to);
         area += m.patches[p].area;
     }
     return weighted / area;

@@ -84,6 +84,9 @@ scene::Scene closed_box(glm::dvec3 size, MaterialOf material_of, scene::Scene s)
     return s;
 }
 
+// Σ F of one shot over the elements of node `node`: the form factor to that surface.
+double node_form_factor(const mesh::Mesh& m, const formfactor::ShotResult& r, std::uint32_t node);
+
 // Area-weighted form factor from every patch of node `from` to all elements of node `to`:
 // F(A_from → A_to) = Σ_p A_p F(p → A_to) / A_from, one hemicube per patch, shots counted from
 // `first_shot`.
