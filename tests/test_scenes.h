@@ -5,30 +5,14 @@
 
 #include "formfactor/engine.h"
 #include "mesh/mesh.h"
+#include "scene/builder.h"
 #include "scene/scene.h"
 
 namespace hemirad::test {
 
-inline std::uint32_t add_material(scene::Scene& s, glm::dvec3 rho, glm::dvec3 emission, bool double_sided = false) {
-    scene::Material m;
-    m.name = "m" + std::to_string(s.materials.size());
-    m.base_color = rho;
-    m.emission = emission;
-    m.double_sided = double_sided;
-    s.materials.push_back(m);
-    return static_cast<std::uint32_t>(s.materials.size() - 1);
-}
-
-// A planar quad p0..p3, counter-clockwise seen from its front, as two triangles sharing p0–p2.
-inline void add_quad(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, glm::dvec3 p3,
-                     std::uint32_t material, const std::string& node_name) {
-    const std::uint32_t node = static_cast<std::uint32_t>(s.nodes.size());
-    s.nodes.push_back({node_name, static_cast<int>(node)});
-    const glm::dvec3 rho = s.materials[material].base_color;
-    const std::uint32_t prim = node;
-    s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, prim});
-    s.triangles.push_back({{p0, p2, p3}, {rho, rho, rho}, material, node, prim});
-}
+using scene::add_material;
+using scene::add_quad;
+using scene::finish;
 
 // A lone triangle p0 p1 p2, counter-clockwise seen from its front: meshed as triangles.
 inline void add_triangle(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, std::uint32_t material,
@@ -37,16 +21,6 @@ inline void add_triangle(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dve
     s.nodes.push_back({node_name, static_cast<int>(node)});
     const glm::dvec3 rho = s.materials[material].base_color;
     s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, node});
-}
-
-inline void finish(scene::Scene& s) {
-    s.bbox_min = glm::dvec3(1e300);
-    s.bbox_max = glm::dvec3(-1e300);
-    for (const auto& t : s.triangles)
-        for (const auto& p : t.p) {
-            s.bbox_min = glm::min(s.bbox_min, p);
-            s.bbox_max = glm::max(s.bbox_max, p);
-        }
 }
 
 // Two a×b rectangles facing each other at distance c: the lower (z = 0) faces +z, the upper

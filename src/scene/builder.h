@@ -1,0 +1,45 @@
+// Scenes built in code (procedural scenes, benchmark configurations, tests): materials, quads
+// as two triangles of one primitive, and the bounding box.
+#pragma once
+
+#include <glm/glm.hpp>
+#include <string>
+
+#include "scene/scene.h"
+
+namespace hemirad::scene {
+
+inline std::uint32_t add_material(Scene& s, glm::dvec3 rho, glm::dvec3 emission, bool double_sided = false) {
+    Material m;
+    m.name = "m" + std::to_string(s.materials.size());
+    m.base_color = rho;
+    m.emission = emission;
+    m.double_sided = double_sided;
+    s.materials.push_back(m);
+    return static_cast<std::uint32_t>(s.materials.size() - 1);
+}
+
+// A planar quad p0..p3, counter-clockwise seen from its front, as two triangles sharing p0–p2,
+// in a node of its own.
+inline void add_quad(Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, glm::dvec3 p3, std::uint32_t material,
+                     const std::string& node_name) {
+    const auto node = static_cast<std::uint32_t>(s.nodes.size());
+    s.nodes.push_back({node_name, static_cast<int>(node)});
+    const glm::dvec3 rho = s.materials[material].base_color;
+    const std::uint32_t prim = node;
+    s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, prim});
+    s.triangles.push_back({{p0, p2, p3}, {rho, rho, rho}, material, node, prim});
+}
+
+// Sets the bounding box from the triangles.
+inline void finish(Scene& s) {
+    s.bbox_min = glm::dvec3(1e300);
+    s.bbox_max = glm::dvec3(-1e300);
+    for (const auto& t : s.triangles)
+        for (const auto& p : t.p) {
+            s.bbox_min = glm::min(s.bbox_min, p);
+            s.bbox_max = glm::max(s.bbox_max, p);
+        }
+}
+
+}  // namespace hemirad::scene
