@@ -33,6 +33,9 @@
 #ifndef HEMIRAD_SETUP_LANES
 #define HEMIRAD_SETUP_LANES 0  // 1: setup takes HR_SETUP_LANES elements per work-item in double8 (CPUs)
 #endif
+#ifndef HEMIRAD_CULL
+#define HEMIRAD_CULL 1  // 0: no bounding-sphere test per element group (to measure what culling saves)
+#endif
 #ifndef HEMIRAD_SCAN_WG
 #define HEMIRAD_SCAN_WG 256  // the single work-group of the tile-offset scan, a power of two
 #endif
@@ -457,6 +460,15 @@ llong snap_lanes(ldouble cells) {
     return convert_long8(floor(cells * (double)SUBCELL + 0.5));
 }
 
+// Whether a group's bounding sphere lies wholly behind the base plane, below -eps: then every
+// vertex of every element is below the plane, where setup_element would drop it too (it keeps
+// an element with a vertex above +eps; the margin of 2 eps dwarfs this test's rounding).
+bool group_behind(const HrShot* shot, __global const HrElementLanes* group) {
+    const Vec d = vec(group->bound[0] - shot->origin[0], group->bound[1] - shot->origin[1],
+                      group->bound[2] - shot->origin[2]);
+    return dot3(d, vec(shot->w[0], shot->w[1], shot->w[2])) + group->bound[3] < -shot->eps;
+}
+
 void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int first,
                  __global HrRecord* records, __global HrBox* boxes,
                  __local uint* used) {
@@ -726,7 +738,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     // The sums' clear, ahead of the raster in the queue (scan leaves the tile counts at zero).
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
 #if HEMIRAD_SETUP_LANES
-    if (p * HR_SETUP_LANES < shot->elements)
+    if (p * HR_SETUP_LANES < shot->elements && !(HEMIRAD_CULL && group_behind(shot, element_lanes + p)))
         setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, records, boxes, &used);
 #else
     if (p < shot->patches && p != shot->shooter) {  // the shooter's elements lie in its base plane

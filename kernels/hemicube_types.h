@@ -50,7 +50,10 @@ typedef struct {
     hr_int n[HR_SETUP_LANES];  // 3 or 4; 0 for no element
     hr_int has_twin[HR_SETUP_LANES];
     hr_int patch[HR_SETUP_LANES];
-    hr_int pad[HR_SETUP_LANES];
+    // A sphere holding every vertex of the group (centre x, y, z, radius): a group wholly behind
+    // the shooter's base plane is culled with one test, so that a shot's setup costs little
+    // for the part of a large scene behind the shooter.
+    hr_double bound[4];
 } HrElementLanes;
 
 // One patch: its polygon decides whether all of its elements lie below the base plane.

@@ -49,14 +49,10 @@ std::string probe(formfactor::Engine& engine, const mesh::Mesh& mesh, const form
 
 std::string first_line(const std::string& text) { return text.substr(0, text.find('\n')); }
 
-// The device's tuning, with HEMIRAD_OPENCL_OPTIONS appended to the kernel build options
-// (extra -D overrides of the kernels' tuning knobs).
 std::unique_ptr<formfactor::OpenCLEngine> make_opencl_engine(const mesh::Mesh& mesh, ocl::Context& context,
                                                              const formfactor::Settings& settings) {
-    formfactor::OpenCLTuning tuning = formfactor::default_tuning(context.info());
-    if (const char* extra = std::getenv("HEMIRAD_OPENCL_OPTIONS"); extra && *extra)
-        tuning.extra_options += std::string(" ") + extra;
-    return std::make_unique<formfactor::OpenCLEngine>(mesh, context, settings, tuning);
+    return std::make_unique<formfactor::OpenCLEngine>(mesh, context, settings,
+                                                      formfactor::tuning_from_environment(context.info()));
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstddef>
 #include <string_view>
 
@@ -20,7 +21,8 @@ namespace {
 static_assert(sizeof(HrElement) == 160 && offsetof(HrElement, normal) == 96 && offsetof(HrElement, centroid) == 120 &&
               offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 148);
 static_assert(sizeof(HrElementLanes) == 1280 && offsetof(HrElementLanes, normal) == 768 &&
-              offsetof(HrElementLanes, n) == 1152 && offsetof(HrElementLanes, patch) == 1216);
+              offsetof(HrElementLanes, n) == 1152 && offsetof(HrElementLanes, patch) == 1216 &&
+              offsetof(HrElementLanes, bound) == 1248);
 static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(HrPatch, elements) == 104);
 static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
               offsetof(HrShot, patches) == 116 && offsetof(HrShot, tiles_x) == 120 &&
@@ -100,6 +102,13 @@ OpenCLTuning default_tuning(const ocl::DeviceInfo& device) {
     for (const auto& entry : kTuningTable)
         if (entry.type == device.type) return entry.tuning;
     return {};
+}
+
+OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device) {
+    OpenCLTuning tuning = default_tuning(device);
+    if (const char* extra = std::getenv("HEMIRAD_OPENCL_OPTIONS"); extra && *extra)
+        tuning.extra_options += std::string(" ") + extra;
+    return tuning;
 }
 
 OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings)
@@ -188,6 +197,23 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         group.n[lane] = e.poly.n;
         group.has_twin[lane] = e.has_twin ? 1 : 0;
         group.patch[lane] = static_cast<hr_int>(e.patch);
+    }
+    // Each group's bounding sphere: the centre of its vertices' box, the farthest vertex.
+    for (std::size_t g = 0; g < element_lanes.size(); ++g) {
+        glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+        const std::size_t end = std::min(mesh.elements.size(), (g + 1) * HR_SETUP_LANES);
+        for (std::size_t k = g * HR_SETUP_LANES; k < end; ++k)
+            for (int i = 0; i < mesh.elements[k].poly.n; ++i) {
+                lo = glm::min(lo, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
+                hi = glm::max(hi, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
+            }
+        const glm::dvec3 centre = 0.5 * (lo + hi);
+        double radius = 0.0;
+        for (std::size_t k = g * HR_SETUP_LANES; k < end; ++k)
+            for (int i = 0; i < mesh.elements[k].poly.n; ++i)
+                radius = std::max(radius, glm::length(mesh.elements[k].poly.v[static_cast<std::size_t>(i)] - centre));
+        for (int c = 0; c < 3; ++c) element_lanes[g].bound[c] = centre[c];
+        element_lanes[g].bound[3] = radius;
     }
     std::vector<HrPatch> patches(mesh.patches.size());
     for (std::size_t p = 0; p < mesh.patches.size(); ++p) {

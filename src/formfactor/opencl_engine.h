@@ -30,6 +30,9 @@ struct OpenCLTuning {
 
 // The knobs for a device, from a small hand-edited table.
 OpenCLTuning default_tuning(const ocl::DeviceInfo& device);
+// default_tuning with HEMIRAD_OPENCL_OPTIONS, where set, appended to the build options (extra -D
+// overrides of the kernels' knobs): what bakes and benchmarks use.
+OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device);
 
 class OpenCLEngine final : public Engine {
 public:
