@@ -562,6 +562,8 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     const llong j0 = max((llong)(0), convert_long8(ceil(convert_double8(ymin - SUBCELL / 2) / sub)));
     const llong j1 = min(rows - 1, convert_long8(floor(convert_double8(ymax - SUBCELL / 2) / sub)));
     record &= (i0 <= i1) & (j0 <= j1);
+    // No record and nothing for setup_element: common where elements are smaller than a cell.
+    if (!any_of8(record | (live & ~fast))) return;
 
     // The edges of the inside test, as setup_element makes them; and in lanes, divided through
     // by SUBCELL = S (a and b are multiples of it, and for integers a' i + b' j, a i + b j + c > 0

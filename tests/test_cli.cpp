@@ -896,3 +896,106 @@ TEST_CASE("auto falls back to the reference when the OpenCL kernels do not build
     CHECK(failed.err.find("build failed") != std::string::npos);
     CHECK(!fs::exists(forced));
 }
+
+namespace {
+
+// `hemirad bench` on a tiny closed procedural scene and a file, quickly (no calibration).
+std::vector<std::string> bench_args(const std::vector<std::string>& extra) {
+    return concat({"bench", "procedural:100", kClosedRoom.string(), "--hemicube", "16,32", "--shots", "2",
+                   "--repeats", "2", "--no-calibrate"},
+                  extra);
+}
+
+#if HEMIRAD_HAVE_EMBREE
+constexpr std::size_t kPeers = 1;  // the Embree ray caster
+#else
+constexpr std::size_t kPeers = 0;
+#endif
+
+}  // namespace
+
+TEST_CASE("bench times every engine on every scene and N and writes the JSON", "[cli][bench]") {
+    const TempDir dir;
+    const fs::path file = dir / "results.json";
+    const RunResult r = run_hemirad(dir, bench_args({"--json", file.string()}));
+    INFO("stderr: [" << r.err << "]");
+    REQUIRE(r.code == 0);
+    const json doc = read_json(file);
+    const std::size_t engines = 1 + kPeers + hemirad::ocl::list_devices().size();
+    REQUIRE(doc["results"].size() == 2 * 2 * engines);  // scenes × N × engines
+    CHECK(all_numbers_finite(doc));
+    // closed_room's triangles, from the file itself: one indexed triangle list per primitive.
+    const json room = read_json(kClosedRoom);
+    std::size_t room_triangles = 0;
+    for (const auto& mesh : room["meshes"])
+        for (const auto& prim : mesh["primitives"])
+            room_triangles += room["accessors"][prim["indices"].get<int>()]["count"].get<std::size_t>() / 3;
+    std::set<std::string> seen;
+    for (const auto& row : doc["results"]) {
+        INFO(row.dump());
+        for (const char* key : {"engine", "device", "scene", "triangles", "hemicube", "shots_per_s"})
+            CHECK(row.contains(key));
+        seen.insert(row["engine"].get<std::string>());
+        const double n = row["hemicube"].get<double>(), shots_per_s = row["shots_per_s"].get<double>();
+        CHECK(shots_per_s > 0.0);
+        CHECK(row["samples_per_s"].get<double>() == Approx(3.0 * n * n * shots_per_s));
+        CHECK(row["ms_per_shot"]["min"].get<double>() <= row["ms_per_shot"]["median"].get<double>());
+        CHECK(row["vs_ref"]["worst_l1_dF"].get<double>() <= 1e-3);
+        const double sum_max = row["sum_F_blocked"]["max"].get<double>();
+        CHECK(sum_max <= 1.0 + 1e-9);
+        if (row["scene"] == "procedural:100") {
+            // Closed: every direction from every patch hits a surface, so each shot sums to 1.
+            CHECK(row["closed"] == true);
+            CHECK(row["sum_F_blocked"]["min"].get<double>() >= 1.0 - 1e-9);
+        } else {
+            CHECK(row["scene"] == kClosedRoom.string());
+            CHECK(row["triangles"] == room_triangles);
+        }
+    }
+    CHECK(seen.count("ref") == 1);
+    if (!hemirad::ocl::list_devices().empty()) CHECK(seen.count("opencl") == 1);
+    // A table row per engine, scene and N on stdout.
+    CHECK(std::count(r.out.begin(), r.out.end(), '\n') > static_cast<long>(doc["results"].size()));
+}
+
+TEST_CASE("bench rejects bad input with exit 2 before any output and keeps an existing JSON file", "[cli][bench]") {
+    const TempDir dir;
+    const fs::path file = dir / "results.json";
+    write_text(file, "earlier results\n");
+    const auto bad = [&](std::vector<std::string> args, const std::string& token) {
+        const RunResult r = run_hemirad(dir, args);
+        INFO("stderr: [" << r.err << "]");
+        CHECK(r.code == 2);
+        check_one_line(r.err);
+        CHECK(r.err.find(token) != std::string::npos);
+        CHECK(r.out.empty());
+        CHECK(read_text(file) == "earlier results\n");
+        CHECK(listing(dir.path()) == std::set<std::string>{"results.json"});
+    };
+    const std::string json_file = file.string();
+    bad({"bench", "no_such_scene.gltf", "--json", json_file}, "no_such_scene.gltf");
+    bad({"bench", "procedural:abc", "--json", json_file}, "procedural:abc");
+    bad({"bench", "procedural:100", "--hemicube", "33", "--json", json_file}, "33");
+    bad({"bench", "procedural:100", "--engines", "nonsense", "--json", json_file}, "nonsense");
+    bad({"bench", "--json", json_file}, "no scene");
+    bad({"bench", "procedural:100", "--json", (dir / "missing" / "r.json").string()}, "missing");
+}
+
+TEST_CASE("bench refuses a fast wrong OpenCL kernel: no result, no JSON", "[cli][bench]") {
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    const TempDir dir;
+    const fs::path file = dir / "results.json";
+    // Setup built for the other layout than the host drives (per patch against lanes of eight
+    // elements, or the reverse) sets up only some elements: fewer records, less work, wrong F.
+    const bool lanes = hemirad::ocl::list_devices().front().type == "cpu";
+    const std::string wrong = std::string("HEMIRAD_OPENCL_OPTIONS=-DHEMIRAD_SETUP_LANES=") + (lanes ? "0" : "1") + " ";
+    const RunResult r = run_hemirad(dir, {"bench", "procedural:100", "--hemicube", "16", "--shots", "2", "--repeats",
+                                          "1", "--no-calibrate", "--engines", "ref,opencl", "--patch-size", "1",
+                                          "--element-size", "1", "--json", file.string()},
+                                    wrong);
+    INFO("stderr: [" << r.err << "]");
+    CHECK(r.code == 1);  // (the device compiler may add its own warnings to stderr)
+    CHECK(r.err.find("hemirad: verification failed: opencl on procedural:100") != std::string::npos);
+    CHECK(r.err.find("disagrees with the reference") != std::string::npos);
+    CHECK(!fs::exists(file));
+}

@@ -2,8 +2,10 @@
 // maps errors to exit codes (0 done, 2 bad input or usage, 1 internal failure).
 #include "cli/app.h"
 
+#include <fmt/core.h>
 #include <unistd.h>
 
+#include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -12,11 +14,9 @@
 #include <optional>
 #include <string>
 
-#include <CLI/CLI.hpp>
-#include <fmt/core.h>
-
-#include "cli/bake.h"
 #include "cl/runtime.h"
+#include "cli/bake.h"
+#include "cli/bench.h"
 #include "core/error.h"
 #include "formfactor/verify.h"
 
@@ -29,33 +29,72 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--device", o.device, "form-factor engine: auto|ref|opencl|opencl:P.D (see hemirad devices)")
         ->capture_default_str();
     bake.add_option("--hemicube", o.hemicube, "hemicube resolution N: top face N×N plus four N×N/2 half faces")
-        ->check(CLI::Range(8, 4096))->capture_default_str();
+        ->check(CLI::Range(8, 4096))
+        ->capture_default_str();
     bake.add_option("--patch-size", o.patch_size, "maximum patch edge, scene units (default: scene diagonal / 16)")
         ->check(CLI::PositiveNumber);
     bake.add_option("--element-size", o.element_size, "maximum element edge, scene units (default: patch size / 3)")
         ->check(CLI::PositiveNumber);
     bake.add_option("--threshold", o.threshold, "stop when the share of final flux not yet placed is below this")
-        ->check(CLI::Range(0.0, 1.0))->capture_default_str();
+        ->check(CLI::Range(0.0, 1.0))
+        ->capture_default_str();
     bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
-        ->check(CLI::NonNegativeNumber)->capture_default_str();
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
     bake.add_option("--batch", o.batch,
                     "shoot the K patches with the most unshot flux together (one launch on OpenCL); "
                     "each still shoots its flux at the time it is applied")
-        ->check(CLI::Range(1, 256))->capture_default_str();
+        ->check(CLI::Range(1, 256))
+        ->capture_default_str();
     bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")->capture_default_str();
     bake.add_flag("--verify", o.verify, "check shots of the OpenCL engine against the scalar reference");
     bake.add_option("--verify-every", o.verify_every, "with --verify, check every K-th shot")
-        ->check(CLI::PositiveNumber)->capture_default_str();
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
     bake.add_option("--camera", o.camera, "render from the camera with this name");
     bake.add_option("--preview-every", o.preview_every, "write DIR/preview/pass_NNNNNN.png every K passes")
         ->check(CLI::NonNegativeNumber);
     bake.add_option("--image-width", o.image_width, "width of render.exr/png; height follows the camera's aspect")
-        ->check(CLI::Range(16, 16384))->capture_default_str();
+        ->check(CLI::Range(16, 16384))
+        ->capture_default_str();
     bake.add_flag("--quiet", o.quiet, "no progress line");
 }
 
+void add_bench_options(CLI::App& cmd, BenchCommand& c) {
+    bench::ThroughputOptions& o = c.throughput;
+    cmd.add_option("scenes", o.scenes, "glTF files or procedural:<triangles> (e.g. procedural:100k, procedural:1M)");
+    cmd.add_option("--hemicube", o.hemicubes, "hemicube resolutions N, comma-separated")
+        ->delimiter(',')
+        ->check(CLI::Range(8, 4096))
+        ->capture_default_str();
+    cmd.add_option("--engines", o.engines, "ref, embree, opencl (every device) or opencl:P.D; default: all")
+        ->delimiter(',');
+    cmd.add_option("--shots", o.shots, "shots per engine per repeat")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    cmd.add_option("--repeats", o.repeats, "timed repeats (min, median and spread over them)")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    cmd.add_option("--batch", o.batch, "shots per engine call")->check(CLI::Range(1, 256))->capture_default_str();
+    cmd.add_option("--patch-size", o.patch_size, "maximum patch edge (default: scene diagonal / 16)")
+        ->check(CLI::PositiveNumber);
+    cmd.add_option("--element-size", o.element_size, "maximum element edge (default: patch size / 3)")
+        ->check(CLI::PositiveNumber);
+    cmd.add_option("--seed", o.seed, "seed of the hemicube rotations")->capture_default_str();
+    cmd.add_flag(
+        "--no-calibrate", [&o](std::int64_t) { o.calibrate = false; },
+        "skip measuring the machine's limit (fill rate, bandwidth)");
+    cmd.add_flag("--accuracy", c.accuracy,
+                 "instead of throughput: error against time over the settings, on analytic cases and a room");
+    cmd.add_flag("--quick", c.quick, "with --accuracy: a few runs per sweep");
+    cmd.add_option("--device", c.device, "with --accuracy: auto, ref or opencl:P.D")->capture_default_str();
+    cmd.add_option("--json", c.json, "also write the results here (JSON)");
+}
+
 std::atomic<bool> g_interrupted{false};
-extern "C" void on_interrupt(int) { g_interrupted = true; }
+extern "C" void on_interrupt(int) {
+    g_interrupted = true;
+}
 
 }  // namespace
 
@@ -66,6 +105,10 @@ int run(int argc, char** argv) {
     BakeOptions bake_options;
     CLI::App* bake = app.add_subcommand("bake", "bake diffuse global illumination into a glTF scene");
     add_bake_options(*bake, bake_options);
+    BenchCommand bench_command;
+    CLI::App* bench_app =
+        app.add_subcommand("bench", "benchmark the form-factor engines against each other and the machine");
+    add_bench_options(*bench_app, bench_command);
     bool devices_json = false;
     CLI::App* devices = app.add_subcommand("devices", "list the form-factor engines this build can use");
     devices->add_flag("--json", devices_json, "machine-readable output");
@@ -86,6 +129,10 @@ int run(int argc, char** argv) {
     try {
         if (*devices) {
             list_devices(std::cout, devices_json);
+            return 0;
+        }
+        if (*bench_app) {
+            run_bench(bench_command, std::cout);
             return 0;
         }
         std::signal(SIGINT, on_interrupt);

@@ -1,0 +1,367 @@
+// Shot throughput of the form-factor engines (see throughput.h). The engines alternate, repeat
+// after repeat, over the same shots after a warm-up (kernel builds and first uploads excluded);
+// only the engines' own calls are timed. Every shot of every engine is checked: its form factors
+// and blocked share may not exceed 1 (and in a closed scene must reach it), and on a sample of
+// shots it must agree with the scalar reference, so that a fast wrong engine cannot win.
+#include "bench/throughput.h"
+
+#include <fmt/core.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <thread>
+
+#include "bench/calibrate.h"
+#include "cl/runtime.h"
+#include "core/error.h"
+#include "formfactor/opencl_engine.h"
+#include "formfactor/reference.h"
+#include "formfactor/verify.h"
+#include "mesh/mesh.h"
+#include "scene/procedural.h"
+#if HEMIRAD_HAVE_EMBREE
+#include "formfactor/embree_engine.h"
+constexpr bool kHaveEmbree = true;
+#else
+constexpr bool kHaveEmbree = false;
+#endif
+
+namespace hemirad::bench {
+namespace {
+
+using ordered_json = nlohmann::ordered_json;
+using Clock = std::chrono::steady_clock;
+
+// The patch and element sizes of a bake with default settings (cli/bake.h).
+constexpr double kPatchFraction = 1.0 / 16.0;
+constexpr double kElementsPerPatchEdge = 3.0;
+
+// Shots compared cell for cell with the reference, per repeat: the reference is the slowest
+// engine, and one shot already exercises every kernel.
+constexpr std::size_t kSampleShots = 4;
+
+// What each engine owes the reference per shot (worst |ΔF| of an element, Σ|ΔF| over the shot):
+// the hemicube engines the same cells, any difference is rounding; the ray caster the same but
+// for cell centres within a float's rounding of an edge and depth ties, a few cells in a million.
+struct Tolerance {
+    double max_abs, l1;
+};
+constexpr Tolerance kExact{0.0, 0.0}, kRasterizer{1e-6, 1e-6}, kRayCaster{1e-3, 1e-3};
+// Form factors plus the blocked share of one shot: at most 1 (the delta table sums to 1 in
+// fixed point); in a closed scene every cell hits something, so exactly 1 to rounding.
+constexpr double kSumSlack = 1e-9;
+
+struct Stats {
+    double min = 0.0, median = 0.0, sigma_percent = 0.0;
+};
+
+Stats stats(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    double mean = 0.0, var = 0.0;
+    for (double x : v) mean += x / static_cast<double>(v.size());
+    for (double x : v) var += (x - mean) * (x - mean) / static_cast<double>(v.size());
+    return {v.front(), v[v.size() / 2], mean > 0.0 ? 100.0 * std::sqrt(var) / mean : 0.0};
+}
+
+std::string cpu_model() {
+    std::ifstream in("/proc/cpuinfo");
+    for (std::string line; std::getline(in, line);)
+        if (line.rfind("model name", 0) == 0) {
+            const auto colon = line.find(':');
+            return colon == std::string::npos ? line : line.substr(colon + 2);
+        }
+    return "unknown CPU";
+}
+
+struct Runner {
+    std::string engine, device;       // "opencl", "PoCL … (opencl:0.0)"
+    ocl::Context* context = nullptr;  // OpenCL engines: their device
+    std::unique_ptr<formfactor::Engine> impl;
+    Tolerance tolerance = kRasterizer;
+    std::vector<double> ms_per_shot;  // per repeat
+    double worst_abs = 0.0, worst_l1 = 0.0, sum_min = 2.0, sum_max = 0.0;
+};
+
+// The engines a run asks for: ref, embree, opencl (every device) or opencl:P.D.
+struct EngineSelection {
+    bool ref = false, embree = false;
+    std::vector<ocl::DeviceInfo> devices;
+};
+
+EngineSelection select_engines(const std::vector<std::string>& names) {
+    const std::vector<ocl::DeviceInfo> all = ocl::list_devices();
+    EngineSelection out;
+    if (names.empty()) {
+        out.ref = true;
+        out.embree = kHaveEmbree;
+        out.devices = all;
+        return out;
+    }
+    for (const std::string& name : names) {
+        if (name == "ref") {
+            out.ref = true;
+        } else if (name == "embree") {
+            if (!kHaveEmbree)
+                throw InputError("--engines embree: this build has no Embree peer (Embree 3 was not found)");
+            out.embree = true;
+        } else if (name == "opencl") {
+            if (all.empty()) throw InputError("--engines opencl: no OpenCL device found (see hemirad devices)");
+            out.devices = all;
+        } else {
+            const auto it = std::find_if(all.begin(), all.end(), [&](const auto& d) { return d.id() == name; });
+            if (it == all.end())
+                throw InputError(
+                    fmt::format("--engines {}: expected ref, embree, opencl or one of hemirad devices", name));
+            if (std::none_of(out.devices.begin(), out.devices.end(), [&](const auto& d) { return d.id() == name; }))
+                out.devices.push_back(*it);
+        }
+    }
+    return out;
+}
+
+// The least time a shot can take on a device with calibration `c`: one z-buffer test per
+// hemicube sample at the peak fill rate, or the bytes every shot must move at the peak
+// bandwidth (each element's vertices read once as three floats each, its sum written, and
+// each cell's id), whichever is longer.
+double limit_ms_per_shot(const Calibration& c, int n, std::size_t elements) {
+    const double samples = 3.0 * n * n;
+    const double bytes = (36.0 + 8.0) * static_cast<double>(elements) + 4.0 * samples;
+    return 1e3 * std::max(samples / c.fill_tests_per_s, bytes / c.bandwidth_bytes_per_s);
+}
+
+}  // namespace
+
+BenchScene load_bench_scene(const std::string& spec) {
+    if (const std::optional<std::size_t> triangles = scene::parse_procedural_spec(spec))
+        return {scene::procedural_scene(*triangles), true};
+    return {scene::load(spec), false};
+}
+
+ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
+    if (o.scenes.empty()) throw InputError("bench: no scene given (a glTF file or procedural:<triangles>)");
+    for (int n : o.hemicubes)
+        if (n < 8 || n > 4096 || n % 2 != 0)
+            throw InputError(fmt::format("--hemicube {}: must be even, from 8 to 4096", n));
+    if (o.shots < 1 || o.repeats < 1 || o.batch < 1)
+        throw InputError("bench: --shots, --repeats and --batch must be at least 1");
+    const EngineSelection selection = select_engines(o.engines);
+    // Every scene first: bad input ends the run before any output.
+    std::vector<BenchScene> scenes;
+    for (const std::string& spec : o.scenes) {
+        scenes.push_back(load_bench_scene(spec));
+        if (scenes.back().scene.triangles.empty()) throw InputError(fmt::format("{}: no triangles", spec));
+    }
+
+    ordered_json doc;
+    doc["version"] = HEMIRAD_VERSION;
+    doc["machine"] = {{"cpu", cpu_model()}, {"hardware_threads", std::thread::hardware_concurrency()}};
+    doc["settings"] = {
+        {"shots", o.shots},
+        {"repeats", o.repeats},
+        {"batch", o.batch},
+        {"seed", o.seed},
+        {"sample_shots_checked", std::min<std::size_t>(kSampleShots, static_cast<std::size_t>(o.shots))}};
+
+    // One context per device for the whole run: kernels build once per device and N.
+    std::vector<std::unique_ptr<ocl::Context>> contexts;
+    std::vector<Calibration> calibrations;
+    ordered_json calibration_json = ordered_json::array();
+    const Calibration* host_limit = nullptr;  // the CPU's, for the host engines
+    for (const auto& d : selection.devices) {
+        contexts.push_back(std::make_unique<ocl::Context>(d));
+        if (!o.calibrate) continue;
+        calibrations.push_back(calibrate(*contexts.back()));
+        const Calibration& c = calibrations.back();
+        calibration_json.push_back({{"device", d.name + " (" + d.id() + ")"},
+                                    {"type", d.type},
+                                    {"fill_tests_per_s", c.fill_tests_per_s},
+                                    {"bandwidth_bytes_per_s", c.bandwidth_bytes_per_s},
+                                    {"seconds", c.seconds}});
+        log << fmt::format("calibration {} ({}): z-buffer fill {:.3g} tests/s, bandwidth {:.3g} GB/s\n", d.name, d.id(),
+                           c.fill_tests_per_s, 1e-9 * c.bandwidth_bytes_per_s);
+    }
+    for (std::size_t i = 0; i < calibrations.size(); ++i)
+        if (selection.devices[i].type == "cpu" && host_limit == nullptr) host_limit = &calibrations[i];
+    doc["calibration"] = calibration_json;
+
+    ordered_json results = ordered_json::array();
+    for (std::size_t scene_index = 0; scene_index < scenes.size(); ++scene_index) {
+        const std::string& spec = o.scenes[scene_index];
+        const BenchScene& bench_scene = scenes[scene_index];
+        const scene::Scene& s = bench_scene.scene;
+        mesh::Settings mesh_settings;
+        mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : s.diagonal() * kPatchFraction;
+        mesh_settings.element_size =
+            o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / kElementsPerPatchEdge;
+        const auto t_mesh = Clock::now();
+        const mesh::Mesh m = mesh::build(s, mesh_settings);
+        if (m.patches.empty()) throw InputError(fmt::format("{}: every triangle has zero area", spec));
+        log << fmt::format("\n{}: {} triangles, {} patches, {} elements (meshed in {:.2f} s)\n", spec,
+                           s.triangles.size(), m.patches.size(), m.elements.size(),
+                           std::chrono::duration<double>(Clock::now() - t_mesh).count());
+
+        // The same shots for every engine: patches spread over the scene, shot index = seed stream.
+        std::vector<formfactor::ShotRequest> shots;
+        for (int i = 0; i < o.shots; ++i)
+            shots.push_back({static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u) % m.patches.size()),
+                             static_cast<std::uint64_t>(i)});
+        const std::size_t sample = std::min(kSampleShots, shots.size());
+
+        for (int n : o.hemicubes) {
+            const formfactor::Settings settings{n, o.seed};
+            formfactor::ReferenceEngine reference(m, settings);
+            std::vector<formfactor::ShotResult> expected(sample);
+            for (std::size_t i = 0; i < sample; ++i) reference.shoot(shots[i].patch, shots[i].shot, expected[i]);
+
+            std::vector<Runner> runners;
+            if (selection.ref)
+                runners.push_back({"ref",
+                                   "host (1 thread)",
+                                   nullptr,
+                                   std::make_unique<formfactor::ReferenceEngine>(m, settings),
+                                   kExact,
+                                   {}});
+#if HEMIRAD_HAVE_EMBREE
+            if (selection.embree) {
+                auto rays = std::make_unique<formfactor::EmbreeEngine>(m, settings);
+                const std::string device =
+                    fmt::format("host ({}, {} threads)", formfactor::EmbreeEngine::version(), rays->threads());
+                runners.push_back({"embree", device, nullptr, std::move(rays), kRayCaster, {}});
+            }
+#endif
+            for (std::size_t d = 0; d < contexts.size(); ++d) {
+                const ocl::DeviceInfo& info = contexts[d]->info();
+                runners.push_back({"opencl",
+                                   info.name + " (" + info.id() + ")",
+                                   contexts[d].get(),
+                                   std::make_unique<formfactor::OpenCLEngine>(
+                                       m, *contexts[d], settings, formfactor::tuning_from_environment(info)),
+                                   kRasterizer,
+                                   {}});
+            }
+
+            std::vector<formfactor::ShotResult> out;
+            for (auto& r : runners) r.impl->shoot_batch({shots[0]}, out);  // warm-up: builds, first uploads
+            using StageTimes = std::array<double, formfactor::OpenCLEngine::kStages>;
+            std::vector<StageTimes> stages_before;  // the timed shots' device time is the difference
+            for (auto& r : runners) {
+                const auto* cl = dynamic_cast<const formfactor::OpenCLEngine*>(r.impl.get());
+                stages_before.push_back(cl ? cl->stage_seconds() : StageTimes{});
+            }
+            for (int rep = 0; rep < o.repeats; ++rep) {
+                for (auto& r : runners) {
+                    double seconds = 0.0;
+                    for (std::size_t first = 0; first < shots.size(); first += static_cast<std::size_t>(o.batch)) {
+                        const std::vector<formfactor::ShotRequest> batch(
+                            shots.begin() + static_cast<std::ptrdiff_t>(first),
+                            shots.begin() + static_cast<std::ptrdiff_t>(
+                                                std::min(shots.size(), first + static_cast<std::size_t>(o.batch))));
+                        const auto t0 = Clock::now();
+                        r.impl->shoot_batch(batch, out);
+                        seconds += std::chrono::duration<double>(Clock::now() - t0).count();
+                        for (std::size_t b = 0; b < batch.size(); ++b) {
+                            double sum = out[b].blocked;
+                            for (double f : out[b].F) sum += f;
+                            r.sum_min = std::min(r.sum_min, sum);
+                            r.sum_max = std::max(r.sum_max, sum);
+                            if (first + b >= sample) continue;
+                            const formfactor::ShotResult& want = expected[first + b];
+                            double l1 = std::abs(out[b].blocked - want.blocked);
+                            for (std::size_t k = 0; k < want.F.size(); ++k) {
+                                const double diff = std::abs(out[b].F[k] - want.F[k]);
+                                r.worst_abs = std::max(r.worst_abs, diff);
+                                l1 += diff;
+                            }
+                            r.worst_l1 = std::max(r.worst_l1, l1);
+                        }
+                    }
+                    r.ms_per_shot.push_back(1e3 * seconds / static_cast<double>(shots.size()));
+                }
+            }
+
+            // A fast wrong engine cannot win: any failed check ends the run without a result.
+            for (const auto& r : runners) {
+                std::string problem;
+                if (r.worst_abs > r.tolerance.max_abs || r.worst_l1 > r.tolerance.l1)
+                    problem = fmt::format("disagrees with the reference (|ΔF| up to {:.3g}, Σ|ΔF| {:.3g})", r.worst_abs,
+                                          r.worst_l1);
+                else if (r.sum_max > 1.0 + kSumSlack)
+                    problem = fmt::format("form factors sum to {:.12f} > 1", r.sum_max);
+                else if (bench_scene.closed && r.sum_min < 1.0 - kSumSlack)
+                    problem = fmt::format("form factors sum to {:.12f} < 1 in a closed scene", r.sum_min);
+                if (!problem.empty())
+                    throw formfactor::VerifyError(
+                        fmt::format("{} on {} at N = {}: {} {}; no result", r.engine, spec, n, r.device, problem));
+            }
+
+            const double ref_median = selection.ref ? stats(runners[0].ms_per_shot).median : 0.0;
+            log << fmt::format("\nN = {}, {} shots × {} repeats, batches of {}\n\n", n, o.shots, o.repeats, o.batch);
+            log << "| engine | device | ms/shot median (min, σ) | shots/s | samples/s | vs ref | % of limit | worst "
+                   "Σ\\|ΔF\\| vs ref |\n|---|---|---|---|---|---|---|---|\n";
+            for (std::size_t i = 0; i < runners.size(); ++i) {
+                const Runner& r = runners[i];
+                const Stats st = stats(r.ms_per_shot);
+                const double shots_per_s = 1e3 / st.median;
+                ordered_json row = {
+                    {"engine", r.engine},
+                    {"device", r.device},
+                    {"scene", spec},
+                    {"closed", bench_scene.closed},
+                    {"triangles", s.triangles.size()},
+                    {"patches", m.patches.size()},
+                    {"elements", m.elements.size()},
+                    {"hemicube", n},
+                    {"batch", o.batch},
+                    {"shots_per_s", shots_per_s},
+                    {"samples_per_s", 3.0 * n * n * shots_per_s},
+                    {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
+                    {"sum_F_blocked", {{"min", r.sum_min}, {"max", r.sum_max}}},
+                    {"vs_ref", {{"worst_abs_dF", r.worst_abs}, {"worst_l1_dF", r.worst_l1}}}};
+                if (selection.ref) row["speedup_vs_ref"] = ref_median / st.median;
+                // The limit: the device's own calibration; the host engines', the CPU device's.
+                const Calibration* limit = host_limit;
+                if (r.context != nullptr) {
+                    limit = nullptr;
+                    for (std::size_t d = 0; d < contexts.size() && d < calibrations.size(); ++d)
+                        if (contexts[d].get() == r.context) limit = &calibrations[d];
+                }
+                std::string limit_cell = "–";
+                if (limit != nullptr) {
+                    const double limit_ms = limit_ms_per_shot(*limit, n, m.elements.size());
+                    row["limit"] = {
+                        {"device", limit->device}, {"ms_per_shot", limit_ms}, {"fraction", limit_ms / st.median}};
+                    limit_cell = fmt::format("{:.1f}%", 100.0 * limit_ms / st.median);
+                }
+                if (const auto* cl = dynamic_cast<const formfactor::OpenCLEngine*>(r.impl.get())) {
+                    ordered_json device_ms;
+                    const double timed = static_cast<double>(o.repeats) * static_cast<double>(shots.size());
+                    for (std::size_t k = 0; k < formfactor::OpenCLEngine::kStages; ++k)
+                        device_ms[formfactor::OpenCLEngine::kStageNames[k]] =
+                            1e3 * (cl->stage_seconds()[k] - stages_before[i][k]) / timed;
+                    row["device_ms_per_shot"] = device_ms;
+                }
+                log << fmt::format(
+                    "| {} | {} | {:.3g} ({:.3g}, ±{:.0f}%) | {:.4g} | {:.3g} | {} | {} | {:.1e} |\n", r.engine,
+                    r.device, st.median, st.min, st.sigma_percent, shots_per_s, 3.0 * n * n * shots_per_s,
+                    selection.ref ? fmt::format("{:.2f}×", ref_median / st.median) : "–", limit_cell, r.worst_l1);
+                results.push_back(row);
+            }
+            for (const auto& row : results) {
+                if (!row.contains("device_ms_per_shot") || row["scene"] != spec || row["hemicube"] != n) continue;
+                log << fmt::format("\n{} device time per shot (ms, event profiling):",
+                                   row["device"].get<std::string>());
+                for (const auto& [stage, ms] : row["device_ms_per_shot"].items())
+                    log << fmt::format(" {} {:.3f}", stage, ms.get<double>());
+                log << "\n";
+            }
+        }
+    }
+    doc["results"] = results;
+    return doc;
+}
+
+}  // namespace hemirad::bench

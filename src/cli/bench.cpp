@@ -1,0 +1,65 @@
+// `hemirad bench` (see bench.h): runs a benchmark and writes its JSON document atomically.
+#include "cli/bench.h"
+
+#include <fmt/core.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <system_error>
+
+#include "core/error.h"
+
+namespace hemirad::cli {
+namespace fs = std::filesystem;
+
+namespace {
+
+// The JSON goes to a temporary file beside the target, renamed over it when complete: a failed
+// or interrupted run never leaves a half-written file, nor destroys an earlier one.
+class JsonFile {
+public:
+    explicit JsonFile(const std::string& target) : target_(target) {
+        if (target_.empty()) return;
+        temp_ = target_;
+        temp_ += fmt::format(".tmp-{}", static_cast<long>(getpid()));
+        std::ofstream probe(temp_);  // fail before hours of benchmarking, not after
+        if (!probe) throw InputError(fmt::format("{}: cannot write the results (does its directory exist?)", target));
+    }
+    JsonFile(const JsonFile&) = delete;
+    JsonFile& operator=(const JsonFile&) = delete;
+    ~JsonFile() {
+        std::error_code ec;  // destructors never throw
+        if (!temp_.empty()) fs::remove(temp_, ec);
+    }
+    void commit(const nlohmann::ordered_json& doc) {
+        if (target_.empty()) return;
+        {
+            std::ofstream out(temp_);
+            out << doc.dump(2) << "\n";
+            if (!out.good()) throw InputError(fmt::format("{}: cannot write the results", target_.string()));
+        }
+        std::error_code ec;
+        fs::rename(temp_, target_, ec);
+        if (ec) throw InputError(fmt::format("{}: cannot write the results: {}", target_.string(), ec.message()));
+        temp_.clear();
+    }
+
+private:
+    fs::path target_, temp_;
+};
+
+}  // namespace
+
+void run_bench(const BenchCommand& command, std::ostream& log) {
+    JsonFile json(command.json);
+    if (command.accuracy && !command.throughput.scenes.empty())
+        throw InputError("bench --accuracy: takes no scenes (it builds its own)");
+    if (command.quick && !command.accuracy) throw InputError("bench: --quick goes with --accuracy");
+    const nlohmann::ordered_json doc = command.accuracy ? bench::run_accuracy({command.device, command.quick}, log)
+                                                        : bench::run_throughput(command.throughput, log);
+    json.commit(doc);
+    if (!command.json.empty()) log << fmt::format("\nwrote {}\n", command.json);
+}
+
+}  // namespace hemirad::cli
