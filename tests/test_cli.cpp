@@ -22,6 +22,7 @@
 #include <catch2/catch.hpp>
 
 #include "cl/runtime.h"
+#include "cli/bake.h"
 #include <nlohmann/json.hpp>
 #include <OpenImageIO/imageio.h>
 #include <tiny_gltf.h>
@@ -998,4 +999,33 @@ TEST_CASE("bench refuses a fast wrong OpenCL kernel: no result, no JSON", "[cli]
     CHECK(r.err.find("hemirad: verification failed: opencl on procedural:100") != std::string::npos);
     CHECK(r.err.find("disagrees with the reference") != std::string::npos);
     CHECK(!fs::exists(file));
+}
+
+TEST_CASE("quality presets fill in the settings the options leave out; options override them", "[cli][quality]") {
+    const TempDir dir;
+    // closed_room spans x ∈ [−2, 2], y ∈ [0, 2.5], z ∈ [−2.5, 2.5] (scenes/README.md).
+    const double diagonal = std::sqrt(4.0 * 4.0 + 2.5 * 2.5 + 5.0 * 5.0);
+    const std::vector<std::string> quick = {"--max-passes", "20", "--image-width", "32", "--quiet"};
+    for (const hemirad::cli::QualityPreset& preset : hemirad::cli::kQualityPresets) {
+        INFO(preset.name);
+        const fs::path out = dir / preset.name;
+        const json report = bake_ok(dir, kClosedRoom, out, concat({"--quality", preset.name}, quick));
+        const json& s = report["settings"];
+        CHECK(s["quality"] == preset.name);
+        CHECK(s["hemicube"] == preset.hemicube);
+        CHECK(s["threshold"].get<double>() == preset.threshold);
+        CHECK(s["patch_size"].get<double>() == Approx(diagonal * preset.patch_fraction).epsilon(1e-9));
+        CHECK(s["element_size"].get<double>() ==
+              Approx(diagonal * preset.patch_fraction / preset.elements_per_patch_edge).epsilon(1e-9));
+    }
+    const json overridden = bake_ok(dir, kClosedRoom, dir / "overridden",
+                                    concat({"--quality", "high", "--hemicube", "32", "--threshold", "0.5",
+                                            "--patch-size", "1.5"},
+                                           quick));
+    CHECK(overridden["settings"]["hemicube"] == 32);
+    CHECK(overridden["settings"]["threshold"].get<double>() == 0.5);
+    CHECK(overridden["settings"]["patch_size"].get<double>() == 1.5);
+    CHECK(overridden["settings"]["element_size"].get<double>() ==
+          Approx(1.5 / hemirad::cli::quality_preset("high").elements_per_patch_edge));
+    expect_bad_input(dir, bake_args(kClosedRoom, dir / "never", {"--quality", "best"}), dir / "never", "quality");
 }

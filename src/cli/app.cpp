@@ -28,16 +28,28 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("-o,--output", o.output, "output directory (created if missing)")->capture_default_str();
     bake.add_option("--device", o.device, "form-factor engine: auto|ref|opencl|opencl:P.D (see hemirad devices)")
         ->capture_default_str();
-    bake.add_option("--hemicube", o.hemicube, "hemicube resolution N: top face N×N plus four N×N/2 half faces")
-        ->check(CLI::Range(8, 4096))
+    std::string presets;
+    for (const QualityPreset& p : kQualityPresets)
+        presets += fmt::format("{}{} (N {}, patches diagonal/{:g}, {:g} elements a side, threshold {:g})",
+                               presets.empty() ? "" : ", ", p.name, p.hemicube, 1.0 / p.patch_fraction,
+                               p.elements_per_patch_edge, p.threshold);
+    bake.add_option("--quality", o.quality,
+                    "settings preset from the accuracy-against-time benchmark: " + presets +
+                        "; the options below override their part")
+        ->check(CLI::IsMember({"draft", "default", "high"}))
         ->capture_default_str();
-    bake.add_option("--patch-size", o.patch_size, "maximum patch edge, scene units (default: scene diagonal / 16)")
+    bake.add_option("--hemicube", o.hemicube,
+                    "hemicube resolution N: top face N×N plus four N×N/2 half faces (default: the quality's)")
+        ->check(CLI::Range(8, 4096));
+    bake.add_option("--patch-size", o.patch_size,
+                    "maximum patch edge, scene units (default: scene diagonal × the quality's fraction)")
         ->check(CLI::PositiveNumber);
-    bake.add_option("--element-size", o.element_size, "maximum element edge, scene units (default: patch size / 3)")
+    bake.add_option("--element-size", o.element_size,
+                    "maximum element edge, scene units (default: patch size / the quality's elements a side)")
         ->check(CLI::PositiveNumber);
-    bake.add_option("--threshold", o.threshold, "stop when the share of final flux not yet placed is below this")
-        ->check(CLI::Range(0.0, 1.0))
-        ->capture_default_str();
+    bake.add_option("--threshold", o.threshold,
+                    "stop when the share of final flux not yet placed is below this (default: the quality's)")
+        ->check(CLI::Range(0.0, 1.0));
     bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();

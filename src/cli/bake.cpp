@@ -210,8 +210,18 @@ void list_devices(std::ostream& out, bool json) {
     if (devices.empty()) out << "(no OpenCL platform or device found)\n";
 }
 
-void run_bake(const BakeOptions& o) {
+const QualityPreset& quality_preset(const std::string& name) {
+    for (const QualityPreset& p : kQualityPresets)
+        if (name == p.name) return p;
+    throw InputError(fmt::format("--quality {}: expected draft, default or high", name));
+}
+
+void run_bake(const BakeOptions& options) {
     const auto t_total = Clock::now();
+    const QualityPreset& quality = quality_preset(options.quality);
+    BakeOptions o = options;  // with the preset's settings where none was given
+    if (o.hemicube == 0) o.hemicube = quality.hemicube;
+    if (o.threshold < 0.0) o.threshold = quality.threshold;
     if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
 
     auto t0 = Clock::now();
@@ -223,8 +233,8 @@ void run_bake(const BakeOptions& o) {
     const double diagonal = scene.diagonal();
     if (!(diagonal > 0.0) || !std::isfinite(diagonal))
         throw InputError(fmt::format("{}: the scene has no extent (all vertices coincide)", o.scene));
-    mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : diagonal * kDefaultPatchFraction;
-    mesh_settings.element_size = o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / kDefaultElementsPerPatchEdge;
+    mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : diagonal * quality.patch_fraction;
+    mesh_settings.element_size = o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / quality.elements_per_patch_edge;
     if (mesh_settings.element_size > mesh_settings.patch_size)
         throw InputError(fmt::format("--element-size {} is larger than the patch size {}", mesh_settings.element_size, mesh_settings.patch_size));
     const output::View view = output::choose_view(scene, o.camera);  // fails early on a bad --camera
@@ -292,6 +302,7 @@ void run_bake(const BakeOptions& o) {
     report["scene"] = o.scene;
     report["device"] = {{"backend", choice.backend}, {"platform", choice.platform}, {"name", choice.name}, {"id", choice.id}};
     report["settings"] = {
+        {"quality", o.quality},
         {"hemicube", o.hemicube},
         {"patch_size", mesh_settings.patch_size},
         {"element_size", mesh_settings.element_size},
