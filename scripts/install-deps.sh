@@ -12,6 +12,8 @@ packages=(
   catch2 libcli11-dev libfmt-dev
   # The ray-casting peer engine of bench/ (optional in CMake, installed here so CI builds it).
   libembree-dev
+  # bench/plot.py: PNG plots from the benchmark's JSON.
+  python3 python3-matplotlib
 )
 
 sudo=""
