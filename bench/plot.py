@@ -1,0 +1,376 @@
+#!/usr/bin/env python3
+"""Draw PNG plots from one JSON document written by `hemirad bench --json`."""
+import argparse
+import json
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+STAGES = ("setup", "scan", "scatter", "raster", "read")
+ROW_KEYS = ("engine", "device", "scene", "triangles", "hemicube", "ms_per_shot")
+RUN_KEYS = ("seconds", "rms_rel_error", "sweep")
+ANALYTIC_KEYS = ("case", "hemicube", "patch_size", "rel_error")
+
+
+class BadDocument(Exception):
+    pass
+
+
+def need(obj, keys, where):
+    """Raise BadDocument unless obj is an object holding every key."""
+    if not isinstance(obj, dict):
+        raise BadDocument(f"{where} is not an object")
+    missing = [k for k in keys if k not in obj]
+    if missing:
+        raise BadDocument(f"{where} lacks {', '.join(repr(k) for k in missing)}")
+
+
+def validate(doc):
+    need(doc, (), "the document")
+    if "results" not in doc and "accuracy" not in doc:
+        raise BadDocument("neither 'results' nor 'accuracy' is present")
+    for i, row in enumerate(doc.get("results", [])):
+        need(row, ROW_KEYS, f"results[{i}]")
+        need(row["ms_per_shot"], ("median",), f"results[{i}].ms_per_shot")
+    if "accuracy" in doc:
+        acc = doc["accuracy"]
+        need(acc, (), "accuracy")
+        for i, a in enumerate(acc.get("analytic", [])):
+            need(a, ANALYTIC_KEYS, f"accuracy.analytic[{i}]")
+        if "room" in acc:
+            need(acc["room"], ("runs",), "accuracy.room")
+            for i, run in enumerate(acc["room"]["runs"]):
+                need(run, RUN_KEYS, f"accuracy.room.runs[{i}]")
+            for name, run in acc["room"].get("presets", {}).items():
+                need(run, ("seconds", "rms_rel_error"), f"accuracy.room.presets.{name}")
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers
+
+def short_scene(scene):
+    return scene if scene.startswith("procedural:") else os.path.splitext(os.path.basename(scene))[0]
+
+
+def series_key(row):
+    return (row["engine"], row["device"])
+
+
+def series_label(key):
+    return f"{key[0]}: {key[1]}"
+
+
+def colours(keys):
+    cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    return {k: cycle[i % len(cycle)] for i, k in enumerate(keys)}
+
+
+def unique(values):
+    return list(dict.fromkeys(values))
+
+
+def footer_text(doc, extra=""):
+    parts = []
+    m = doc.get("machine")
+    if isinstance(m, dict):
+        parts.append(f"CPU: {m.get('cpu', '?')} ({m.get('hardware_threads', '?')} hardware threads)")
+    if "version" in doc:
+        parts.append(f"hemirad {doc['version']}")
+    if extra:
+        parts.append(extra)
+    return "   |   ".join(parts)
+
+
+def panels(n, width=5.2, height=4.2):
+    cols = min(n, 3)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(width * cols, height * rows), squeeze=False)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    return fig, list(axes.flat[:n])
+
+
+def guide(ax, xs, ys, power, label):
+    """Dashed grey y ∝ x^power line through the first point, for reading slopes."""
+    x0, x1 = min(xs), max(xs)
+    y0 = min(y for x, y in zip(xs, ys) if x == x0)
+    ax.plot([x0, x1], [y0, y0 * (x1 / x0) ** power], ls="--", color="0.6", lw=1, label=label, zorder=0)
+
+
+def finish(fig, path, doc, title, extra="", legend=None):
+    """Title and provenance line on top, the legend (if any) below the panels, then save."""
+    h = fig.get_figheight()
+    fig.suptitle(title, fontsize=12, y=1 - 0.08 / h, va="top")
+    fig.text(0.5, 1 - 0.34 / h, footer_text(doc, extra), ha="center", va="top", fontsize=7.5, color="0.3")
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.55 / h))
+    if legend:
+        fig.legend(*legend, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(len(legend[1]), 2),
+                   fontsize=8, frameon=False)
+    fig.savefig(path, dpi=110, bbox_inches="tight", metadata={"Software": None})
+    plt.close(fig)
+    print(path)
+
+
+def n_axis(ax, ns):
+    """Log x axis labelled with the hemicube N values themselves."""
+    ax.set_xscale("log")
+    ax.set_xticks(ns, [str(n) for n in ns])
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xlabel("hemicube N (cells per side)")
+
+
+def merged_legend(axes):
+    seen = {}
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(lab, h)
+    return list(seen.values()), list(seen.keys())
+
+
+def ms_errors(rows):
+    """Median ± σ, the lower bar clipped so it stays positive on a log axis."""
+    med = [r["ms_per_shot"]["median"] for r in rows]
+    sig = [m * r["ms_per_shot"].get("sigma_percent", 0.0) / 100 for m, r in zip(med, rows)]
+    return med, [[min(s, 0.9 * m) for s, m in zip(sig, med)], sig]
+
+
+# ---------------------------------------------------------------------------------------------
+# throughput
+
+def plot_scaling_triangles(doc, rows, out, colour):
+    ns = sorted(n for n in {r["hemicube"] for r in rows}
+                if len({r["triangles"] for r in rows if r["hemicube"] == n}) > 1)
+    if not ns:
+        return "needs one hemicube N measured on more than one scene size"
+    fig, axes = panels(len(ns))
+    for ax, n in zip(axes, ns):
+        at_n = [r for r in rows if r["hemicube"] == n]
+        proc = [r for r in at_n if r["scene"].startswith("procedural:")]
+        for key in colour:
+            line = sorted((r for r in proc if series_key(r) == key), key=lambda r: r["triangles"])
+            if line:
+                med, err = ms_errors(line)
+                ax.errorbar([r["triangles"] for r in line], med, yerr=err, marker="o", ms=4,
+                            capsize=2, color=colour[key], label=series_label(key))
+            files = [r for r in at_n if series_key(r) == key and not r["scene"].startswith("procedural:")]
+            if files:
+                ax.scatter([r["triangles"] for r in files], [r["ms_per_shot"]["median"] for r in files],
+                           marker="D", s=30, facecolors="none", edgecolors=colour[key], zorder=3)
+        for scene in unique(r["scene"] for r in at_n if not r["scene"].startswith("procedural:")):
+            r = max((r for r in at_n if r["scene"] == scene), key=lambda r: r["ms_per_shot"]["median"])
+            ax.annotate(short_scene(scene), (r["triangles"], r["ms_per_shot"]["median"]),
+                        xytext=(0, 6), textcoords="offset points", ha="center", fontsize=7)
+        if proc:
+            guide(ax, [r["triangles"] for r in proc], [r["ms_per_shot"]["median"] for r in proc],
+                  1, "∝ triangles (guide)")
+        ax.set(xscale="log", yscale="log", title=f"hemicube N = {n}",
+               xlabel="triangles", ylabel="ms per shot (median ± σ)")
+        ax.grid(True, which="both", alpha=0.25)
+    handles, labels = merged_legend(axes)
+    handles.append(plt.Line2D([], [], marker="D", ls="", mfc="none", mec="0.3"))
+    labels.append("file scenes (hollow diamonds, labelled; not part of the lines)")
+    finish(fig, os.path.join(out, "scaling_triangles.png"), doc,
+           "Shot time against scene size (lines: procedural scenes)", legend=(handles, labels))
+
+
+def plot_scaling_hemicube(doc, rows, out, colour):
+    scenes = sorted(unique(r["scene"] for r in rows), key=lambda s: (
+        min(r["triangles"] for r in rows if r["scene"] == s), s))
+    scenes = [s for s in scenes if len({r["hemicube"] for r in rows if r["scene"] == s}) > 1]
+    if not scenes:
+        return "needs a scene measured at more than one hemicube N"
+    fig, axes = panels(len(scenes))
+    for ax, scene in zip(axes, scenes):
+        at_s = [r for r in rows if r["scene"] == scene]
+        for key in colour:
+            line = sorted((r for r in at_s if series_key(r) == key), key=lambda r: r["hemicube"])
+            if line:
+                med, err = ms_errors(line)
+                ax.errorbar([r["hemicube"] for r in line], med, yerr=err, marker="o", ms=4,
+                            capsize=2, color=colour[key], label=series_label(key))
+        guide(ax, [r["hemicube"] for r in at_s], [r["ms_per_shot"]["median"] for r in at_s],
+              2, "∝ N² (guide)")
+        n_axis(ax, sorted({r["hemicube"] for r in at_s}))
+        ax.set(yscale="log", ylabel="ms per shot (median ± σ)",
+               title=f"{short_scene(scene)} ({at_s[0]['triangles']:,} triangles)")
+        ax.grid(True, which="both", alpha=0.25)
+    finish(fig, os.path.join(out, "scaling_hemicube.png"), doc, "Shot time against hemicube resolution",
+           legend=merged_legend(axes))
+
+
+def scene_order(rows):
+    return sorted(unique(r["scene"] for r in rows),
+                  key=lambda s: (min(r["triangles"] for r in rows if r["scene"] == s), s))
+
+
+def plot_fraction_of_limit(doc, rows, out, colour):
+    rows = [r for r in rows if isinstance(r.get("limit"), dict) and "fraction" in r["limit"]]
+    if not rows:
+        return "no row has a 'limit'"
+    ns = sorted({r["hemicube"] for r in rows})
+    fig, axes = panels(len(ns), width=max(5.2, 1.0 + 0.25 * len(rows) / len(ns)))
+    keys = [k for k in colour if any(series_key(r) == k for r in rows)]
+    width = 0.8 / len(keys)
+    for ax, n in zip(axes, ns):
+        at_n = [r for r in rows if r["hemicube"] == n]
+        scenes = scene_order(at_n)
+        for j, key in enumerate(keys):
+            pts = [(i, r["limit"]["fraction"] * 100) for i, s in enumerate(scenes)
+                   for r in at_n if r["scene"] == s and series_key(r) == key]
+            if pts:
+                ax.bar([i - 0.4 + width * (j + 0.5) for i, _ in pts], [p for _, p in pts], width,
+                       color=colour[key], label=series_label(key))
+        ax.set_xticks(range(len(scenes)), [short_scene(s) for s in scenes],
+                      rotation=30 if len(scenes) > 3 else 0, ha="right" if len(scenes) > 3 else "center")
+        ax.set(yscale="log", ylabel="% of the calibrated limit", title=f"hemicube N = {n}")
+        ax.yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}%"))
+        ax.grid(True, axis="y", which="both", alpha=0.25)
+    limits = unique(r["limit"].get("device", "?") for r in rows)
+    finish(fig, os.path.join(out, "fraction_of_limit.png"), doc,
+           "Shot throughput as a fraction of the machine's calibrated limit",
+           extra="limit devices: " + "; ".join(limits), legend=merged_legend(axes))
+
+
+def plot_opencl_stages(doc, rows, out, colour):
+    rows = [r for r in rows if r["engine"] == "opencl" and isinstance(r.get("device_ms_per_shot"), dict)]
+    if not rows:
+        return "no OpenCL row has 'device_ms_per_shot'"
+    devices = unique(r["device"] for r in rows)
+    most = max(sum(r["device"] == d for r in rows) for d in devices)
+    fig, axes = plt.subplots(2, len(devices), figsize=(max(5.5, 1.2 + 0.45 * most) * len(devices), 7.5),
+                             squeeze=False, sharex="col")
+    stage_colours = plt.get_cmap("tab10").colors
+    for col, device in enumerate(devices):
+        these = sorted((r for r in rows if r["device"] == device),
+                       key=lambda r: (r["triangles"], r["scene"], r["hemicube"]))
+        xs = range(len(these))
+        totals = [sum(r["device_ms_per_shot"].get(s, 0.0) for s in STAGES) for r in these]
+        top, share = axes[0][col], axes[1][col]
+        low_abs, low_pct = [0.0] * len(these), [0.0] * len(these)
+        for k, stage in enumerate(STAGES):
+            ms = [r["device_ms_per_shot"].get(stage, 0.0) for r in these]
+            pct = [100 * m / t if t else 0 for m, t in zip(ms, totals)]
+            top.bar(xs, ms, 0.7, bottom=low_abs, color=stage_colours[k], label=stage)
+            share.bar(xs, pct, 0.7, bottom=low_pct, color=stage_colours[k])
+            low_abs = [a + b for a, b in zip(low_abs, ms)]
+            low_pct = [a + b for a, b in zip(low_pct, pct)]
+        top.plot(xs, [r["ms_per_shot"]["median"] for r in these], "k_", ms=18, mew=2,
+                 label="wall-clock ms/shot (median)")
+        top.set(ylabel="device ms per shot", title=device)
+        share.set(ylabel="% of device time", ylim=(0, 100))
+        share.set_xticks(list(xs), [f"{short_scene(r['scene'])}\nN={r['hemicube']}" for r in these],
+                         rotation=45 if len(these) > 4 else 0, ha="right" if len(these) > 4 else "center",
+                         fontsize=8)
+        for ax in (top, share):
+            ax.grid(True, axis="y", alpha=0.25)
+    finish(fig, os.path.join(out, "opencl_stages.png"), doc,
+           "OpenCL device time per shot by stage (event profiling)",
+           legend=merged_legend([axes[0][0]]))
+
+
+# ---------------------------------------------------------------------------------------------
+# accuracy
+
+def plot_accuracy_pareto(doc, acc, out):
+    room = acc.get("room")
+    if not room or not room["runs"]:
+        return "no 'accuracy.room.runs'"
+    runs = room["runs"]
+    fig, ax = plt.subplots(figsize=(8, 6))
+    for sweep in unique(r["sweep"] for r in runs):
+        pts = [r for r in runs if r["sweep"] == sweep]
+        ax.scatter([r["seconds"] for r in pts], [r["rms_rel_error"] for r in pts], s=22, alpha=0.8,
+                   label=f"sweep: {sweep}")
+    front = sorted((runs[i] for i in room.get("pareto", [])), key=lambda r: r["seconds"])
+    if front:
+        ax.step([r["seconds"] for r in front], [r["rms_rel_error"] for r in front], where="post",
+                color="k", lw=1.2, label="Pareto front")
+    for name, run in room.get("presets", {}).items():
+        ax.scatter([run["seconds"]], [run["rms_rel_error"]], marker="*", s=260, color="gold",
+                   edgecolors="k", linewidths=0.8, zorder=5)
+        ax.annotate(name, (run["seconds"], run["rms_rel_error"]), xytext=(9, 6),
+                    textcoords="offset points", fontsize=10, weight="bold")
+    ax.scatter([], [], marker="*", s=120, color="gold", edgecolors="k", label="--quality presets")
+    ax.set(xscale="log", yscale="log", xlabel="bake time (s)",
+           ylabel="RMS relative error of the radiosity")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), frameon=False)
+    ref = room.get("reference", {})
+    ref_text = ", ".join(f"{k}={v}" for k, v in ref.items() if isinstance(v, (int, float, str)))
+    finish(fig, os.path.join(out, "accuracy_pareto.png"), doc,
+           f"Accuracy against time, room scene (device: {acc.get('device', '?')})",
+           extra=f"reference: {ref_text}" if ref_text else "")
+
+
+def plot_accuracy_analytic(doc, acc, out):
+    cases = unique(a["case"] for a in acc.get("analytic", []))
+    if not cases:
+        return "no 'accuracy.analytic' cases"
+    fig, axes = panels(len(cases))
+    for ax, case in zip(axes, cases):
+        these = [a for a in acc["analytic"] if a["case"] == case]
+        for size in sorted({a["patch_size"] for a in these}):
+            line = sorted((a for a in these if a["patch_size"] == size and a["rel_error"] != 0),
+                          key=lambda a: a["hemicube"])
+            ax.plot([a["hemicube"] for a in line], [abs(a["rel_error"]) for a in line], marker="o",
+                    ms=4, label=f"patch size {size:g}")
+        n_axis(ax, sorted({a["hemicube"] for a in these}))
+        exact = these[0].get("exact")
+        ax.set(yscale="log", ylabel="|relative error| of the form factor",
+               title=case + (f" (exact F = {exact:.4g})" if exact is not None else ""))
+        ax.grid(True, which="both", alpha=0.25)
+        ax.legend(fontsize=8, frameon=False)
+    finish(fig, os.path.join(out, "accuracy_analytic.png"), doc,
+           f"Form factors against closed forms (device: {acc.get('device', '?')}); "
+           "exact results are not drawn")
+
+
+# ---------------------------------------------------------------------------------------------
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("json", help="file written by `hemirad bench --json`")
+    parser.add_argument("--out", help="folder for the PNG files (default: the JSON's folder)")
+    args = parser.parse_args()
+
+    def fail(problem):
+        print(f"plot.py: {args.json}: {problem}", file=sys.stderr)
+        sys.exit(2)
+
+    try:
+        with open(args.json, encoding="utf-8") as f:
+            doc = json.load(f)
+        validate(doc)
+    except OSError as e:
+        fail(e.strerror or str(e))
+    except json.JSONDecodeError as e:
+        fail(f"not valid JSON ({e})")
+    except BadDocument as e:
+        fail(str(e))
+
+    out = args.out or os.path.dirname(os.path.abspath(args.json))
+    os.makedirs(out, exist_ok=True)
+    plt.rcParams.update({"font.size": 9, "axes.titlesize": 10})
+    rows = doc.get("results", [])
+    colour = colours(unique(series_key(r) for r in rows))
+    plots = []
+    if rows:
+        plots += [(f, (doc, rows, out, colour)) for f in
+                  (plot_scaling_triangles, plot_scaling_hemicube, plot_fraction_of_limit, plot_opencl_stages)]
+    if "accuracy" in doc:
+        plots += [(f, (doc, doc["accuracy"], out)) for f in (plot_accuracy_pareto, plot_accuracy_analytic)]
+    try:
+        for plot, plot_args in plots:
+            skipped = plot(*plot_args)
+            if skipped:
+                print(f"plot.py: skipped {plot.__name__[5:]}.png: {skipped}", file=sys.stderr)
+    except (KeyError, TypeError, ValueError, IndexError, ZeroDivisionError) as e:
+        fail(f"unexpected document layout in {plot.__name__[5:]} ({type(e).__name__}: {e})")
+
+
+if __name__ == "__main__":
+    main()
