@@ -268,12 +268,8 @@ std::vector<RoomSettings> room_sweep(bool quick) {
     return runs;
 }
 
-// Presets come only from runs with a threshold of at most this: in the convex, unoccluded room
-// the ambient term stands in for unshot light almost exactly, which a scene with shadows does
-// not grant, so the room would reward stopping far too early.
-constexpr double kPresetMaxThreshold = 1e-2;
+}  // namespace
 
-// Indices of the eligible runs no other eligible run beats in both time and error, fastest first.
 std::vector<std::size_t> pareto_front(const ordered_json& runs) {
     std::vector<std::size_t> order;
     for (std::size_t i = 0; i < runs.size(); ++i)
@@ -291,9 +287,6 @@ std::vector<std::size_t> pareto_front(const ordered_json& runs) {
     return front;
 }
 
-// The --quality presets, read off the Pareto front against the bake's defaults (run 0):
-// draft, the fastest front run within twice the defaults' error; default, the fastest front run
-// at most as wrong as the defaults; high, the most accurate front run within 8x their time.
 ordered_json derive_presets(const ordered_json& runs, const std::vector<std::size_t>& front) {
     const double base_error = runs[0]["rms_rel_error"].get<double>(), base_time = runs[0]["seconds"].get<double>();
     const auto error = [&](std::size_t i) { return runs[i]["rms_rel_error"].get<double>(); };
@@ -315,8 +308,6 @@ ordered_json derive_presets(const ordered_json& runs, const std::vector<std::siz
     }
     return presets;
 }
-
-}  // namespace
 
 ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
     EngineFactory engines(o.engine);
@@ -363,7 +354,8 @@ ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
         log << fmt::format(" [{:.2f} s, {:.2f}%]", runs[i]["seconds"].get<double>(),
                            100.0 * runs[i]["rms_rel_error"].get<double>());
     log << "\n\npresets, from runs with threshold <= 1e-2 (draft: fastest within 2x the defaults' error; default:\n"
-           "fastest at most as wrong as the defaults; high: most accurate within 8x their time)\n\n| preset | N | patch / diagonal | elements per "
+           "fastest at most as wrong as the defaults; high: most accurate within 8x their time)\n\n| preset | N | "
+           "patch / diagonal | elements per "
            "patch edge | threshold | batch | s | rms error |\n|---|---|---|---|---|---|---|---|\n";
     for (const auto& [name, p] : out["room"]["presets"].items())
         log << fmt::format("| {} | {} | 1/{:.0f} | {:g} | {:g} | {} | {:.2f} | {:.2f}% |\n", name,

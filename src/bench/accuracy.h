@@ -4,9 +4,11 @@
 // per run, and derives the Pareto front and the `--quality` presets from it.
 #pragma once
 
+#include <cstddef>
 #include <nlohmann/json.hpp>
 #include <ostream>
 #include <string>
+#include <vector>
 
 namespace hemirad::bench {
 
@@ -18,5 +20,21 @@ struct AccuracyOptions {
 // Returns {"accuracy": {device, analytic: [...], room: {reference, runs, pareto, presets}}} and
 // prints the tables to `log`.
 nlohmann::ordered_json run_accuracy(const AccuracyOptions& options, std::ostream& log);
+
+// Presets come only from runs with a threshold of at most this: in the convex, unoccluded room
+// the ambient term stands in for unshot light almost exactly, which a scene with shadows does
+// not grant, so the room would reward stopping far too early.
+inline constexpr double kPresetMaxThreshold = 1e-2;
+
+// Of `runs` (each with seconds, rms_rel_error, threshold), the indices of the eligible runs
+// (threshold <= kPresetMaxThreshold) that no other eligible run beats in both time and error,
+// fastest first.
+std::vector<std::size_t> pareto_front(const nlohmann::ordered_json& runs);
+
+// The --quality presets read off `front` against run 0 (a bake's defaults, which must be
+// eligible): draft, the fastest front run within twice run 0's error; default, the fastest at
+// most as wrong as run 0; high, the most accurate within 8x run 0's time. Each is a copy of its
+// run with "run": its index.
+nlohmann::ordered_json derive_presets(const nlohmann::ordered_json& runs, const std::vector<std::size_t>& front);
 
 }  // namespace hemirad::bench
