@@ -1029,3 +1029,54 @@ TEST_CASE("quality presets fill in the settings the options leave out; options o
           Approx(1.5 / hemirad::cli::quality_preset("high").elements_per_patch_edge));
     expect_bad_input(dir, bake_args(kClosedRoom, dir / "never", {"--quality", "best"}), dir / "never", "quality");
 }
+
+TEST_CASE("bench --accuracy --quick: analytic errors, room runs, the front and the presets", "[cli][bench]") {
+    const TempDir dir;
+    const fs::path file = dir / "accuracy.json";
+    const RunResult r = run_hemirad(dir, {"bench", "--accuracy", "--quick", "--json", file.string()});
+    INFO("stderr: [" << r.err << "]");
+    REQUIRE(r.code == 0);
+    const json doc = read_json(file);
+    CHECK(all_numbers_finite(doc));
+    const json& acc = doc["accuracy"];
+    REQUIRE(!acc["analytic"].empty());
+    for (const auto& row : acc["analytic"]) {
+        INFO(row.dump());
+        // REFERENCES.md's values; shooters of a quarter of the square are within a few percent.
+        CHECK(row["exact"].get<double>() == (row["case"].get<std::string>().rfind("parallel", 0) == 0
+                                                 ? 0.1998248957
+                                                 : 0.2000437761));
+        const double error = std::abs(row["value"].get<double>() / row["exact"].get<double>() - 1.0);
+        CHECK(row["rel_error"].get<double>() == Approx(error));
+        if (row["patch_size"].get<double>() <= 0.25) CHECK(row["rel_error"].get<double>() < 0.03);
+    }
+    const json& runs = acc["room"]["runs"];
+    REQUIRE(runs.size() >= 3);
+    for (const auto& run : runs) {
+        INFO(run.dump());
+        CHECK(run["rms_rel_error"].get<double>() < 0.15);
+        CHECK(run["max_surface_error"].get<double>() < 0.05);
+        CHECK(run["seconds"].get<double>() > 0.0);
+    }
+    // The front: fastest first, each run more accurate than the one before.
+    const json& front = acc["room"]["pareto"];
+    REQUIRE(!front.empty());
+    for (std::size_t i = 1; i < front.size(); ++i) {
+        const json &a = runs[front[i - 1].get<std::size_t>()], &b = runs[front[i].get<std::size_t>()];
+        CHECK(a["seconds"].get<double>() <= b["seconds"].get<double>());
+        CHECK(a["rms_rel_error"].get<double>() > b["rms_rel_error"].get<double>());
+    }
+    for (const char* name : {"draft", "default", "high"}) {
+        INFO(name);
+        const std::size_t run = acc["room"]["presets"][name]["run"].get<std::size_t>();
+        CHECK(std::find(front.begin(), front.end(), run) != front.end());
+    }
+    // Options that do not go together.
+    const auto bad = [&](const std::vector<std::string>& args) {
+        const RunResult b = run_hemirad(dir, args);
+        CHECK(b.code == 2);
+        check_one_line(b.err);
+    };
+    bad({"bench", "--quick", "procedural:100"});
+    bad({"bench", "--accuracy", "procedural:100"});
+}

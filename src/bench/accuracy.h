@@ -14,7 +14,7 @@ namespace hemirad::bench {
 
 struct AccuracyOptions {
     std::string engine = "auto";  // auto (the first OpenCL GPU, else device, else ref), ref, opencl:P.D
-    bool quick = false;           // a few runs per sweep instead of the full sweep
+    bool quick = false;           // a smoke test: a few coarse runs against a coarser reference
 };
 
 // Returns {"accuracy": {device, analytic: [...], room: {reference, runs, pareto, presets}}} and

@@ -1,6 +1,8 @@
 // The box-room radiosity reference: grid, exact unoccluded form factors, GMRES solve, final gather.
 #include "bench/room_reference.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -11,8 +13,6 @@
 #include <string>
 #include <thread>
 #include <tuple>
-
-#include <fmt/format.h>
 
 #include "core/error.h"
 #include "formfactor/analytic.h"
@@ -90,7 +90,8 @@ void validate(const Room& room) {
     for (int s = 0; s < kSurfaceCount; ++s)
         for (int c = 0; c < 3; ++c) {
             if (!(room.rho[s][c] >= 0.0 && room.rho[s][c] <= scene::kMaxReflectance))
-                fail(fmt::format("reflectance of {} must be in [0, {}]", surface_name(Surface(s)), scene::kMaxReflectance));
+                fail(fmt::format("reflectance of {} must be in [0, {}]", surface_name(Surface(s)),
+                                 scene::kMaxReflectance));
             if (!(room.emission[s][c] >= 0.0) || !std::isfinite(room.emission[s][c]))
                 fail(fmt::format("emission of {} must be finite and >= 0", surface_name(Surface(s))));
         }
