@@ -23,25 +23,8 @@ inline void add_triangle(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dve
     s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, node});
 }
 
-// Two a×b rectangles facing each other at distance c: the lower (z = 0) faces +z, the upper
-// (z = c) faces −z. Node 0 "lower", node 1 "upper".
-inline scene::Scene parallel_rectangles(double a, double b, double c, std::uint32_t lower_material,
-                                        std::uint32_t upper_material, scene::Scene s) {
-    add_quad(s, {0, 0, 0}, {a, 0, 0}, {a, b, 0}, {0, b, 0}, lower_material, "lower");
-    add_quad(s, {0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}, upper_material, "upper");
-    finish(s);
-    return s;
-}
-
-// Rectangles sharing the edge x ∈ [0, l] on the x axis: "floor" w deep (y ∈ [0, w], facing +z)
-// and "wall" h high (z ∈ [0, h], facing +y).
-inline scene::Scene perpendicular_rectangles(double l, double w, double h, std::uint32_t floor_material,
-                                             std::uint32_t wall_material, scene::Scene s) {
-    add_quad(s, {0, 0, 0}, {l, 0, 0}, {l, w, 0}, {0, w, 0}, floor_material, "floor");
-    add_quad(s, {0, 0, 0}, {0, 0, h}, {l, 0, h}, {l, 0, 0}, wall_material, "wall");
-    finish(s);
-    return s;
-}
+using scene::parallel_rectangles;
+using scene::perpendicular_rectangles;
 
 // An axis-aligned closed box [0, size]³ whose six faces look inwards, node per face.
 // `material_of(face)` gives each face's material (faces: −x, +x, −y, +y, −z, +z walls).

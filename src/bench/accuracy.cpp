@@ -77,25 +77,14 @@ struct AnalyticCase {
 };
 
 std::vector<AnalyticCase> analytic_cases() {
+    scene::Scene s;
+    const auto light = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
+    const auto grey = scene::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
     std::vector<AnalyticCase> cases;
-    {
-        scene::Scene s;
-        const auto light = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
-        const auto grey = scene::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-        scene::add_quad(s, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, light, "shooter");
-        scene::add_quad(s, {0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}, grey, "receiver");
-        scene::finish(s);
-        cases.push_back({"parallel unit squares 1 apart", 0.1998248957, std::move(s)});
-    }
-    {
-        scene::Scene s;
-        const auto light = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
-        const auto grey = scene::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-        scene::add_quad(s, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, light, "shooter");
-        scene::add_quad(s, {0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 0, 0}, grey, "receiver");
-        scene::finish(s);
-        cases.push_back({"perpendicular unit squares sharing an edge", 0.2000437761, std::move(s)});
-    }
+    cases.push_back(
+        {"parallel unit squares 1 apart", 0.1998248957, scene::parallel_rectangles(1, 1, 1, light, grey, s)});
+    cases.push_back({"perpendicular unit squares sharing an edge", 0.2000437761,
+                     scene::perpendicular_rectangles(1, 1, 1, light, grey, s)});
     return cases;
 }
 
@@ -347,11 +336,10 @@ ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
         runs.push_back(run);
     }
     const std::vector<std::size_t> front = pareto_front(runs);
-    out["room"] = {
-        {"reference", {{"cell_size", cell_size}, {"seconds", reference_seconds}, {"probes", probes.size()}}},
-        {"runs", runs},
-        {"pareto", front},
-        {"presets", derive_presets(runs, front)}};
+    out["room"] = {{"reference", {{"cell_size", cell_size}, {"seconds", reference_seconds}, {"probes", probes.size()}}},
+                   {"runs", runs},
+                   {"pareto", front},
+                   {"presets", derive_presets(runs, front)}};
     log << "\nPareto front of the runs with threshold <= 1e-2 (fastest first):";
     for (std::size_t i : front)
         log << fmt::format(" [{:.2f} s, {:.2f}%]", runs[i]["seconds"].get<double>(),

@@ -1,5 +1,5 @@
 // Scenes built in code (procedural scenes, benchmark configurations, tests): materials, quads
-// as two triangles of one primitive, and the bounding box.
+// as two triangles of one primitive, the bounding box, and the analytic rectangle pairs.
 #pragma once
 
 #include <glm/glm.hpp>
@@ -40,6 +40,26 @@ inline void finish(Scene& s) {
             s.bbox_min = glm::min(s.bbox_min, p);
             s.bbox_max = glm::max(s.bbox_max, p);
         }
+}
+
+// Two a×b rectangles facing each other at distance c: the lower (z = 0) faces +z, the upper
+// (z = c) faces −z. Node 0 "lower", node 1 "upper".
+inline Scene parallel_rectangles(double a, double b, double c, std::uint32_t lower_material,
+                                 std::uint32_t upper_material, Scene s) {
+    add_quad(s, {0, 0, 0}, {a, 0, 0}, {a, b, 0}, {0, b, 0}, lower_material, "lower");
+    add_quad(s, {0, 0, c}, {0, b, c}, {a, b, c}, {a, 0, c}, upper_material, "upper");
+    finish(s);
+    return s;
+}
+
+// Rectangles sharing the edge x ∈ [0, l] on the x axis: "floor" w deep (y ∈ [0, w], facing +z)
+// and "wall" h high (z ∈ [0, h], facing +y).
+inline Scene perpendicular_rectangles(double l, double w, double h, std::uint32_t floor_material,
+                                      std::uint32_t wall_material, Scene s) {
+    add_quad(s, {0, 0, 0}, {l, 0, 0}, {l, w, 0}, {0, w, 0}, floor_material, "floor");
+    add_quad(s, {0, 0, 0}, {0, 0, h}, {l, 0, h}, {l, 0, 0}, wall_material, "wall");
+    finish(s);
+    return s;
 }
 
 }  // namespace hemirad::scene
