@@ -289,10 +289,10 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                 if (r.worst_abs > r.tolerance.max_abs || r.worst_l1 > r.tolerance.l1)
                     problem = fmt::format("disagrees with the reference (|ΔF| up to {:.3g}, Σ|ΔF| {:.3g})", r.worst_abs,
                                           r.worst_l1);
-                // A closed scene's shots sum to 1 within what the engine owes the reference: the
-                // ray caster's rays may slip through a float's gap between neighbours.
                 else if (r.sum_max > 1.0 + kSumSlack)
                     problem = fmt::format("form factors sum to {:.12f} > 1", r.sum_max);
+                // A closed scene's shots sum to 1 within what the engine owes the reference: the
+                // ray caster's rays may slip through a float's gap between neighbours.
                 else if (bench_scene.closed && r.sum_min < 1.0 - std::max(kSumSlack, r.tolerance.l1))
                     problem = fmt::format("form factors sum to {:.12f} < 1 in a closed scene", r.sum_min);
                 if (!problem.empty())
