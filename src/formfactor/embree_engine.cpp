@@ -1,13 +1,13 @@
 // The Embree ray-casting peer (see embree_engine.h).
 #include "formfactor/embree_engine.h"
 
+#include <embree3/rtcore.h>
+#include <fmt/core.h>
+
 #include <algorithm>
 #include <array>
 #include <limits>
 #include <thread>
-
-#include <embree3/rtcore.h>
-#include <fmt/core.h>
 
 #include "core/error.h"
 
@@ -16,7 +16,7 @@ namespace hemirad::formfactor {
 namespace {
 
 constexpr int kPacket = 16;
-constexpr int kBlock = 4;  // a packet is a 4×4 block of cells: coherent rays
+constexpr int kBlock = 4;         // a packet is a 4×4 block of cells: coherent rays
 constexpr unsigned kTwinned = 1;  // geometry id of the elements that have a twin (see twin_filter)
 
 }  // namespace
@@ -41,9 +41,10 @@ struct EmbreeEngine::Impl {
     }
     void build();
     // Casts packets [first, last) of a shot from `frame` into ids (element, −1 empty, −2 a
-    // blocker), adding each cell's delta form factor to F; returns the blocked part.
-    double cast(const Frame& frame, const std::vector<char>& back, std::size_t first, std::size_t last,
-                std::vector<std::int32_t>& ids, std::vector<double>& F) const;
+    // blocker), adding each cell's delta form factor to F (all zero at the start) and listing in
+    // `touched` each element it adds to first; returns the blocked part.
+    double cast(const Frame& frame, std::size_t first, std::size_t last, std::vector<std::int32_t>& ids,
+                std::vector<double>& F, std::vector<std::uint32_t>& touched) const;
     static void twin_filter(const RTCFilterFunctionNArguments* args);
 };
 
@@ -76,8 +77,9 @@ void EmbreeEngine::Impl::build() {
         for (std::uint32_t k = 0; k < mesh.elements.size(); ++k)
             if (mesh.elements[k].has_twin == (g == kTwinned)) map.push_back(k);
         RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_QUAD);
-        auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
-            geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 4 * std::max<std::size_t>(1, map.size())));
+        auto* vertices =
+            static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                        3 * sizeof(float), 4 * std::max<std::size_t>(1, map.size())));
         auto* quads = static_cast<std::uint32_t*>(rtcSetNewGeometryBuffer(
             geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(std::uint32_t), map.size()));
         if (vertices == nullptr || (quads == nullptr && !map.empty()))
@@ -86,8 +88,10 @@ void EmbreeEngine::Impl::build() {
             const mesh::Polygon& poly = mesh.elements[map[q]].poly;
             for (int c = 0; c < 4; ++c) {
                 const glm::dvec3& p = poly.v[static_cast<std::size_t>(std::min(c, poly.n - 1))];
-                for (int a = 0; a < 3; ++a) vertices[12 * q + 3 * static_cast<std::size_t>(c) + a] = static_cast<float>(p[a]);
-                quads[4 * q + static_cast<std::size_t>(c)] = static_cast<std::uint32_t>(4 * q) + static_cast<std::uint32_t>(c);
+                for (int a = 0; a < 3; ++a)
+                    vertices[12 * q + 3 * static_cast<std::size_t>(c) + a] = static_cast<float>(p[a]);
+                quads[4 * q + static_cast<std::size_t>(c)] =
+                    static_cast<std::uint32_t>(4 * q) + static_cast<std::uint32_t>(c);
             }
         }
         if (g == kTwinned) {
@@ -130,8 +134,8 @@ void EmbreeEngine::Impl::build() {
     }
 }
 
-double EmbreeEngine::Impl::cast(const Frame& frame, const std::vector<char>& back, std::size_t first,
-                                std::size_t last, std::vector<std::int32_t>& ids, std::vector<double>& F) const {
+double EmbreeEngine::Impl::cast(const Frame& frame, std::size_t first, std::size_t last, std::vector<std::int32_t>& ids,
+                                std::vector<double>& F, std::vector<std::uint32_t>& touched) const {
     const auto& table = delta.table();
     double blocked = 0.0;
     RTCIntersectContext context;
@@ -167,12 +171,15 @@ double EmbreeEngine::Impl::cast(const Frame& frame, const std::vector<char>& bac
                 continue;
             }
             const std::uint32_t k = element_of[rh.hit.geomID[r]][rh.hit.primID[r]];
-            // The back of a one-sided surface blocks (a twinned one's back was filtered out).
-            if (back[k]) {
+            // The back of a one-sided surface blocks (a twinned one's back was filtered out);
+            // which side the shooter sees is decided as the reference decides it.
+            const mesh::Element& e = mesh.elements[k];
+            if (glm::dot(e.normal, frame.origin - e.centroid) < 0.0) {
                 ids[cell] = -2;
                 blocked += table[cell];
             } else {
                 ids[cell] = static_cast<std::int32_t>(k);
+                if (F[k] == 0.0) touched.push_back(k);  // every delta form factor is > 0
                 F[k] += table[cell];
             }
         }
@@ -182,7 +189,9 @@ double EmbreeEngine::Impl::cast(const Frame& frame, const std::vector<char>& bac
 
 EmbreeEngine::EmbreeEngine(const mesh::Mesh& mesh, const Settings& settings, unsigned threads)
     : impl_(std::make_unique<Impl>(mesh, settings)),
-      threads_(threads != 0 ? threads : std::max(1u, std::thread::hardware_concurrency())) {
+      threads_(threads != 0 ? threads : std::max(1u, std::thread::hardware_concurrency())),
+      sums_(threads_, std::vector<double>(mesh.elements.size(), 0.0)),
+      touched_(threads_) {
     impl_->build();
 }
 
@@ -194,19 +203,16 @@ std::string EmbreeEngine::version() {
 
 void EmbreeEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
     const Frame frame = make_frame(impl_->mesh.patches.at(patch), impl_->settings.seed, shot);
-    const std::size_t elements = impl_->mesh.elements.size(), packets = impl_->packets.size();
+    const std::size_t packets = impl_->packets.size();
     last_batch_ = 1;
     ids_.assign(impl_->delta.cells(), -1);
-    // Which elements show the shooter their back, as the reference decides it.
-    std::vector<char> back(elements);
-    for (std::size_t k = 0; k < elements; ++k) {
-        const mesh::Element& e = impl_->mesh.elements[k];
-        back[k] = glm::dot(e.normal, frame.origin - e.centroid) < 0.0;
-    }
-    // Thread t casts a fixed range of packets into its own sums; they are added in thread order.
-    std::vector<std::vector<double>> F(threads_, std::vector<double>(elements, 0.0));
+    // Thread t casts a fixed range of packets into its own sums, kept between shots (zero but
+    // where it touched), so a shot's cost follows its cells, not the scene's size.
     std::vector<double> blocked(threads_, 0.0);
     const auto range = [&](unsigned t) { return packets * t / threads_; };
+    const auto cast = [&](unsigned t) {
+        blocked[t] = impl_->cast(frame, range(t), range(t + 1), ids_, sums_[t], touched_[t]);
+    };
     {
         std::vector<std::thread> workers;
         struct JoinAll {  // also when starting a thread throws: none is left running
@@ -216,14 +222,18 @@ void EmbreeEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& ou
                     if (w.joinable()) w.join();
             }
         } join_all{workers};
-        for (unsigned t = 1; t < threads_; ++t)
-            workers.emplace_back([&, t] { blocked[t] = impl_->cast(frame, back, range(t), range(t + 1), ids_, F[t]); });
-        blocked[0] = impl_->cast(frame, back, range(0), range(1), ids_, F[0]);
+        for (unsigned t = 1; t < threads_; ++t) workers.emplace_back(cast, t);
+        cast(0);
     }
-    out.F = std::move(F[0]);
-    out.blocked = blocked[0];
-    for (unsigned t = 1; t < threads_; ++t) {
-        for (std::size_t k = 0; k < elements; ++k) out.F[k] += F[t][k];
+    // The threads' sums added in thread order: the same bits run after run.
+    out.F.assign(impl_->mesh.elements.size(), 0.0);
+    out.blocked = 0.0;
+    for (unsigned t = 0; t < threads_; ++t) {
+        for (std::uint32_t k : touched_[t]) {
+            out.F[k] += sums_[t][k];
+            sums_[t][k] = 0.0;
+        }
+        touched_[t].clear();
         out.blocked += blocked[t];
     }
 }

@@ -47,6 +47,8 @@ public:
 private:
     std::unique_ptr<Impl> impl_;
     unsigned threads_;
+    std::vector<std::vector<double>> sums_;            // per thread, per element; zero between shots
+    std::vector<std::vector<std::uint32_t>> touched_;  // per thread: the elements its sums hold
     std::vector<std::int32_t> ids_;
     std::size_t last_batch_ = 1;
 };
