@@ -1,14 +1,18 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """Draw PNG plots from one JSON document written by `hemirad bench --json`."""
 import argparse
 import json
 import os
 import sys
 
-import matplotlib
+try:
+    import matplotlib
+except ImportError:
+    sys.exit("plot.py: needs matplotlib (Debian: apt install python3-matplotlib, then run /usr/bin/python3)")
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # noqa: E402
 
 STAGES = ("setup", "scan", "scatter", "raster", "read")
 ROW_KEYS = ("engine", "device", "scene", "triangles", "hemicube", "ms_per_shot")
@@ -29,22 +33,39 @@ def need(obj, keys, where):
         raise BadDocument(f"{where} lacks {', '.join(repr(k) for k in missing)}")
 
 
+def positive(value, where):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        raise BadDocument(f"{where} is {value!r}, not a positive number")
+
+
+def listed(value, where):
+    if not isinstance(value, list):
+        raise BadDocument(f"{where} is not a list")
+    return value
+
+
 def validate(doc):
     need(doc, (), "the document")
     if "results" not in doc and "accuracy" not in doc:
         raise BadDocument("neither 'results' nor 'accuracy' is present")
-    for i, row in enumerate(doc.get("results", [])):
+    for i, row in enumerate(listed(doc.get("results", []), "results")):
         need(row, ROW_KEYS, f"results[{i}]")
         need(row["ms_per_shot"], ("median",), f"results[{i}].ms_per_shot")
+        for key in ("triangles", "hemicube"):
+            positive(row[key], f"results[{i}].{key}")
+        positive(row["ms_per_shot"]["median"], f"results[{i}].ms_per_shot.median")
     if "accuracy" in doc:
         acc = doc["accuracy"]
         need(acc, (), "accuracy")
-        for i, a in enumerate(acc.get("analytic", [])):
+        for i, a in enumerate(listed(acc.get("analytic", []), "accuracy.analytic")):
             need(a, ANALYTIC_KEYS, f"accuracy.analytic[{i}]")
+            positive(a["hemicube"], f"accuracy.analytic[{i}].hemicube")
         if "room" in acc:
             need(acc["room"], ("runs",), "accuracy.room")
-            for i, run in enumerate(acc["room"]["runs"]):
+            for i, run in enumerate(listed(acc["room"]["runs"], "accuracy.room.runs")):
                 need(run, RUN_KEYS, f"accuracy.room.runs[{i}]")
+                positive(run["seconds"], f"accuracy.room.runs[{i}].seconds")
+                positive(run["rms_rel_error"], f"accuracy.room.runs[{i}].rms_rel_error")
             for name, run in acc["room"].get("presets", {}).items():
                 need(run, ("seconds", "rms_rel_error"), f"accuracy.room.presets.{name}")
 
@@ -85,8 +106,34 @@ def footer_text(doc, extra=""):
     return "   |   ".join(parts)
 
 
-def panels(n, width=5.2, height=4.2):
-    cols = min(n, 3)
+def plain_log(ax, which="y", unit="", fmt=None):
+    """Label a log axis (set after plotting) with plain numbers, at 1-2-5 steps if it spans little."""
+    axis, (lo, hi) = (ax.yaxis, ax.get_ylim()) if which == "y" else (ax.xaxis, ax.get_xlim())
+    axis.set_major_locator(LogLocator(subs=(1, 2, 5) if hi / lo < 300 else (1,)))
+    axis.set_major_formatter(FuncFormatter(fmt or (lambda v, _: f"{v:g}{unit}")))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def bar_scale(ax, values, unit=""):
+    """Bars: a log y axis when the values span more than 20x, else a linear one from zero."""
+    pos = [v for v in values if v > 0]
+    if pos and max(pos) > 20 * min(pos):
+        ax.set_yscale("log")
+        plain_log(ax, unit=unit)
+    else:
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}{unit}"))
+
+
+def count_label(v, _=None):
+    """1000 -> 1k, 2500000 -> 2.5M."""
+    for div, suffix in ((1e6, "M"), (1e3, "k")):
+        if v >= div:
+            return f"{v / div:g}{suffix}"
+    return f"{v:g}"
+
+
+def panels(n, width=5.2, height=4.2, max_cols=3):
+    cols = min(n, max_cols)
     rows = (n + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(width * cols, height * rows), squeeze=False)
     for ax in axes.flat[n:]:
@@ -95,10 +142,14 @@ def panels(n, width=5.2, height=4.2):
 
 
 def guide(ax, xs, ys, power, label):
-    """Dashed grey y ∝ x^power line through the first point, for reading slopes."""
+    """Dashed grey y ∝ x^power line through the first point, for reading slopes (y limits kept).
+
+    Call it once the axes are log-log and the data are drawn."""
     x0, x1 = min(xs), max(xs)
     y0 = min(y for x, y in zip(xs, ys) if x == x0)
+    ylim = ax.get_ylim()
     ax.plot([x0, x1], [y0, y0 * (x1 / x0) ** power], ls="--", color="0.6", lw=1, label=label, zorder=0)
+    ax.set_ylim(ylim)
 
 
 def finish(fig, path, doc, title, extra="", legend=None):
@@ -106,7 +157,7 @@ def finish(fig, path, doc, title, extra="", legend=None):
     h = fig.get_figheight()
     fig.suptitle(title, fontsize=12, y=1 - 0.08 / h, va="top")
     fig.text(0.5, 1 - 0.34 / h, footer_text(doc, extra), ha="center", va="top", fontsize=7.5, color="0.3")
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.55 / h))
+    fig.tight_layout(pad=0.6, rect=(0, 0, 1, 1 - 0.5 / h))
     if legend:
         fig.legend(*legend, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(len(legend[1]), 2),
                    fontsize=8, frameon=False)
@@ -119,7 +170,7 @@ def n_axis(ax, ns):
     """Log x axis labelled with the hemicube N values themselves."""
     ax.set_xscale("log")
     ax.set_xticks(ns, [str(n) for n in ns])
-    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("hemicube N (cells per side)")
 
 
@@ -164,11 +215,13 @@ def plot_scaling_triangles(doc, rows, out, colour):
             r = max((r for r in at_n if r["scene"] == scene), key=lambda r: r["ms_per_shot"]["median"])
             ax.annotate(short_scene(scene), (r["triangles"], r["ms_per_shot"]["median"]),
                         xytext=(0, 6), textcoords="offset points", ha="center", fontsize=7)
+        ax.set(xscale="log", yscale="log", title=f"hemicube N = {n}",
+               xlabel="triangles", ylabel="ms per shot (median ± σ)")
         if proc:
             guide(ax, [r["triangles"] for r in proc], [r["ms_per_shot"]["median"] for r in proc],
                   1, "∝ triangles (guide)")
-        ax.set(xscale="log", yscale="log", title=f"hemicube N = {n}",
-               xlabel="triangles", ylabel="ms per shot (median ± σ)")
+        plain_log(ax)
+        plain_log(ax, "x", fmt=count_label)
         ax.grid(True, which="both", alpha=0.25)
     handles, labels = merged_legend(axes)
     handles.append(plt.Line2D([], [], marker="D", ls="", mfc="none", mec="0.3"))
@@ -192,11 +245,12 @@ def plot_scaling_hemicube(doc, rows, out, colour):
                 med, err = ms_errors(line)
                 ax.errorbar([r["hemicube"] for r in line], med, yerr=err, marker="o", ms=4,
                             capsize=2, color=colour[key], label=series_label(key))
-        guide(ax, [r["hemicube"] for r in at_s], [r["ms_per_shot"]["median"] for r in at_s],
-              2, "∝ N² (guide)")
         n_axis(ax, sorted({r["hemicube"] for r in at_s}))
         ax.set(yscale="log", ylabel="ms per shot (median ± σ)",
                title=f"{short_scene(scene)} ({at_s[0]['triangles']:,} triangles)")
+        guide(ax, [r["hemicube"] for r in at_s], [r["ms_per_shot"]["median"] for r in at_s],
+              2, "∝ N² (guide)")
+        plain_log(ax)
         ax.grid(True, which="both", alpha=0.25)
     finish(fig, os.path.join(out, "scaling_hemicube.png"), doc, "Shot time against hemicube resolution",
            legend=merged_legend(axes))
@@ -212,8 +266,9 @@ def plot_fraction_of_limit(doc, rows, out, colour):
     if not rows:
         return "no row has a 'limit'"
     ns = sorted({r["hemicube"] for r in rows})
-    fig, axes = panels(len(ns), width=max(5.2, 1.0 + 0.25 * len(rows) / len(ns)))
     keys = [k for k in colour if any(series_key(r) == k for r in rows)]
+    most = max(len({r["scene"] for r in rows if r["hemicube"] == n}) for n in ns)
+    fig, axes = panels(len(ns), width=max(6.0, 1.5 + max(1.3, 0.3 * len(keys)) * most), height=3.4, max_cols=1)
     width = 0.8 / len(keys)
     for ax, n in zip(axes, ns):
         at_n = [r for r in rows if r["hemicube"] == n]
@@ -224,14 +279,13 @@ def plot_fraction_of_limit(doc, rows, out, colour):
             if pts:
                 ax.bar([i - 0.4 + width * (j + 0.5) for i, _ in pts], [p for _, p in pts], width,
                        color=colour[key], label=series_label(key))
-        ax.set_xticks(range(len(scenes)), [short_scene(s) for s in scenes],
-                      rotation=30 if len(scenes) > 3 else 0, ha="right" if len(scenes) > 3 else "center")
-        ax.set(yscale="log", ylabel="% of the calibrated limit", title=f"hemicube N = {n}")
-        ax.yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}%"))
+        ax.set_xticks(range(len(scenes)), [short_scene(s) for s in scenes])
+        ax.set(ylabel="% of calibrated limit", title=f"hemicube N = {n}")
+        bar_scale(ax, [r["limit"]["fraction"] * 100 for r in rows], "%")  # one scale for all panels
         ax.grid(True, axis="y", which="both", alpha=0.25)
     limits = unique(r["limit"].get("device", "?") for r in rows)
     finish(fig, os.path.join(out, "fraction_of_limit.png"), doc,
-           "Shot throughput as a fraction of the machine's calibrated limit",
+           "Shot throughput as a fraction of the calibrated limit (higher is better)",
            extra="limit devices: " + "; ".join(limits), legend=merged_legend(axes))
 
 
@@ -240,36 +294,36 @@ def plot_opencl_stages(doc, rows, out, colour):
     if not rows:
         return "no OpenCL row has 'device_ms_per_shot'"
     devices = unique(r["device"] for r in rows)
-    most = max(sum(r["device"] == d for r in rows) for d in devices)
-    fig, axes = plt.subplots(2, len(devices), figsize=(max(5.5, 1.2 + 0.45 * most) * len(devices), 7.5),
-                             squeeze=False, sharex="col")
+    cases = sorted({(r["triangles"], r["scene"], r["hemicube"]) for r in rows})  # shared x axis
+    fig, axes = plt.subplots(2 * len(devices), 1, sharex=True, squeeze=False,
+                             figsize=(max(6.0, 1.5 + 0.4 * len(cases)), 1.0 + 4.0 * len(devices)),
+                             gridspec_kw={"height_ratios": [1, 1.5] * len(devices)})
     stage_colours = plt.get_cmap("tab10").colors
-    for col, device in enumerate(devices):
-        these = sorted((r for r in rows if r["device"] == device),
-                       key=lambda r: (r["triangles"], r["scene"], r["hemicube"]))
-        xs = range(len(these))
+    for d, device in enumerate(devices):
+        these = {(r["triangles"], r["scene"], r["hemicube"]): r for r in rows if r["device"] == device}
+        xs = [i for i, c in enumerate(cases) if c in these]
+        these = [these[cases[i]] for i in xs]
         totals = [sum(r["device_ms_per_shot"].get(s, 0.0) for s in STAGES) for r in these]
-        top, share = axes[0][col], axes[1][col]
-        low_abs, low_pct = [0.0] * len(these), [0.0] * len(these)
+        top, share = axes[2 * d][0], axes[2 * d + 1][0]
+        top.bar(xs, totals, 0.7, color="0.7", label="device ms/shot (sum of stages)")
+        wall = [r["ms_per_shot"]["median"] for r in these]
+        top.plot(xs, wall, "k_", ms=14, mew=2, label="wall-clock ms/shot (median)")
+        top.set(ylabel="ms per shot", title=f"OpenCL device: {device}")
+        bar_scale(top, totals + wall)
+        bottom = [0.0] * len(these)
         for k, stage in enumerate(STAGES):
-            ms = [r["device_ms_per_shot"].get(stage, 0.0) for r in these]
-            pct = [100 * m / t if t else 0 for m, t in zip(ms, totals)]
-            top.bar(xs, ms, 0.7, bottom=low_abs, color=stage_colours[k], label=stage)
-            share.bar(xs, pct, 0.7, bottom=low_pct, color=stage_colours[k])
-            low_abs = [a + b for a, b in zip(low_abs, ms)]
-            low_pct = [a + b for a, b in zip(low_pct, pct)]
-        top.plot(xs, [r["ms_per_shot"]["median"] for r in these], "k_", ms=18, mew=2,
-                 label="wall-clock ms/shot (median)")
-        top.set(ylabel="device ms per shot", title=device)
+            pct = [100 * r["device_ms_per_shot"].get(stage, 0.0) / t if t else 0 for r, t in zip(these, totals)]
+            share.bar(xs, pct, 0.7, bottom=bottom, color=stage_colours[k], label=stage)
+            bottom = [a + b for a, b in zip(bottom, pct)]
         share.set(ylabel="% of device time", ylim=(0, 100))
-        share.set_xticks(list(xs), [f"{short_scene(r['scene'])}\nN={r['hemicube']}" for r in these],
-                         rotation=45 if len(these) > 4 else 0, ha="right" if len(these) > 4 else "center",
-                         fontsize=8)
         for ax in (top, share):
-            ax.grid(True, axis="y", alpha=0.25)
+            ax.grid(True, axis="y", which="both", alpha=0.25)
+    axes[-1][0].set_xticks(range(len(cases)), [f"{short_scene(s)}\nN={n}" for _, s, n in cases],
+                           rotation=90 if len(cases) > 6 else 0, fontsize=8)
+    axes[-1][0].set_xlim(-0.6, len(cases) - 0.4)
     finish(fig, os.path.join(out, "opencl_stages.png"), doc,
-           "OpenCL device time per shot by stage (event profiling)",
-           legend=merged_legend([axes[0][0]]))
+           "OpenCL time per shot: totals and the share of each stage (event profiling)",
+           legend=merged_legend(axes[:2, 0]))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -297,10 +351,13 @@ def plot_accuracy_pareto(doc, acc, out):
     ax.scatter([], [], marker="*", s=120, color="gold", edgecolors="k", label="--quality presets")
     ax.set(xscale="log", yscale="log", xlabel="bake time (s)",
            ylabel="RMS relative error of the radiosity")
+    plain_log(ax)
+    plain_log(ax, "x")
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), frameon=False)
     ref = room.get("reference", {})
-    ref_text = ", ".join(f"{k}={v}" for k, v in ref.items() if isinstance(v, (int, float, str)))
+    ref_text = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                         for k, v in ref.items() if isinstance(v, (int, float, str)))
     finish(fig, os.path.join(out, "accuracy_pareto.png"), doc,
            f"Accuracy against time, room scene (device: {acc.get('device', '?')})",
            extra=f"reference: {ref_text}" if ref_text else "")
@@ -310,6 +367,7 @@ def plot_accuracy_analytic(doc, acc, out):
     cases = unique(a["case"] for a in acc.get("analytic", []))
     if not cases:
         return "no 'accuracy.analytic' cases"
+    colour = colours(sorted({a["patch_size"] for a in acc["analytic"]}))
     fig, axes = panels(len(cases))
     for ax, case in zip(axes, cases):
         these = [a for a in acc["analytic"] if a["case"] == case]
@@ -317,16 +375,16 @@ def plot_accuracy_analytic(doc, acc, out):
             line = sorted((a for a in these if a["patch_size"] == size and a["rel_error"] != 0),
                           key=lambda a: a["hemicube"])
             ax.plot([a["hemicube"] for a in line], [abs(a["rel_error"]) for a in line], marker="o",
-                    ms=4, label=f"patch size {size:g}")
+                    ms=4, color=colour[size], label=f"patch size {size:g}")
         n_axis(ax, sorted({a["hemicube"] for a in these}))
         exact = these[0].get("exact")
         ax.set(yscale="log", ylabel="|relative error| of the form factor",
                title=case + (f" (exact F = {exact:.4g})" if exact is not None else ""))
+        plain_log(ax)
         ax.grid(True, which="both", alpha=0.25)
-        ax.legend(fontsize=8, frameon=False)
     finish(fig, os.path.join(out, "accuracy_analytic.png"), doc,
-           f"Form factors against closed forms (device: {acc.get('device', '?')}); "
-           "exact results are not drawn")
+           f"Form factors against closed forms (device: {acc.get('device', '?')})",
+           extra="runs with zero error are not drawn (log axis)", legend=merged_legend(axes))
 
 
 # ---------------------------------------------------------------------------------------------
