@@ -192,6 +192,15 @@ def ms_errors(rows):
 # ---------------------------------------------------------------------------------------------
 # throughput
 
+def draw_series(ax, rows, x_key, key, colour):
+    """One engine's ms/shot (median ± σ) against x_key, as a line, if it has any rows."""
+    line = sorted((r for r in rows if series_key(r) == key), key=lambda r: r[x_key])
+    if line:
+        med, err = ms_errors(line)
+        ax.errorbar([r[x_key] for r in line], med, yerr=err, marker="o", ms=4,
+                    capsize=2, color=colour[key], label=series_label(key))
+
+
 def plot_scaling_triangles(doc, rows, out, colour):
     ns = sorted(n for n in {r["hemicube"] for r in rows}
                 if len({r["triangles"] for r in rows if r["hemicube"] == n}) > 1)
@@ -202,11 +211,7 @@ def plot_scaling_triangles(doc, rows, out, colour):
         at_n = [r for r in rows if r["hemicube"] == n]
         proc = [r for r in at_n if r["scene"].startswith("procedural:")]
         for key in colour:
-            line = sorted((r for r in proc if series_key(r) == key), key=lambda r: r["triangles"])
-            if line:
-                med, err = ms_errors(line)
-                ax.errorbar([r["triangles"] for r in line], med, yerr=err, marker="o", ms=4,
-                            capsize=2, color=colour[key], label=series_label(key))
+            draw_series(ax, proc, "triangles", key, colour)
             files = [r for r in at_n if series_key(r) == key and not r["scene"].startswith("procedural:")]
             if files:
                 ax.scatter([r["triangles"] for r in files], [r["ms_per_shot"]["median"] for r in files],
@@ -240,11 +245,7 @@ def plot_scaling_hemicube(doc, rows, out, colour):
     for ax, scene in zip(axes, scenes):
         at_s = [r for r in rows if r["scene"] == scene]
         for key in colour:
-            line = sorted((r for r in at_s if series_key(r) == key), key=lambda r: r["hemicube"])
-            if line:
-                med, err = ms_errors(line)
-                ax.errorbar([r["hemicube"] for r in line], med, yerr=err, marker="o", ms=4,
-                            capsize=2, color=colour[key], label=series_label(key))
+            draw_series(ax, at_s, "hemicube", key, colour)
         n_axis(ax, sorted({r["hemicube"] for r in at_s}))
         ax.set(yscale="log", ylabel="ms per shot (median ± σ)",
                title=f"{short_scene(scene)} ({at_s[0]['triangles']:,} triangles)")
