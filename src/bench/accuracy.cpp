@@ -197,6 +197,7 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
         std::uint32_t node = 0;
         while (node < room.nodes.size() && room.nodes[node].name != probe.surface) ++node;
         const std::size_t k = element_at(m, node, probe.point);
+        if (k >= m.elements.size()) throw InternalError("accuracy: no element on surface " + probe.surface);
         const double want = luminance(reference.radiosity_at(probe.point, probe.normal));
         const double got = luminance(radiosity[k]);
         squares += (got - want) * (got - want) / (want * want);
