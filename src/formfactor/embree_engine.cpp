@@ -142,8 +142,9 @@ double EmbreeEngine::Impl::cast(const Frame& frame, std::size_t first, std::size
     rtcInitIntersectContext(&context);
     context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
     for (std::size_t p = first; p < last; ++p) {
-        RTCRayHit16 rh;
-        std::array<int, kPacket> valid{};
+        // rtcIntersect16 requires both 64-byte aligned (the valid mask too: not an int's 4).
+        alignas(64) RTCRayHit16 rh;
+        alignas(64) std::array<int, kPacket> valid{};
         for (int r = 0; r < kPacket; ++r) {
             const bool live = r < packet_size[p];
             valid[static_cast<std::size_t>(r)] = live ? -1 : 0;
