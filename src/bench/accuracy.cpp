@@ -11,6 +11,7 @@
 #include <memory>
 
 #include "bench/room_reference.h"
+#include "bench/throughput.h"
 #include "cl/runtime.h"
 #include "core/error.h"
 #include "formfactor/near_field.h"
@@ -354,7 +355,7 @@ ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
                            p["hemicube"].get<int>(), 1.0 / p["patch_fraction"].get<double>(),
                            p["elements_per_patch_edge"].get<double>(), p["threshold"].get<double>(),
                            p["batch"].get<int>(), p["seconds"].get<double>(), 100.0 * p["rms_rel_error"].get<double>());
-    return {{"accuracy", out}};
+    return {{"version", HEMIRAD_VERSION}, {"machine", machine_info()}, {"accuracy", out}};
 }
 
 }  // namespace hemirad::bench

@@ -17,8 +17,8 @@ struct AccuracyOptions {
     bool quick = false;           // a smoke test: a few coarse runs against a coarser reference
 };
 
-// Returns {"accuracy": {device, analytic: [...], room: {reference, runs, pareto, presets}}} and
-// prints the tables to `log`.
+// Returns {version, machine, accuracy: {device, analytic: [...], room: {reference, runs, pareto,
+// presets}}} and prints the tables to `log`.
 nlohmann::ordered_json run_accuracy(const AccuracyOptions& options, std::ostream& log);
 
 // Presets come only from runs with a threshold of at most this: in the convex, unoccluded room

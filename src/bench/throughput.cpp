@@ -135,6 +135,10 @@ double limit_ms_per_shot(const Calibration& c, int n, std::size_t elements) {
 
 }  // namespace
 
+ordered_json machine_info() {
+    return {{"cpu", cpu_model()}, {"hardware_threads", std::thread::hardware_concurrency()}};
+}
+
 BenchScene load_bench_scene(const std::string& spec) {
     if (const std::optional<std::size_t> triangles = scene::parse_procedural_spec(spec))
         return {scene::procedural_scene(*triangles), true};
@@ -158,7 +162,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
 
     ordered_json doc;
     doc["version"] = HEMIRAD_VERSION;
-    doc["machine"] = {{"cpu", cpu_model()}, {"hardware_threads", std::thread::hardware_concurrency()}};
+    doc["machine"] = machine_info();
     doc["settings"] = {
         {"shots", o.shots},
         {"repeats", o.repeats},

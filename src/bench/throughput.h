@@ -35,6 +35,9 @@ struct BenchScene {
 };
 BenchScene load_bench_scene(const std::string& spec);
 
+// The machine a benchmark ran on: {cpu, hardware_threads}.
+nlohmann::ordered_json machine_info();
+
 // Runs every engine on every scene at every N; prints a Markdown table per scene to `log` and
 // returns the JSON document ({machine, calibration, settings, results}). Throws InputError for
 // bad scenes or options and formfactor::VerifyError when an engine fails a check.
