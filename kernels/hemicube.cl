@@ -34,7 +34,7 @@
 #define HEMIRAD_SETUP_LANES 0  // 1: setup takes HR_SETUP_LANES elements per work-item in double8 (CPUs)
 #endif
 #ifndef HEMIRAD_CULL
-#define HEMIRAD_CULL 1  // 0: no bounding-sphere test per element group (to measure what culling saves)
+#define HEMIRAD_CULL 1  // 0: no bounding-sphere test per lane group (the host sets it with its cluster culling)
 #endif
 #ifndef HEMIRAD_SCAN_WG
 #define HEMIRAD_SCAN_WG 256  // the single work-group of the tile-offset scan, a power of two
@@ -724,7 +724,8 @@ void bin_records(const HrShot* shot, __global const HrPatch* patches, __global c
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrElement* elements,
     __global const HrElementLanes* element_lanes, __global const HrPatch* patches, __global HrRecord* records,
-    __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts, __global long* sums) {
+    __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts, __global long* sums,
+    __global const int* clusters) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
@@ -736,13 +737,24 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     __local uint used;
     if (get_local_id(0) == 0) used = group_first_slot(shot, patches, (int)get_group_id(0));
     barrier(CLK_LOCAL_MEM_FENCE);
+#if HEMIRAD_SETUP_LANES
+    // Work-group g sets up cluster clusters[b][g] (HEMIRAD_WG lane groups; -1: none), those the
+    // host found not wholly behind the shot's base plane: the rest of the scene costs nothing
+    // here. The host reads back only these clusters' sums, so only theirs are cleared (ahead of
+    // the raster in the queue; scan leaves the tile counts at zero), and the blocked share.
+    const int cluster = clusters[b * get_num_groups(0) + get_group_id(0)];
+    const int p = cluster * HEMIRAD_WG + (int)get_local_id(0);
+    if (get_global_id(0) == 0) sums[shot->elements] = 0;
+    if (cluster >= 0)
+        for (int l = 0; l < HR_SETUP_LANES && p * HR_SETUP_LANES + l < shot->elements; ++l)
+            sums[p * HR_SETUP_LANES + l] = 0;
+    if (cluster >= 0 && p * HR_SETUP_LANES < shot->elements &&
+        !(HEMIRAD_CULL && group_behind(shot, element_lanes + p)))
+        setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, records, boxes, &used);
+#else
     const int p = (int)get_global_id(0);
     // The sums' clear, ahead of the raster in the queue (scan leaves the tile counts at zero).
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
-#if HEMIRAD_SETUP_LANES
-    if (p * HR_SETUP_LANES < shot->elements && !(HEMIRAD_CULL && group_behind(shot, element_lanes + p)))
-        setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, records, boxes, &used);
-#else
     if (p < shot->patches && p != shot->shooter) {  // the shooter's elements lie in its base plane
         // Elements tile their patch: when the patch is below the base plane, so are they.
         __global const HrPatch* patch = patches + p;

@@ -7,8 +7,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <cstddef>
+#include <limits>
 #include <string_view>
 
 #include "core/error.h"
@@ -96,6 +96,30 @@ void check_layout(ocl::Context& context, cl::Program& program) {
             expected[3]));
 }
 
+// The clusters (lanes setup) each shot must set up: those whose bounding sphere does not lie
+// wholly below −eps along the shooter's normal, the test group_behind makes per lane group, so
+// every element of a skipped one lies behind the base plane. Fills `per_shot` and `rows` (row i:
+// shot i's clusters, then −1, a work-group with nothing to do) and returns the row length.
+std::size_t select_clusters(const std::vector<std::array<double, 4>>& bounds, const std::vector<HrShot>& shots,
+                            bool cull, std::vector<std::vector<std::uint32_t>>& per_shot,
+                            std::vector<std::int32_t>& rows) {
+    per_shot.assign(shots.size(), {});
+    std::size_t most = 1;
+    for (std::size_t i = 0; i < shots.size(); ++i) {
+        const HrShot& shot = shots[i];
+        for (std::size_t c = 0; c < bounds.size(); ++c) {
+            const double z = (bounds[c][0] - shot.origin[0]) * shot.w[0] + (bounds[c][1] - shot.origin[1]) * shot.w[1] +
+                             (bounds[c][2] - shot.origin[2]) * shot.w[2];
+            if (!cull || !(z + bounds[c][3] < -shot.eps)) per_shot[i].push_back(static_cast<std::uint32_t>(c));
+        }
+        most = std::max(most, per_shot[i].size());
+    }
+    rows.assign(shots.size() * most, -1);
+    for (std::size_t i = 0; i < shots.size(); ++i)
+        std::copy(per_shot[i].begin(), per_shot[i].end(), rows.begin() + static_cast<std::ptrdiff_t>(i * most));
+    return most;
+}
+
 }  // namespace
 
 OpenCLTuning default_tuning(const ocl::DeviceInfo& device) {
@@ -108,6 +132,7 @@ OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device) {
     OpenCLTuning tuning = default_tuning(device);
     if (const char* extra = std::getenv("HEMIRAD_OPENCL_OPTIONS"); extra && *extra)
         tuning.extra_options += std::string(" ") + extra;
+    if (const char* cull = std::getenv("HEMIRAD_CULL"); cull && std::string_view(cull) == "0") tuning.cull = false;
     return tuning;
 }
 
@@ -136,9 +161,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     // Never -cl-fast-relaxed-math or -cl-mad-enable: the kernel must round like the reference.
     options_ = fmt::format(
         "-cl-std=CL1.2 -DHEMIRAD_TILE={} -DHEMIRAD_WG={} -DHEMIRAD_SCAN_WG={} -DHEMIRAD_RASTER_WG={} "
-        "-DHEMIRAD_COUNT_COPIES={} -DHEMIRAD_LANES={} -DHEMIRAD_SETUP_LANES={}",
+        "-DHEMIRAD_COUNT_COPIES={} -DHEMIRAD_LANES={} -DHEMIRAD_SETUP_LANES={} -DHEMIRAD_CULL={}",
         tuning.tile, tuning.work_group, tuning.scan_work_group, tuning.raster_work_group, tuning.count_copies,
-        tuning.lanes, tuning.setup_lanes ? 1 : 0);
+        tuning.lanes, tuning.setup_lanes ? 1 : 0, tuning.cull ? 1 : 0);
     if (!tuning.extra_options.empty()) options_ += " " + tuning.extra_options;
     cl::Program& program = context.program(std::string(ocl::kernel_source("hemicube.cl")), options_);
     setup_ = cl::Kernel(program, "setup");
@@ -215,6 +240,26 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         for (int c = 0; c < 3; ++c) element_lanes[g].bound[c] = centre[c];
         element_lanes[g].bound[3] = radius;
     }
+    // Clusters, a setup work-group's elements each (lanes setup): their bounding spheres, as the groups'.
+    if (tuning.setup_lanes) {
+        const std::size_t per = cluster_elements();
+        for (std::size_t first = 0; first < mesh.elements.size(); first += per) {
+            const std::size_t end = std::min(mesh.elements.size(), first + per);
+            glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+            for (std::size_t k = first; k < end; ++k)
+                for (int i = 0; i < mesh.elements[k].poly.n; ++i) {
+                    lo = glm::min(lo, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
+                    hi = glm::max(hi, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
+                }
+            const glm::dvec3 centre = 0.5 * (lo + hi);
+            double radius = 0.0;
+            for (std::size_t k = first; k < end; ++k)
+                for (int i = 0; i < mesh.elements[k].poly.n; ++i)
+                    radius =
+                        std::max(radius, glm::length(mesh.elements[k].poly.v[static_cast<std::size_t>(i)] - centre));
+            cluster_bounds_.push_back({centre.x, centre.y, centre.z, radius});
+        }
+    }
     std::vector<HrPatch> patches(mesh.patches.size());
     for (std::size_t p = 0; p < mesh.patches.size(); ++p) {
         patches[p] = {};
@@ -256,6 +301,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     tile_counts_ = buffer(counters * sizeof(hr_uint));
     counts_zero_ = false;
     offsets_ = buffer((counters + 1) * sizeof(hr_uint));
+    clusters_ = buffer(setup_groups() * sizeof(hr_int));
     cursors_ = buffer(counters * sizeof(hr_uint));
     lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
     ids_buffer_ = buffer(delta_.cells() * sizeof(hr_int));
@@ -292,6 +338,10 @@ std::size_t OpenCLEngine::setup_groups() const {
     return std::max<std::size_t>(1, (items + wg - 1) / wg);
 }
 
+std::size_t OpenCLEngine::cluster_elements() const {
+    return static_cast<std::size_t>(tuning_.work_group) * HR_SETUP_LANES;
+}
+
 std::size_t OpenCLEngine::counter_entries() const {
     return static_cast<std::size_t>(tile_base_[kFaces]) * static_cast<std::size_t>(tuning_.count_copies);
 }
@@ -323,8 +373,15 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     // Every kernel's arguments, bound here only: the first shot by value, the rest of the batch
     // through shots_ (batch_shot in the kernels).
     const HrShot& first = shots[0];
+    // Lanes setup: a work-group per cluster in front of the shooter (the most any shot has).
+    const std::size_t groups =
+        tuning_.setup_lanes ? select_clusters(cluster_bounds_, shots, tuning_.cull, shot_clusters_, cluster_rows_)
+                            : setup_groups();
+    if (tuning_.setup_lanes)
+        context_.queue().enqueueWriteBuffer(clusters_, CL_TRUE, 0, cluster_rows_.size() * sizeof(std::int32_t),
+                                            cluster_rows_.data());
     bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_,
-         sums_);
+         sums_, clusters_);
     bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_);
     bind(scatter_, first, shots_, patches_, boxes_, group_records_, cursors_, lists_);
     bind(raster_, first, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_);
@@ -350,7 +407,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
                                    event);
     };
     // scatter reads the records of setup's work-groups, one work-group each.
-    const std::size_t group_items = setup_groups() * wg;
+    const std::size_t group_items = groups * wg;
     run(setup_, group_items, wg, &events[0]);
     run(scan_, scan_wg, scan_wg, &events[1]);
     run(scatter_, group_items, wg, &events[2]);
@@ -414,9 +471,17 @@ void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vecto
     const double unit = std::ldexp(1.0, -HR_FIXED_SHIFT);
     for (std::size_t i = 0; i < shots.size(); ++i) {
         const hr_long* sums = sums_host_.data() + i * sum_stride();
-        out[i].F.resize(elements);
-        for (std::size_t k = 0; k < elements; ++k)
-            out[i].F[k] = static_cast<double>(sums[k]) * unit;
+        if (tuning_.setup_lanes) {  // only the clusters set up hold sums; the rest see nothing
+            out[i].F.assign(elements, 0.0);
+            for (std::uint32_t c : shot_clusters_[i]) {
+                const std::size_t end = std::min(elements, (c + std::size_t{1}) * cluster_elements());
+                for (std::size_t k = c * cluster_elements(); k < end; ++k)
+                    out[i].F[k] = static_cast<double>(sums[k]) * unit;
+            }
+        } else {
+            out[i].F.resize(elements);
+            for (std::size_t k = 0; k < elements; ++k) out[i].F[k] = static_cast<double>(sums[k]) * unit;
+        }
         out[i].blocked = static_cast<double>(sums[elements]) * unit;
     }
 }

@@ -26,12 +26,14 @@ struct OpenCLTuning {
     std::string extra_options;        // appended to the build options (more -D overrides)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
     std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: 1 GiB or device memory / 4
+    bool cull = true;                 // lanes setup skips clusters and groups behind the shooter (off: to measure)
 };
 
 // The knobs for a device, from a small hand-edited table.
 OpenCLTuning default_tuning(const ocl::DeviceInfo& device);
 // default_tuning with HEMIRAD_OPENCL_OPTIONS, where set, appended to the build options (extra -D
-// overrides of the kernels' knobs): what bakes and benchmarks use.
+// overrides of the kernels' knobs), and culling off where HEMIRAD_CULL=0: what bakes and
+// benchmarks use.
 OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device);
 
 class OpenCLEngine final : public Engine {
@@ -87,15 +89,23 @@ private:
     std::size_t last_batch_ = 0;           // shots of the last launch
     std::size_t ids_first_ = 0;            // their first index in the last shoot_batch
     std::vector<ShotResult> batch_results_;
+    // Lanes setup (CPUs): each setup work-group's elements as a cluster with a bounding sphere
+    // (centre, radius); per shot of the launch, the clusters not wholly behind its base plane,
+    // which alone are set up, cleared and read.
+    std::vector<std::array<double, 4>> cluster_bounds_;
+    std::vector<std::vector<std::uint32_t>> shot_clusters_;
+    std::vector<std::int32_t> cluster_rows_;  // the launch's table: per shot, its clusters then −1
+    cl::Buffer clusters_;
 
     std::array<double, kStages> stage_seconds_{};
     mutable std::vector<std::vector<std::int32_t>> ids_;  // per shot of the last batch
     mutable std::vector<bool> ids_stale_;
 
     std::size_t raster_group_size() const;
-    std::size_t record_slots() const;  // per shot
-    std::size_t setup_groups() const;  // work-groups of setup and scatter: a work-item per patch or lane group
-    std::size_t counter_entries() const;  // per shot: tile counters of every copy
+    std::size_t record_slots() const;      // per shot
+    std::size_t setup_groups() const;      // work-groups of setup and scatter: a work-item per patch or lane group
+    std::size_t cluster_elements() const;  // elements per cluster (a setup work-group's, lanes setup)
+    std::size_t counter_entries() const;   // per shot: tile counters of every copy
     std::size_t sum_stride() const;
     std::size_t max_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
