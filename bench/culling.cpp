@@ -1,0 +1,130 @@
+// What geometry behind the shooter costs a shot, with and without the OpenCL engine's culling:
+// the shooters are the floor of procedural:10k, and up to 1M more triangles of objects lie below
+// the floor, wholly behind them. Every engine's shots are checked against the reference first.
+// Usage: hemirad_bench_culling [--hemicube N] [--shots K] [--repeats R]
+#include <fmt/core.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <memory>
+#include <vector>
+
+#include "cl/runtime.h"
+#include "formfactor/opencl_engine.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "scene/procedural.h"
+#if HEMIRAD_HAVE_EMBREE
+#include "formfactor/embree_engine.h"
+#endif
+
+using namespace hemirad;
+
+namespace {
+
+// procedural:10k with the objects of procedural:<below> moved 20 m down, under its floor.
+scene::Scene room_over_clutter(std::size_t below) {
+    scene::Scene s = scene::procedural_scene(10000);
+    if (below == 0) return s;
+    const scene::Scene clutter = scene::procedural_scene(below);
+    const auto nodes = static_cast<std::uint32_t>(s.nodes.size());
+    std::uint32_t primitives = 0;
+    for (const auto& t : s.triangles) primitives = std::max(primitives, t.primitive + 1);
+    for (scene::Triangle t : clutter.triangles) {
+        if (t.node < 2) continue;  // its room and light stay out
+        for (auto& p : t.p) p.y -= 20.0;
+        t.node += nodes;
+        t.primitive += primitives;
+        s.triangles.push_back(t);
+    }
+    s.nodes.insert(s.nodes.end(), clutter.nodes.begin(), clutter.nodes.end());
+    s.bbox_min.y -= 20.0;
+    return s;
+}
+
+double ms_per_shot(formfactor::Engine& engine, const std::vector<std::uint32_t>& shooters, int repeats) {
+    formfactor::ShotResult r;
+    engine.shoot(shooters[0], 0, r);  // warm-up
+    std::vector<double> ms;
+    for (int rep = 0; rep < repeats; ++rep) {
+        const auto t0 = std::chrono::steady_clock::now();
+        for (std::size_t i = 0; i < shooters.size(); ++i) engine.shoot(shooters[i], i, r);
+        ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() /
+                     static_cast<double>(shooters.size()));
+    }
+    std::sort(ms.begin(), ms.end());
+    return ms[ms.size() / 2];
+}
+
+// Every engine must give the reference's form factors on the shots it is timed on.
+void check(formfactor::Engine& engine, formfactor::ReferenceEngine& reference,
+           const std::vector<std::uint32_t>& shooters, double tolerance) {
+    formfactor::ShotResult got, want;
+    for (std::size_t i = 0; i < shooters.size(); ++i) {
+        engine.shoot(shooters[i], i, got);
+        reference.shoot(shooters[i], i, want);
+        double l1 = std::abs(got.blocked - want.blocked);
+        for (std::size_t k = 0; k < want.F.size(); ++k) l1 += std::abs(got.F[k] - want.F[k]);
+        if (l1 > tolerance)
+            throw std::runtime_error(fmt::format("{} disagrees with the reference: Σ|ΔF| {:.3g}", engine.name(), l1));
+    }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    int hemicube = 256, shots = 16, repeats = 3;
+    CLI::App app{"what geometry behind the shooter costs a shot, with and without culling"};
+    app.add_option("--hemicube", hemicube)->capture_default_str();
+    app.add_option("--shots", shots, "floor shooters")->capture_default_str();
+    app.add_option("--repeats", repeats)->capture_default_str();
+    CLI11_PARSE(app, argc, argv);
+    const std::vector<ocl::DeviceInfo> devices = ocl::list_devices();
+    if (devices.empty()) {
+        std::cerr << "hemirad_bench_culling: no OpenCL device\n";
+        return 1;
+    }
+    try {
+        ocl::Context context(devices.front());
+        std::cout << fmt::format("floor shooters of procedural:10k, N = {}, {} shots × {} repeats, {}\n\n", hemicube,
+                                 shots, repeats, devices.front().name);
+        std::cout << "| triangles behind | elements | OpenCL, culling | OpenCL, no culling | Embree |\n"
+                     "|---|---|---|---|---|\n";
+        const std::size_t room_triangles = room_over_clutter(0).triangles.size();
+        for (std::size_t below : {std::size_t{0}, std::size_t{100000}, std::size_t{1000000}}) {
+            const scene::Scene s = room_over_clutter(below);
+            const double patch = 10.0 * std::sqrt(3.0) / 16.0;  // the room's default, whatever lies below
+            const mesh::Mesh m = mesh::build(s, {patch, patch / 3.0});
+            std::vector<std::uint32_t> floor;  // upward patches of the room (node 0): its floor
+            for (std::uint32_t p = 0; p < m.patches.size(); ++p)
+                if (m.patches[p].node == 0 && m.patches[p].normal.y > 0.99) floor.push_back(p);
+            std::vector<std::uint32_t> shooters;
+            for (int i = 0; i < shots; ++i) shooters.push_back(floor[static_cast<std::size_t>(i) * 7 % floor.size()]);
+            const formfactor::Settings settings{hemicube, 1};
+            formfactor::ReferenceEngine reference(m, settings);
+            std::vector<double> cells;
+            for (bool cull : {true, false}) {
+                formfactor::OpenCLTuning tuning = formfactor::default_tuning(context.info());
+                tuning.cull = cull;
+                formfactor::OpenCLEngine engine(m, context, settings, tuning);
+                check(engine, reference, shooters, 1e-6);
+                cells.push_back(ms_per_shot(engine, shooters, repeats));
+            }
+            std::string embree = "–";
+#if HEMIRAD_HAVE_EMBREE
+            formfactor::EmbreeEngine rays(m, settings);
+            check(rays, reference, shooters, 1e-3);
+            embree = fmt::format("{:.2f} ms", ms_per_shot(rays, shooters, repeats));
+#endif
+            std::cout << fmt::format("| {} | {} | {:.2f} ms | {:.2f} ms | {} |\n", s.triangles.size() - room_triangles,
+                                     m.elements.size(), cells[0], cells[1], embree);
+        }
+    } catch (const std::exception& e) {
+        std::cerr << "hemirad_bench_culling: " << e.what() << "\n";
+        return 1;
+    }
+    return 0;
+}
