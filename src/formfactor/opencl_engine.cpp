@@ -96,6 +96,24 @@ void check_layout(ocl::Context& context, cl::Program& program) {
             expected[3]));
 }
 
+// A sphere holding every vertex of elements [first, first + count) (clamped to the mesh): the
+// centre of their box and the distance to the farthest, as {x, y, z, radius}.
+std::array<double, 4> bounding_sphere(const mesh::Mesh& mesh, std::size_t first, std::size_t count) {
+    const std::size_t end = std::min(mesh.elements.size(), first + count);
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    for (std::size_t k = first; k < end; ++k)
+        for (int i = 0; i < mesh.elements[k].poly.n; ++i) {
+            lo = glm::min(lo, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
+            hi = glm::max(hi, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
+        }
+    const glm::dvec3 centre = 0.5 * (lo + hi);
+    double radius = 0.0;
+    for (std::size_t k = first; k < end; ++k)
+        for (int i = 0; i < mesh.elements[k].poly.n; ++i)
+            radius = std::max(radius, glm::length(mesh.elements[k].poly.v[static_cast<std::size_t>(i)] - centre));
+    return {centre.x, centre.y, centre.z, radius};
+}
+
 // The clusters (lanes setup) each shot must set up: those whose bounding sphere does not lie
 // wholly below −eps along the shooter's normal, the test group_behind makes per lane group, so
 // every element of a skipped one lies behind the base plane. Fills `per_shot` and `rows` (row i:
@@ -223,43 +241,16 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         group.has_twin[lane] = e.has_twin ? 1 : 0;
         group.patch[lane] = static_cast<hr_int>(e.patch);
     }
-    // Each group's bounding sphere: the centre of its vertices' box, the farthest vertex.
+    // Each lane group's bounding sphere, for group_behind in setup.
     for (std::size_t g = 0; g < element_lanes.size(); ++g) {
-        glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-        const std::size_t end = std::min(mesh.elements.size(), (g + 1) * HR_SETUP_LANES);
-        for (std::size_t k = g * HR_SETUP_LANES; k < end; ++k)
-            for (int i = 0; i < mesh.elements[k].poly.n; ++i) {
-                lo = glm::min(lo, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
-                hi = glm::max(hi, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
-            }
-        const glm::dvec3 centre = 0.5 * (lo + hi);
-        double radius = 0.0;
-        for (std::size_t k = g * HR_SETUP_LANES; k < end; ++k)
-            for (int i = 0; i < mesh.elements[k].poly.n; ++i)
-                radius = std::max(radius, glm::length(mesh.elements[k].poly.v[static_cast<std::size_t>(i)] - centre));
-        for (int c = 0; c < 3; ++c) element_lanes[g].bound[c] = centre[c];
-        element_lanes[g].bound[3] = radius;
+        const std::array<double, 4> bound = bounding_sphere(mesh, g * HR_SETUP_LANES, HR_SETUP_LANES);
+        std::copy(bound.begin(), bound.end(), element_lanes[g].bound);
     }
-    // Clusters, a setup work-group's elements each (lanes setup): their bounding spheres, as the groups'.
-    if (tuning.setup_lanes) {
-        const std::size_t per = cluster_elements();
-        for (std::size_t first = 0; first < mesh.elements.size(); first += per) {
-            const std::size_t end = std::min(mesh.elements.size(), first + per);
-            glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-            for (std::size_t k = first; k < end; ++k)
-                for (int i = 0; i < mesh.elements[k].poly.n; ++i) {
-                    lo = glm::min(lo, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
-                    hi = glm::max(hi, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
-                }
-            const glm::dvec3 centre = 0.5 * (lo + hi);
-            double radius = 0.0;
-            for (std::size_t k = first; k < end; ++k)
-                for (int i = 0; i < mesh.elements[k].poly.n; ++i)
-                    radius =
-                        std::max(radius, glm::length(mesh.elements[k].poly.v[static_cast<std::size_t>(i)] - centre));
-            cluster_bounds_.push_back({centre.x, centre.y, centre.z, radius});
-        }
-    }
+    // Clusters, a setup work-group's elements each (lanes setup): their bounding spheres, for
+    // select_clusters on the host.
+    if (tuning.setup_lanes)
+        for (std::size_t first = 0; first < mesh.elements.size(); first += cluster_elements())
+            cluster_bounds_.push_back(bounding_sphere(mesh, first, cluster_elements()));
     std::vector<HrPatch> patches(mesh.patches.size());
     for (std::size_t p = 0; p < mesh.patches.size(); ++p) {
         patches[p] = {};
