@@ -44,13 +44,6 @@ constexpr double kElementsPerPatchEdge = 3.0;
 // engine, and one shot already exercises every kernel.
 constexpr std::size_t kSampleShots = 4;
 
-// What each engine owes the reference per shot (worst |ΔF| of an element, Σ|ΔF| over the shot):
-// the hemicube engines the same cells, any difference is rounding; the ray caster the same but
-// for cell centres within a float's rounding of an edge and depth ties, a few cells in a million.
-struct Tolerance {
-    double max_abs, l1;
-};
-constexpr Tolerance kExact{0.0, 0.0}, kRasterizer{1e-6, 1e-6}, kRayCaster{1e-3, 1e-3};
 // Form factors plus the blocked share of one shot: at most 1 (the delta table sums to 1 in
 // fixed point); in a closed scene every cell hits something, so exactly 1 to rounding.
 constexpr double kSumSlack = 1e-9;
@@ -83,7 +76,8 @@ struct Runner {
     std::unique_ptr<formfactor::Engine> impl;
     Tolerance tolerance = kRasterizer;
     std::vector<double> ms_per_shot;  // per repeat
-    double worst_abs = 0.0, worst_l1 = 0.0, sum_min = 2.0, sum_max = 0.0;
+    ShotDifference worst{};           // over the shots compared
+    double sum_min = 2.0, sum_max = 0.0;
 };
 
 // The engines a run asks for: ref, embree, opencl (every device) or opencl:P.D.
@@ -134,6 +128,17 @@ double limit_ms_per_shot(const Calibration& c, int n, std::size_t elements) {
 }
 
 }  // namespace
+
+ShotDifference shot_difference(const formfactor::ShotResult& got, const formfactor::ShotResult& want) {
+    ShotDifference d;
+    d.l1 = std::abs(got.blocked - want.blocked);
+    for (std::size_t k = 0; k < want.F.size(); ++k) {
+        const double diff = std::abs(got.F[k] - want.F[k]);
+        d.max_abs = std::max(d.max_abs, diff);
+        d.l1 += diff;
+    }
+    return d;
+}
 
 ordered_json machine_info() {
     return {{"cpu", cpu_model()}, {"hardware_threads", std::thread::hardware_concurrency()}};
@@ -273,14 +278,9 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                             r.sum_min = std::min(r.sum_min, sum);
                             r.sum_max = std::max(r.sum_max, sum);
                             if (first + b >= sample) continue;
-                            const formfactor::ShotResult& want = expected[first + b];
-                            double l1 = std::abs(out[b].blocked - want.blocked);
-                            for (std::size_t k = 0; k < want.F.size(); ++k) {
-                                const double diff = std::abs(out[b].F[k] - want.F[k]);
-                                r.worst_abs = std::max(r.worst_abs, diff);
-                                l1 += diff;
-                            }
-                            r.worst_l1 = std::max(r.worst_l1, l1);
+                            const ShotDifference d = shot_difference(out[b], expected[first + b]);
+                            r.worst.max_abs = std::max(r.worst.max_abs, d.max_abs);
+                            r.worst.l1 = std::max(r.worst.l1, d.l1);
                         }
                     }
                     r.ms_per_shot.push_back(1e3 * seconds / static_cast<double>(shots.size()));
@@ -290,9 +290,9 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
             // A fast wrong engine cannot win: any failed check ends the run without a result.
             for (const auto& r : runners) {
                 std::string problem;
-                if (r.worst_abs > r.tolerance.max_abs || r.worst_l1 > r.tolerance.l1)
-                    problem = fmt::format("disagrees with the reference (|ΔF| up to {:.3g}, Σ|ΔF| {:.3g})", r.worst_abs,
-                                          r.worst_l1);
+                if (!r.worst.within(r.tolerance))
+                    problem = fmt::format("disagrees with the reference (|ΔF| up to {:.3g}, Σ|ΔF| {:.3g})",
+                                          r.worst.max_abs, r.worst.l1);
                 else if (r.sum_max > 1.0 + kSumSlack)
                     problem = fmt::format("form factors sum to {:.12f} > 1", r.sum_max);
                 // A closed scene's shots sum to 1 within what the engine owes the reference: the
@@ -326,7 +326,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                     {"samples_per_s", 3.0 * n * n * shots_per_s},
                     {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
                     {"sum_F_blocked", {{"min", r.sum_min}, {"max", r.sum_max}}},
-                    {"vs_ref", {{"worst_abs_dF", r.worst_abs}, {"worst_l1_dF", r.worst_l1}}}};
+                    {"vs_ref", {{"worst_abs_dF", r.worst.max_abs}, {"worst_l1_dF", r.worst.l1}}}};
                 if (selection.ref) row["speedup_vs_ref"] = ref_median / st.median;
                 // The limit: the device's own calibration; the reference's, the CPU device's. It
                 // bounds a rasterizer, which reads every element each shot; a ray caster reads
@@ -355,7 +355,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                 log << fmt::format(
                     "| {} | {} | {:.3g} ({:.3g}, ±{:.0f}%) | {:.4g} | {:.3g} | {} | {} | {:.1e} |\n", r.engine,
                     r.device, st.median, st.min, st.sigma_percent, shots_per_s, 3.0 * n * n * shots_per_s,
-                    selection.ref ? fmt::format("{:.2f}×", ref_median / st.median) : "–", limit_cell, r.worst_l1);
+                    selection.ref ? fmt::format("{:.2f}×", ref_median / st.median) : "–", limit_cell, r.worst.l1);
                 results.push_back(row);
             }
             for (const auto& row : results) {

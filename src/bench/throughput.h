@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "formfactor/engine.h"
 #include "scene/scene.h"
 
 namespace hemirad::bench {
@@ -25,6 +26,22 @@ struct ThroughputOptions {
     std::uint64_t seed = 1;
     bool calibrate = true;  // measure each OpenCL device's fill rate and bandwidth
 };
+
+// What each engine owes the reference per shot (worst |ΔF| of an element, Σ|ΔF| over the shot):
+// the hemicube engines the same cells, any difference is rounding; the ray caster the same but
+// for cell centres within a float's rounding of an edge and depth ties, a few cells in a million.
+struct Tolerance {
+    double max_abs, l1;
+};
+inline constexpr Tolerance kExact{0.0, 0.0}, kRasterizer{1e-6, 1e-6}, kRayCaster{1e-3, 1e-3};
+
+// How far one shot is from the reference's: the largest |ΔF| of an element, and Σ|ΔF| over the
+// elements and the blocked share.
+struct ShotDifference {
+    double max_abs = 0.0, l1 = 0.0;
+    bool within(const Tolerance& t) const { return max_abs <= t.max_abs && l1 <= t.l1; }
+};
+ShotDifference shot_difference(const formfactor::ShotResult& got, const formfactor::ShotResult& want);
 
 // A scene by name: procedural:<count> is generated, anything else loaded as glTF. `closed` is
 // true where every direction from every patch hits a surface by construction (procedural
