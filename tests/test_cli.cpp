@@ -22,7 +22,7 @@
 #include <catch2/catch.hpp>
 
 #include "cl/runtime.h"
-#include "cli/bake.h"
+#include "core/quality.h"
 #include <nlohmann/json.hpp>
 #include <OpenImageIO/imageio.h>
 #include <tiny_gltf.h>
@@ -1006,7 +1006,7 @@ TEST_CASE("quality presets fill in the settings the options leave out; options o
     // closed_room spans x ∈ [−2, 2], y ∈ [0, 2.5], z ∈ [−2.5, 2.5] (scenes/README.md).
     const double diagonal = std::sqrt(4.0 * 4.0 + 2.5 * 2.5 + 5.0 * 5.0);
     const std::vector<std::string> quick = {"--max-passes", "20", "--image-width", "32", "--quiet"};
-    for (const hemirad::cli::QualityPreset& preset : hemirad::cli::kQualityPresets) {
+    for (const hemirad::QualityPreset& preset : hemirad::kQualityPresets) {
         INFO(preset.name);
         const fs::path out = dir / preset.name;
         const json report = bake_ok(dir, kClosedRoom, out, concat({"--quality", preset.name}, quick));
@@ -1026,7 +1026,7 @@ TEST_CASE("quality presets fill in the settings the options leave out; options o
     CHECK(overridden["settings"]["threshold"].get<double>() == 0.5);
     CHECK(overridden["settings"]["patch_size"].get<double>() == 1.5);
     CHECK(overridden["settings"]["element_size"].get<double>() ==
-          Approx(1.5 / hemirad::cli::quality_preset("high").elements_per_patch_edge));
+          Approx(1.5 / hemirad::quality_preset("high").elements_per_patch_edge));
     expect_bad_input(dir, bake_args(kClosedRoom, dir / "never", {"--quality", "best"}), dir / "never", "quality");
 }
 

@@ -18,6 +18,7 @@
 #include "bench/calibrate.h"
 #include "cl/runtime.h"
 #include "core/error.h"
+#include "core/quality.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
 #include "formfactor/verify.h"
@@ -35,10 +36,6 @@ namespace {
 
 using ordered_json = nlohmann::ordered_json;
 using Clock = std::chrono::steady_clock;
-
-// The patch and element sizes of a bake with default settings (cli/bake.h).
-constexpr double kPatchFraction = 1.0 / 16.0;
-constexpr double kElementsPerPatchEdge = 3.0;
 
 // Shots compared cell for cell with the reference, per repeat: the reference is the slowest
 // engine, and one shot already exercises every kernel.
@@ -203,9 +200,11 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
         const BenchScene& bench_scene = scenes[scene_index];
         const scene::Scene& s = bench_scene.scene;
         mesh::Settings mesh_settings;
-        mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : s.diagonal() * kPatchFraction;
+        // Unless given, the patch and element sizes of a bake at the default quality.
+        const QualityPreset& quality = quality_preset("default");
+        mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : s.diagonal() * quality.patch_fraction;
         mesh_settings.element_size =
-            o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / kElementsPerPatchEdge;
+            o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / quality.elements_per_patch_edge;
         const auto t_mesh = Clock::now();
         const mesh::Mesh m = mesh::build(s, mesh_settings);
         if (m.patches.empty()) throw InputError(fmt::format("{}: every triangle has zero area", spec));

@@ -21,8 +21,8 @@ struct ThroughputOptions {
     int shots = 16;                    // shots per engine per repeat
     int repeats = 5;
     int batch = 1;              // shots per shoot_batch call
-    double patch_size = 0.0;    // 0: scene diagonal / 16, as a bake
-    double element_size = 0.0;  // 0: patch size / 3
+    double patch_size = 0.0;    // 0: as a bake at the default quality (core/quality.h)
+    double element_size = 0.0;  // 0: as a bake at the default quality
     std::uint64_t seed = 1;
     bool calibrate = true;  // measure each OpenCL device's fill rate and bandwidth
 };

@@ -13,6 +13,7 @@
 #include <iostream>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "cl/runtime.h"
 #include "cli/bake.h"
@@ -29,14 +30,17 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--device", o.device, "form-factor engine: auto|ref|opencl|opencl:P.D (see hemirad devices)")
         ->capture_default_str();
     std::string presets;
-    for (const QualityPreset& p : kQualityPresets)
+    std::vector<std::string> names;
+    for (const QualityPreset& p : kQualityPresets) {
         presets += fmt::format("{}{} (N {}, patches diagonal/{:g}, {:g} elements a side, threshold {:g})",
                                presets.empty() ? "" : ", ", p.name, p.hemicube, 1.0 / p.patch_fraction,
                                p.elements_per_patch_edge, p.threshold);
+        names.emplace_back(p.name);
+    }
     bake.add_option("--quality", o.quality,
                     "settings preset from the accuracy-against-time benchmark: " + presets +
                         "; the options below override their part")
-        ->check(CLI::IsMember({"draft", "default", "high"}))
+        ->check(CLI::IsMember(names))
         ->capture_default_str();
     bake.add_option("--hemicube", o.hemicube,
                     "hemicube resolution N: top face N×N plus four N×N/2 half faces (default: the quality's)")
@@ -88,9 +92,13 @@ void add_bench_options(CLI::App& cmd, BenchCommand& c) {
         ->check(CLI::PositiveNumber)
         ->capture_default_str();
     cmd.add_option("--batch", o.batch, "shots per engine call")->check(CLI::Range(1, 256))->capture_default_str();
-    cmd.add_option("--patch-size", o.patch_size, "maximum patch edge (default: scene diagonal / 16)")
+    const QualityPreset& quality = quality_preset("default");
+    cmd.add_option(
+           "--patch-size", o.patch_size,
+           fmt::format("maximum patch edge (default: scene diagonal / {:g}, as a bake)", 1.0 / quality.patch_fraction))
         ->check(CLI::PositiveNumber);
-    cmd.add_option("--element-size", o.element_size, "maximum element edge (default: patch size / 3)")
+    cmd.add_option("--element-size", o.element_size,
+                   fmt::format("maximum element edge (default: patch size / {:g})", quality.elements_per_patch_edge))
         ->check(CLI::PositiveNumber);
     cmd.add_option("--seed", o.seed, "seed of the hemicube rotations")->capture_default_str();
     cmd.add_flag(

@@ -210,12 +210,6 @@ void list_devices(std::ostream& out, bool json) {
     if (devices.empty()) out << "(no OpenCL platform or device found)\n";
 }
 
-const QualityPreset& quality_preset(const std::string& name) {
-    for (const QualityPreset& p : kQualityPresets)
-        if (name == p.name) return p;
-    throw InputError(fmt::format("--quality {}: expected draft, default or high", name));
-}
-
 void run_bake(const BakeOptions& options) {
     const auto t_total = Clock::now();
     const QualityPreset& quality = quality_preset(options.quality);
