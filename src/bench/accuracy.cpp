@@ -40,16 +40,10 @@ double seconds_since(Clock::time_point t0) {
 class EngineFactory {
 public:
     explicit EngineFactory(const std::string& spec) {
-        if (spec == "ref") return;
-        const std::vector<ocl::DeviceInfo> devices = ocl::list_devices();
-        const ocl::DeviceInfo* chosen = nullptr;
-        for (const auto& d : devices)
-            if ((spec == "auto" || spec == "opencl") ? (chosen == nullptr && d.type == "gpu") : d.id() == spec)
-                chosen = &d;
-        if (chosen == nullptr && (spec == "auto" || spec == "opencl") && !devices.empty()) chosen = &devices.front();
-        if (chosen == nullptr && spec != "auto")
-            throw InputError(fmt::format("--device {}: no such OpenCL device (see hemirad devices)", spec));
-        if (chosen != nullptr) context_ = std::make_unique<ocl::Context>(*chosen);
+        const std::vector<ocl::DeviceInfo> devices =
+            spec == "ref" ? std::vector<ocl::DeviceInfo>{} : ocl::list_devices();
+        if (const ocl::DeviceInfo* chosen = ocl::resolve_device(spec, "--device " + spec, devices))
+            context_ = std::make_unique<ocl::Context>(*chosen);
     }
     std::string device() const {
         return context_ ? context_->info().name + " (" + context_->info().id() + ")" : "ref (host, 1 thread)";

@@ -3,6 +3,7 @@
 
 #include <cstdlib>
 #include <iostream>
+#include <regex>
 
 #if defined(__linux__)
 #include <sched.h>
@@ -10,6 +11,8 @@
 #endif
 
 #include <fmt/core.h>
+
+#include "core/error.h"
 
 namespace hemirad::ocl {
 namespace {
@@ -63,6 +66,27 @@ bool should_pin_pocl_threads(const char* affinity, const char* max_threads, cons
         if (end == max_threads || *end != '\0' || most < 1 || most > allowed) return false;
     }
     return true;
+}
+
+const DeviceInfo* resolve_device(const std::string& spec, const std::string& label,
+                                const std::vector<DeviceInfo>& devices) {
+    if (spec == "ref") return nullptr;
+    if (spec == "auto" || spec == "opencl") {
+        for (const auto& d : devices)
+            if (d.type == "gpu") return &d;
+        if (!devices.empty()) return &devices.front();
+        if (spec == "auto") return nullptr;
+        throw InputError(fmt::format("{}: no OpenCL device found (see hemirad devices)", label));
+    }
+    std::smatch m;
+    static const std::regex kExact(R"(opencl:(\d+)\.(\d+))");
+    if (std::regex_match(spec, m, kExact)) {
+        const int p = std::stoi(m[1]), d = std::stoi(m[2]);
+        for (const auto& dev : devices)
+            if (dev.platform == p && dev.device == d) return &dev;
+        throw InputError(fmt::format("{}: no such OpenCL device (see hemirad devices)", label));
+    }
+    throw InputError(fmt::format("{}: expected auto, ref, opencl or opencl:P.D", label));
 }
 
 std::vector<DeviceInfo> list_devices() {

@@ -28,6 +28,12 @@ struct DeviceInfo {
 // Every OpenCL device of every platform; empty (never throws) when there is no ICD or platform.
 std::vector<DeviceInfo> list_devices();
 
+// The device a --device spec names among `devices`: auto (the first GPU, else the first device,
+// else nullptr for the reference), ref (nullptr), opencl (as auto, but no device is an error) or
+// opencl:P.D. Throws InputError naming `label` ("--device X", "HEMIRAD_DEVICE=X") otherwise.
+const DeviceInfo* resolve_device(const std::string& spec, const std::string& label,
+                                 const std::vector<DeviceInfo>& devices);
+
 // Whether hemirad should ask PoCL to pin its worker threads (POCL_AFFINITY=1, worker i on CPU
 // i), which the first OpenCL call in the process does where this says so: only when the user
 // set none of POCL_AFFINITY, POCL_MAX_PTHREAD_COUNT above `allowed`, or POCL_PTHREAD_MIN_THREADS

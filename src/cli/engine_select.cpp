@@ -2,7 +2,6 @@
 #include "cli/engine_select.h"
 
 #include <cstdlib>
-#include <regex>
 
 #include <fmt/core.h>
 
@@ -12,29 +11,6 @@
 
 namespace hemirad::cli {
 namespace {
-
-// The device a spec names, or nullptr for the reference. `label` says where the spec came from
-// ("--device X" or "HEMIRAD_DEVICE=X") for the error message.
-const ocl::DeviceInfo* resolve(const std::string& spec, const std::string& label,
-                               const std::vector<ocl::DeviceInfo>& devices) {
-    if (spec == "ref") return nullptr;
-    if (spec == "auto" || spec == "opencl") {
-        for (const auto& d : devices)
-            if (d.type == "gpu") return &d;
-        if (!devices.empty()) return &devices.front();
-        if (spec == "auto") return nullptr;
-        throw InputError(fmt::format("{}: no OpenCL device found (see hemirad devices)", label));
-    }
-    std::smatch m;
-    static const std::regex kExact(R"(opencl:(\d+)\.(\d+))");
-    if (std::regex_match(spec, m, kExact)) {
-        const int p = std::stoi(m[1]), d = std::stoi(m[2]);
-        for (const auto& dev : devices)
-            if (dev.platform == p && dev.device == d) return &dev;
-        throw InputError(fmt::format("{}: no such OpenCL device (see hemirad devices)", label));
-    }
-    throw InputError(fmt::format("{}: expected auto, ref, opencl or opencl:P.D", label));
-}
 
 // `auto` trusts a device only after one shot agrees with the reference: a driver that builds the
 // kernels but computes something else must not quietly change a bake.
@@ -69,7 +45,7 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
     }
     const bool wants_opencl = spec != "ref";
     const std::vector<ocl::DeviceInfo> devices = wants_opencl ? ocl::list_devices() : std::vector<ocl::DeviceInfo>{};
-    const ocl::DeviceInfo* chosen = resolve(spec, label, devices);
+    const ocl::DeviceInfo* chosen = ocl::resolve_device(spec, label, devices);
 
     EngineChoice out;
     if (!chosen) {
