@@ -6,7 +6,6 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <iostream>
 #include <memory>
@@ -14,6 +13,7 @@
 
 #include "bench/throughput.h"
 #include "cl/runtime.h"
+#include "core/timing.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
@@ -51,13 +51,11 @@ double ms_per_shot(formfactor::Engine& engine, const std::vector<std::uint32_t>&
     engine.shoot(shooters[0], 0, r);  // warm-up
     std::vector<double> ms;
     for (int rep = 0; rep < repeats; ++rep) {
-        const auto t0 = std::chrono::steady_clock::now();
+        const auto t0 = Clock::now();
         for (std::size_t i = 0; i < shooters.size(); ++i) engine.shoot(shooters[i], i, r);
-        ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() /
-                     static_cast<double>(shooters.size()));
+        ms.push_back(1e3 * seconds_since(t0) / static_cast<double>(shooters.size()));
     }
-    std::sort(ms.begin(), ms.end());
-    return ms[ms.size() / 2];
+    return bench::stats(ms).median;
 }
 
 // Every engine must give the reference's form factors on the shots it is timed on, within what

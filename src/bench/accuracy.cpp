@@ -14,6 +14,7 @@
 #include "bench/throughput.h"
 #include "cl/runtime.h"
 #include "core/error.h"
+#include "core/timing.h"
 #include "formfactor/near_field.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
@@ -26,14 +27,9 @@ namespace hemirad::bench {
 namespace {
 
 using ordered_json = nlohmann::ordered_json;
-using Clock = std::chrono::steady_clock;
 
 // Probes per surface edge: 8 × 8 points on each of the seven surfaces.
 constexpr int kProbesPerEdge = 8;
-
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // The engine every run uses: an OpenCL device (one context for the whole sweep, so kernels
 // build once per N) or the reference.

@@ -12,11 +12,10 @@
 
 #include "core/error.h"
 #include "core/rng.h"
+#include "core/timing.h"
 
 namespace hemirad::bench {
 namespace {
-
-using Clock = std::chrono::steady_clock;
 
 // The kernel reads a triangle as four float4s.
 static_assert(sizeof(FillTriangle) == 4 * sizeof(cl_float4));
@@ -86,10 +85,6 @@ double median(std::vector<double> values) {
     std::sort(values.begin(), values.end());
     const std::size_t n = values.size();
     return n % 2 == 1 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
-}
-
-double seconds_since(Clock::time_point start) {
-    return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
 // Repeats of a launch of `launch_seconds` that fit `seconds`, within [kMinRepeats, kMaxRepeats].

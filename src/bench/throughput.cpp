@@ -19,6 +19,7 @@
 #include "cl/runtime.h"
 #include "core/error.h"
 #include "core/quality.h"
+#include "core/timing.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
 #include "formfactor/verify.h"
@@ -35,7 +36,6 @@ namespace hemirad::bench {
 namespace {
 
 using ordered_json = nlohmann::ordered_json;
-using Clock = std::chrono::steady_clock;
 
 // Shots compared cell for cell with the reference, per repeat: the reference is the slowest
 // engine, and one shot already exercises every kernel.
@@ -44,18 +44,6 @@ constexpr std::size_t kSampleShots = 4;
 // Form factors plus the blocked share of one shot: at most 1 (the delta table sums to 1 in
 // fixed point); in a closed scene every cell hits something, so exactly 1 to rounding.
 constexpr double kSumSlack = 1e-9;
-
-struct Stats {
-    double min = 0.0, median = 0.0, sigma_percent = 0.0;
-};
-
-Stats stats(std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    double mean = 0.0, var = 0.0;
-    for (double x : v) mean += x / static_cast<double>(v.size());
-    for (double x : v) var += (x - mean) * (x - mean) / static_cast<double>(v.size());
-    return {v.front(), v[v.size() / 2], mean > 0.0 ? 100.0 * std::sqrt(var) / mean : 0.0};
-}
 
 std::string cpu_model() {
     std::ifstream in("/proc/cpuinfo");
@@ -125,6 +113,14 @@ double limit_ms_per_shot(const Calibration& c, int n, std::size_t elements) {
 }
 
 }  // namespace
+
+Stats stats(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    double mean = 0.0, var = 0.0;
+    for (double x : v) mean += x / static_cast<double>(v.size());
+    for (double x : v) var += (x - mean) * (x - mean) / static_cast<double>(v.size());
+    return {v.front(), v[v.size() / 2], mean > 0.0 ? 100.0 * std::sqrt(var) / mean : 0.0};
+}
 
 ShotDifference shot_difference(const formfactor::ShotResult& got, const formfactor::ShotResult& want) {
     ShotDifference d;
@@ -209,8 +205,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
         const mesh::Mesh m = mesh::build(s, mesh_settings);
         if (m.patches.empty()) throw InputError(fmt::format("{}: every triangle has zero area", spec));
         log << fmt::format("\n{}: {} triangles, {} patches, {} elements (meshed in {:.2f} s)\n", spec,
-                           s.triangles.size(), m.patches.size(), m.elements.size(),
-                           std::chrono::duration<double>(Clock::now() - t_mesh).count());
+                           s.triangles.size(), m.patches.size(), m.elements.size(), seconds_since(t_mesh));
 
         // The same shots for every engine: patches spread over the scene, shot index = seed stream.
         std::vector<formfactor::ShotRequest> shots;
@@ -270,7 +265,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                                                 std::min(shots.size(), first + static_cast<std::size_t>(o.batch))));
                         const auto t0 = Clock::now();
                         r.impl->shoot_batch(batch, out);
-                        seconds += std::chrono::duration<double>(Clock::now() - t0).count();
+                        seconds += seconds_since(t0);
                         for (std::size_t b = 0; b < batch.size(); ++b) {
                             double sum = out[b].blocked;
                             for (double f : out[b].F) sum += f;

@@ -43,6 +43,13 @@ struct ShotDifference {
 };
 ShotDifference shot_difference(const formfactor::ShotResult& got, const formfactor::ShotResult& want);
 
+// Over a run's repeats: the fastest, the median (the upper one of an even count) and the standard
+// deviation as a percentage of the mean. `values` must not be empty.
+struct Stats {
+    double min = 0.0, median = 0.0, sigma_percent = 0.0;
+};
+Stats stats(std::vector<double> values);
+
 // A scene by name: procedural:<count> is generated, anything else loaded as glTF. `closed` is
 // true where every direction from every patch hits a surface by construction (procedural
 // scenes), so each shot's form factors and blocked share must sum to 1.

@@ -18,6 +18,7 @@
 #include "cl/runtime.h"
 #include "cli/engine_select.h"
 #include "core/error.h"
+#include "core/timing.h"
 #include "formfactor/near_field.h"
 #include "mesh/mesh.h"
 #include "output/output.h"
@@ -26,14 +27,9 @@
 
 namespace hemirad::cli {
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 using ordered_json = nlohmann::ordered_json;
 
 namespace {
-
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // Times every shot of the engine it wraps, so the report can split form factors from solving.
 class TimedEngine final : public formfactor::Engine {
