@@ -16,6 +16,7 @@
 
 #include "core/error.h"
 #include "formfactor/analytic.h"
+#include "scene/builder.h"
 
 namespace hemirad::bench {
 namespace {
@@ -259,13 +260,11 @@ scene::Scene make_room_scene(const Room& room) {
         s.materials.push_back(m);
         s.nodes.push_back({surface_name(Surface(i)), -1});  // built in memory: no glTF node
     }
+    // Material and node of a surface are its index; validate() kept every reflectance <= kMaxReflectance.
     std::uint32_t primitive = 0;
     auto add_quad = [&](const std::array<glm::dvec3, 4>& q, Surface surface) {
         const auto id = static_cast<std::uint32_t>(surface);
-        const glm::dvec3 rho = glm::clamp(room.rho[id], 0.0, scene::kMaxReflectance);
-        s.triangles.push_back({{q[0], q[1], q[2]}, {rho, rho, rho}, id, id, primitive});
-        s.triangles.push_back({{q[0], q[2], q[3]}, {rho, rho, rho}, id, id, primitive});
-        ++primitive;
+        scene::add_quad_to(s, q[0], q[1], q[2], q[3], id, id, primitive++);
     };
     for (const Face& f : kFaces) {
         if (f.surface != Surface::ceiling) {

@@ -19,16 +19,21 @@ inline std::uint32_t add_material(Scene& s, glm::dvec3 rho, glm::dvec3 emission,
     return static_cast<std::uint32_t>(s.materials.size() - 1);
 }
 
-// A planar quad p0..p3, counter-clockwise seen from its front, as two triangles sharing p0–p2,
-// in a node of its own.
+// A planar quad p0..p3, counter-clockwise seen from its front, as two triangles sharing p0–p2
+// (reflectance: the material's) of an existing node and primitive.
+inline void add_quad_to(Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, glm::dvec3 p3, std::uint32_t material,
+                        std::uint32_t node, std::uint32_t primitive) {
+    const glm::dvec3 rho = s.materials[material].base_color;
+    s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, primitive});
+    s.triangles.push_back({{p0, p2, p3}, {rho, rho, rho}, material, node, primitive});
+}
+
+// The same quad in a node (and primitive) of its own.
 inline void add_quad(Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, glm::dvec3 p3, std::uint32_t material,
                      const std::string& node_name) {
     const auto node = static_cast<std::uint32_t>(s.nodes.size());
     s.nodes.push_back({node_name, static_cast<int>(node)});
-    const glm::dvec3 rho = s.materials[material].base_color;
-    const std::uint32_t prim = node;
-    s.triangles.push_back({{p0, p1, p2}, {rho, rho, rho}, material, node, prim});
-    s.triangles.push_back({{p0, p2, p3}, {rho, rho, rho}, material, node, prim});
+    add_quad_to(s, p0, p1, p2, p3, material, node, node);
 }
 
 // Sets the bounding box from the triangles.
