@@ -1,0 +1,110 @@
+// Full-matrix gathering (the article's first approach): one hemicube per patch gives its
+// form-factor row, then the linear system B = E + K·B over patch radiosities is solved by
+// Gauss–Seidel. Patches shoot (are the rows), elements receive. No ambient term is needed:
+// once the residual is small the solution is complete, not an estimate of the rest.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <glm/glm.hpp>
+#include <vector>
+
+#include "formfactor/engine.h"
+#include "mesh/mesh.h"
+#include "solve/progressive.h"
+
+namespace hemirad::solve {
+
+struct MatrixSettings {
+    // Stop the sweeps when max_p |E_p + Σ_i K_pi B_i − B_p| / max_p B_p (worst channel) is at
+    // most this.
+    double tolerance = 1e-6;
+    int max_iterations = 1000;  // Gauss–Seidel sweeps at most
+    // Rows shot per engine call: one launch per kernel stage on the OpenCL engine.
+    int batch = 64;
+    // Every ρ and E has r = g = b: solve one channel (a third of K's memory and time) and copy
+    // it to the other two. The constructor throws std::invalid_argument if the scene is not grey.
+    bool grey = false;
+    // false: direct light only. Only emitting patches are shot (the time saving) and they shoot
+    // their emission; what the receivers reflect goes nowhere (it is the books' `unshot`).
+    bool interreflection = true;
+    // Checked between batches of rows and between sweeps: once true, solve() stops early,
+    // leaving converged() false. nullptr: never.
+    const std::atomic<bool>* cancel = nullptr;
+};
+
+class Matrix {
+public:
+    // Throws std::invalid_argument when settings.grey is set and some element's ρ or E is not grey.
+    Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixSettings& settings);
+
+    // Patch counts up to which the matrix solver is the better choice. It shoots one hemicube
+    // per patch and holds a dense P×P K per channel (72 MB a channel at 3000 patches) whose
+    // sweeps cost P² each; progressive shooting stops early once its ambient estimate is small,
+    // and on large scenes shoots far fewer than P hemicubes, so beyond a few thousand patches it
+    // is faster.
+    static constexpr std::size_t kDefaultMaxPatches = 3000;
+    static bool suits(const mesh::Mesh& mesh) { return mesh.patches.size() <= kDefaultMaxPatches; }
+
+    // An estimate of the memory solve() needs, P being the patches that get rows: the dense K
+    // exactly (none for direct light), the sparse rows at a quarter of their worst case (every
+    // row holding all E elements, 12 bytes each: P·E·12), and the engine's results for one
+    // batch (batch·E doubles).
+    static std::size_t estimate_bytes(const mesh::Mesh& mesh, const MatrixSettings& settings);
+
+    // Computes the rows (calling `progress(rows_done, rows_total)` after each batch if set) and
+    // solves. Does its work once: later calls return at once.
+    void solve(const std::function<void(long, long)>& progress = {});
+
+    long rows() const { return rows_done_; }        // rows computed (hemicubes shot)
+    int iterations() const { return iterations_; }  // Gauss–Seidel sweeps
+    // Final relative residual, as for `tolerance`; 0 for direct light, infinite when cancelled
+    // before every row was shot.
+    double residual() const { return residual_; }
+    bool converged() const { return converged_; }  // residual <= tolerance; direct light: all rows shot
+
+    std::vector<glm::dvec3> radiosity() const { return B_; }         // per element B_j = E_j + ρ_j H_j
+    std::vector<glm::dvec3> irradiance() const { return H_; }        // per element H_j
+    std::vector<glm::dvec3> patch_radiosity() const { return Bp_; }  // per patch: what it shot
+
+    // emitted Σ E_j A_j; absorbed Σ_j (1 − ρ_j) H_j A_j + Σ_i blocked_i B_i A_i; escaped
+    // Σ_i B_i A_i (1 − ΣF_i − blocked_i); unshot = emitted − absorbed − escaped, which is the
+    // residual's flux Σ_p A_p (E_p + Σ_i K_pi B_i − B_p) (with direct light only: the reflected
+    // flux Σ ρ_j H_j A_j). Averaged over r, g, b like Progressive::energy().
+    Energy energy() const;
+
+private:
+    // One patch's form factors, sparse: the elements it sees and F to each.
+    struct Row {
+        std::vector<std::uint32_t> element;
+        std::vector<double> F;
+        double f_sum = 0.0;
+        double blocked = 0.0;
+        bool shot = false;
+    };
+
+    const mesh::Mesh& mesh_;
+    formfactor::Engine& engine_;
+    MatrixSettings settings_;
+    int channels_ = 3;                   // 1 when grey
+    std::vector<std::uint32_t> active_;  // patches that get rows, ascending
+    std::vector<Row> rows_;              // per patch; empty where not active
+    long rows_done_ = 0;
+    int iterations_ = 0;
+    double residual_ = 0.0;
+    bool converged_ = false;
+    bool solved_ = false;
+
+    std::vector<glm::dvec3> Bp_;  // per patch
+    std::vector<glm::dvec3> B_;   // per element
+    std::vector<glm::dvec3> H_;   // per element
+
+    bool cancelled() const;
+    bool shoot_rows(const std::function<void(long, long)>& progress);  // false when cancelled
+    void gauss_seidel();
+    void gather();  // H_j and B_j from the rows and Bp_
+};
+
+}  // namespace hemirad::solve
