@@ -1,0 +1,357 @@
+// The effects planner: what a scene calls for, effect by effect, with the evidence.
+#include "scene/effects.h"
+
+#include <fmt/core.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <cstdint>
+#include <stdexcept>
+#include <vector>
+
+namespace hemirad::scene {
+
+namespace {
+
+std::string trim(const std::string& s) {
+    std::size_t b = 0, e = s.size();
+    while (b < e && std::isspace(static_cast<unsigned char>(s[b]))) ++b;
+    while (e > b && std::isspace(static_cast<unsigned char>(s[e - 1]))) --e;
+    return s.substr(b, e - b);
+}
+
+std::string lower(std::string s) {
+    for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return s;
+}
+
+std::string node_name(const Scene& scene, std::size_t triangle) {
+    const std::uint32_t node = scene.triangles[triangle].node;
+    return node < scene.nodes.size() ? scene.nodes[node].name : fmt::format("node{}", node);
+}
+
+std::string material_name(const Scene& scene, std::uint32_t material) {
+    if (material >= scene.materials.size()) return fmt::format("material{}", material);
+    const std::string& name = scene.materials[material].name;
+    return name.empty() ? fmt::format("material{}", material) : name;
+}
+
+std::string vec(const glm::dvec3& v) { return fmt::format("({:.4g}, {:.4g}, {:.4g})", v.x, v.y, v.z); }
+
+bool grey(const glm::dvec3& v) { return v.r == v.g && v.g == v.b; }
+
+const Material* material_of(const Scene& scene, const Triangle& t) {
+    return t.material < scene.materials.size() ? &scene.materials[t.material] : nullptr;
+}
+
+EffectDecision automatic(bool on, std::string why) { return {on, false, std::move(why)}; }
+
+// The decision for one effect: the scene's, unless forced.
+EffectDecision decide(Force force, EffectDecision analysis) {
+    if (force == Force::automatic) return analysis;
+    const bool on = force == Force::on;
+    return {on, true,
+            fmt::format("forced {} from the command line (the scene analysis would have turned it {}: {})",
+                        on ? "on" : "off", analysis.on ? "on" : "off", analysis.why)};
+}
+
+// Whether a material is double-sided once the two_sided override is applied.
+bool effectively_double_sided(const Material& m, Force two_sided) {
+    if (two_sided == Force::on) return true;
+    if (two_sided == Force::off) return false;
+    return m.double_sided;
+}
+
+// ---- occlusion ---------------------------------------------------------------------------------
+
+struct Plane {
+    glm::dvec3 n;
+    double d;               // n·x = d on the plane
+    std::size_t triangle;   // a triangle on it
+};
+
+EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
+    const std::size_t count = scene.triangles.size();
+    if (count == 0) return automatic(false, "the scene has no triangles, so nothing can hide anything");
+
+    // Back faces: a double-sided triangle also faces the other way, and that side sees (and is
+    // hidden by) whatever lies behind the front.
+    if (two_sided == Force::on)
+        return automatic(true, "two_sided is forced on, so every triangle has a back face looking away from the "
+                               "front faces, and surfaces can hide one another");
+    std::size_t double_sided = 0, example = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+        const Material* m = material_of(scene, scene.triangles[i]);
+        if (m && effectively_double_sided(*m, two_sided)) {
+            if (double_sided++ == 0) example = i;
+        }
+    }
+    if (double_sided > 0)
+        return automatic(true, fmt::format("{} of {} triangles use a double-sided material (e.g. '{}' on node '{}'), "
+                                           "whose back faces look away from the front faces, so surfaces can hide "
+                                           "one another",
+                                           double_sided, count, material_name(scene, scene.triangles[example].material),
+                                           node_name(scene, example)));
+
+    glm::dvec3 lo(0.0), hi(0.0);
+    bool any = false;
+    for (const Triangle& t : scene.triangles)
+        for (const glm::dvec3& p : t.p) {
+            lo = any ? glm::min(lo, p) : p;
+            hi = any ? glm::max(hi, p) : p;
+            any = true;
+        }
+    const double diagonal = glm::length(hi - lo);
+    const double tolerance = 1e-9 * diagonal;
+
+    // Distinct planes of the non-degenerate triangles (an approximate de-duplication: planes
+    // that differ by rounding only are merged, others are merely checked twice).
+    std::vector<Plane> planes;
+    planes.reserve(count);
+    for (std::size_t i = 0; i < count; ++i) {
+        const Triangle& t = scene.triangles[i];
+        const glm::dvec3 c = glm::cross(t.p[1] - t.p[0], t.p[2] - t.p[0]);
+        const double len = glm::length(c);
+        if (!(len > 1e-24 * diagonal * diagonal)) continue;  // zero area: no plane, hides nothing
+        const glm::dvec3 n = c / len;
+        planes.push_back({n, glm::dot(n, (t.p[0] + t.p[1] + t.p[2]) / 3.0), i});
+    }
+    if (planes.empty()) return automatic(false, "every triangle has zero area, so nothing can hide anything");
+    {
+        const double dq = diagonal > 0.0 ? 1e-9 * diagonal : 1.0;
+        using Key = std::array<std::int64_t, 4>;
+        auto key = [dq](const Plane& p) {
+            return Key{std::llround(p.n.x * 1e9), std::llround(p.n.y * 1e9), std::llround(p.n.z * 1e9),
+                       std::llround(p.d / dq)};
+        };
+        std::vector<std::pair<Key, std::size_t>> keyed;
+        keyed.reserve(planes.size());
+        for (std::size_t i = 0; i < planes.size(); ++i) keyed.push_back({key(planes[i]), i});
+        std::sort(keyed.begin(), keyed.end());
+        std::vector<Plane> distinct;
+        for (std::size_t i = 0; i < keyed.size(); ++i)
+            if (i == 0 || keyed[i].first != keyed[i - 1].first) distinct.push_back(planes[keyed[i].second]);
+        planes.swap(distinct);
+    }
+
+    // Distinct vertices (exact), each with a triangle it belongs to.
+    struct Vertex {
+        glm::dvec3 p;
+        std::size_t triangle;
+    };
+    std::vector<Vertex> vertices;
+    vertices.reserve(3 * count);
+    for (std::size_t i = 0; i < count; ++i)
+        for (const glm::dvec3& p : scene.triangles[i].p) vertices.push_back({p, i});
+    auto less = [](const Vertex& a, const Vertex& b) {
+        if (a.p.x != b.p.x) return a.p.x < b.p.x;
+        if (a.p.y != b.p.y) return a.p.y < b.p.y;
+        return a.p.z < b.p.z;
+    };
+    std::sort(vertices.begin(), vertices.end(), less);
+    vertices.erase(std::unique(vertices.begin(), vertices.end(), [](const Vertex& a, const Vertex& b) { return a.p == b.p; }),
+                   vertices.end());
+
+    const double work = static_cast<double>(planes.size()) * static_cast<double>(vertices.size());
+    if (work > 2e8)
+        return automatic(true, fmt::format("the scene is too large to check ({} distinct planes × {} vertices), so "
+                                           "occlusion is assumed",
+                                           planes.size(), vertices.size()));
+
+    // Structure of arrays for the inner loop.
+    const std::size_t nv = vertices.size();
+    std::vector<double> xs(nv), ys(nv), zs(nv);
+    for (std::size_t k = 0; k < nv; ++k) {
+        xs[k] = vertices[k].p.x;
+        ys[k] = vertices[k].p.y;
+        zs[k] = vertices[k].p.z;
+    }
+    std::size_t last_offender = 0;  // a vertex behind one plane is likely behind the next
+    for (const Plane& plane : planes) {
+        const double nx = plane.n.x, ny = plane.n.y, nz = plane.n.z, limit = plane.d - tolerance;
+        auto behind = [&](std::size_t k) { return nx * xs[k] + ny * ys[k] + nz * zs[k] < limit; };
+        std::size_t found = nv;
+        if (behind(last_offender)) {
+            found = last_offender;
+        } else {
+            for (std::size_t k = 0; k < nv; ++k)
+                if (behind(k)) {
+                    found = k;
+                    break;
+                }
+        }
+        if (found == nv) continue;
+        last_offender = found;
+        const Vertex& v = vertices[found];
+        const double depth = plane.d - glm::dot(plane.n, v.p);
+        return automatic(true, fmt::format("vertex {} of node '{}' (triangle {}) lies {:.4g} behind the plane of "
+                                           "triangle {} of node '{}', so surfaces can hide one another",
+                                           vec(v.p), node_name(scene, v.triangle), v.triangle, depth, plane.triangle,
+                                           node_name(scene, plane.triangle)));
+    }
+    return automatic(false, fmt::format("all {} vertices lie on or in front of all {} distinct triangle planes ({} "
+                                        "triangles): the surfaces bound a convex region seen from inside, so no surface "
+                                        "can hide one front face from another",
+                                        nv, planes.size(), count));
+}
+
+// ---- colour, interreflection, two-sidedness ----------------------------------------------------
+
+EffectDecision analyse_colour(const Scene& scene) {
+    std::size_t coloured = 0, example = 0;
+    for (std::size_t i = 0; i < scene.triangles.size(); ++i) {
+        const Triangle& t = scene.triangles[i];
+        if (!grey(t.rho[0]) || !grey(t.rho[1]) || !grey(t.rho[2])) {
+            if (coloured++ == 0) example = i;
+        }
+    }
+    std::vector<char> used(scene.materials.size(), 0);
+    for (const Triangle& t : scene.triangles)
+        if (t.material < used.size()) used[t.material] = 1;
+    std::size_t coloured_emitters = 0, emitters = 0;
+    std::uint32_t emitter_example = 0;
+    for (std::uint32_t m = 0; m < scene.materials.size(); ++m) {
+        if (!used[m]) continue;
+        const glm::dvec3& e = scene.materials[m].emission;
+        if (e != glm::dvec3(0.0)) ++emitters;
+        if (!grey(e)) {
+            if (coloured_emitters++ == 0) emitter_example = m;
+        }
+    }
+    if (coloured > 0) {
+        const Triangle& t = scene.triangles[example];
+        const Material* m = material_of(scene, t);
+        const std::string what =
+            m && !grey(m->base_color)
+                ? fmt::format("material '{}' with base colour {} on node '{}'", material_name(scene, t.material),
+                              vec(m->base_color), node_name(scene, example))
+                : fmt::format("triangle {} of node '{}' with vertex reflectance {} (material '{}')", example,
+                              node_name(scene, example),
+                              vec(!grey(t.rho[0]) ? t.rho[0] : !grey(t.rho[1]) ? t.rho[1] : t.rho[2]),
+                              material_name(scene, t.material));
+        return automatic(true, fmt::format("{} of {} triangles have a coloured reflectance (r, g, b not all equal), "
+                                           "e.g. {}, so three channels are solved",
+                                           coloured, scene.triangles.size(), what));
+    }
+    if (coloured_emitters > 0)
+        return automatic(true, fmt::format("material '{}' emits coloured light {}, so three channels are solved",
+                                           material_name(scene, emitter_example),
+                                           vec(scene.materials[emitter_example].emission)));
+    return automatic(false, fmt::format("all {} triangles' reflectances and the emission of all {} emitting "
+                                        "material{} are grey (r = g = b), so one channel is solved",
+                                        scene.triangles.size(), emitters, emitters == 1 ? "" : "s"));
+}
+
+EffectDecision analyse_interreflection(const Scene& scene) {
+    std::size_t reflecting = 0, example = 0;
+    for (std::size_t i = 0; i < scene.triangles.size(); ++i) {
+        const Triangle& t = scene.triangles[i];
+        const glm::dvec3 zero(0.0);
+        if (t.rho[0] != zero || t.rho[1] != zero || t.rho[2] != zero) {
+            if (reflecting++ == 0) example = i;
+        }
+    }
+    if (reflecting == 0)
+        return automatic(false, fmt::format("all {} triangles have reflectance 0, so only the emitters' direct light "
+                                            "is needed (one shot each)",
+                                            scene.triangles.size()));
+    const Triangle& t = scene.triangles[example];
+    const glm::dvec3 rho = t.rho[0] != glm::dvec3(0.0) ? t.rho[0] : t.rho[1] != glm::dvec3(0.0) ? t.rho[1] : t.rho[2];
+    return automatic(true, fmt::format("{} of {} triangles reflect light, e.g. triangle {} of node '{}' (material "
+                                       "'{}', reflectance {}), so light bounces",
+                                       reflecting, scene.triangles.size(), example, node_name(scene, example),
+                                       material_name(scene, t.material), vec(rho)));
+}
+
+EffectDecision analyse_two_sided(const Scene& scene) {
+    std::size_t count = 0, example = 0;
+    for (std::size_t i = 0; i < scene.triangles.size(); ++i) {
+        const Material* m = material_of(scene, scene.triangles[i]);
+        if (m && m->double_sided) {
+            if (count++ == 0) example = i;
+        }
+    }
+    if (count == 0) return automatic(false, "no triangle uses a double-sided material, so back faces need no patches");
+    return automatic(true, fmt::format("{} of {} triangles use a double-sided material (e.g. '{}' on node '{}'), so "
+                                       "their back faces get patches of their own",
+                                       count, scene.triangles.size(),
+                                       material_name(scene, scene.triangles[example].material),
+                                       node_name(scene, example)));
+}
+
+}  // namespace
+
+const char* to_string(Force force) {
+    switch (force) {
+        case Force::on: return "on";
+        case Force::off: return "off";
+        case Force::automatic: break;
+    }
+    return "auto";
+}
+
+EffectOverrides parse_effect_overrides(const std::string& spec) {
+    EffectOverrides out;
+    if (trim(spec).empty()) return out;
+    const char* const names[] = {"occlusion", "colour", "interreflection", "two_sided", "refinement", "convergence"};
+    Force* const slots[] = {&out.occlusion,  &out.colour,     &out.interreflection,
+                            &out.two_sided,  &out.refinement, &out.convergence};
+    bool seen[6] = {};
+    std::size_t start = 0;
+    while (true) {
+        const std::size_t comma = spec.find(',', start);
+        const std::string item = trim(spec.substr(start, comma == std::string::npos ? std::string::npos : comma - start));
+        if (item.empty()) throw std::invalid_argument(fmt::format("effects '{}': empty item", spec));
+        const std::size_t eq = item.find('=');
+        if (eq == std::string::npos)
+            throw std::invalid_argument(fmt::format("effects '{}': item '{}' is not name=on|off|auto", spec, item));
+        const std::string name = lower(trim(item.substr(0, eq)));
+        const std::string value = lower(trim(item.substr(eq + 1)));
+        int index = -1;
+        for (int i = 0; i < 6; ++i)
+            if (name == names[i]) index = i;
+        if (index < 0)
+            throw std::invalid_argument(fmt::format("effects '{}': unknown effect '{}' in '{}' (expected occlusion, "
+                                                    "colour, interreflection, two_sided, refinement or convergence)",
+                                                    spec, name, item));
+        Force force;
+        if (value == "on") force = Force::on;
+        else if (value == "off") force = Force::off;
+        else if (value == "auto") force = Force::automatic;
+        else
+            throw std::invalid_argument(
+                fmt::format("effects '{}': bad value '{}' in '{}' (expected on, off or auto)", spec, value, item));
+        if (seen[index]) throw std::invalid_argument(fmt::format("effects '{}': '{}' given twice", spec, name));
+        seen[index] = true;
+        *slots[index] = force;
+        if (comma == std::string::npos) break;
+        start = comma + 1;
+    }
+    return out;
+}
+
+EffectsPlan plan_effects(const Scene& scene, const EffectOverrides& overrides) {
+    EffectsPlan plan;
+    plan.occlusion = decide(overrides.occlusion, analyse_occlusion(scene, overrides.two_sided));
+    plan.colour = decide(overrides.colour, analyse_colour(scene));
+    plan.interreflection = decide(overrides.interreflection, analyse_interreflection(scene));
+    plan.two_sided = decide(overrides.two_sided, analyse_two_sided(scene));
+    plan.refinement = decide(overrides.refinement,
+                             automatic(true, "elements are split where the radiosity contrast with a neighbour exceeds "
+                                             "the threshold"));
+    plan.convergence = decide(overrides.convergence,
+                              automatic(true, "stop when the light left unshot can no longer change the output visibly"));
+    return plan;
+}
+
+void apply_two_sided(Scene& scene, const EffectsPlan& plan, const EffectOverrides& overrides) {
+    if (overrides.two_sided == Force::on) {
+        for (Material& m : scene.materials) m.double_sided = true;
+    } else if (!plan.two_sided.on) {
+        for (Material& m : scene.materials) m.double_sided = false;
+    }
+}
+
+}  // namespace hemirad::scene
