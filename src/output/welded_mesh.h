@@ -13,6 +13,7 @@ namespace hemirad::output {
 // One scene mesh node's triangles, both sides (a doubleSided back face has its own vertices).
 struct WeldedNode {
     std::vector<glm::dvec3> positions;
+    // Per vertex (a hanging vertex of a T-junction takes its edge's ends' mean instead, see weld):
     std::vector<glm::dvec3> normals;     // unit, area-weighted mean of the elements' around it
     std::vector<glm::dvec3> radiosity;   // area-weighted mean of the elements around the vertex
     std::vector<std::uint32_t> indices;  // 3 per triangle, counter-clockwise seen from its front
@@ -30,8 +31,20 @@ struct WeldedMesh {
 
 // Welds within one node and one side: vertices at bit-identical positions whose element
 // normals are within a crease angle (40°) become one vertex, so tessellated curves shade
-// smoothly but nothing blurs across a crease such as a box edge. Quads become two triangles. Throws InternalError when
-// `radiosity` is not one value per element or an element names a node that does not exist.
+// smoothly but nothing blurs across a crease such as a box edge. Quads become two triangles.
+//
+// Adaptive refinement leaves T-junctions: a vertex of finer elements at the midpoint
+// 0.5·(a + b) of a coarser neighbour's edge a–b (found by its bit-exact position, at any depth
+// of halving). Such an element is cut into triangles through those hanging vertices instead
+// (ear clipping: no zero-area triangles, no centroid vertex), so neighbours share triangle
+// edges, and each hanging vertex takes the mean of its edge's ends' radiosity (and their
+// normalized mean normal), so the shading is continuous across the junction. Across a crease
+// the coarse side's edge is split too, at a vertex of its own (its value interpolated the
+// same way). An unrefined mesh, whose elements meet vertex to vertex, gets exactly its old
+// vertices and triangles.
+//
+// Throws InternalError when `radiosity` is not one value per element or an element names a
+// node that does not exist.
 WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity);
 
 }  // namespace hemirad::output
