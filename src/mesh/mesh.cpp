@@ -53,12 +53,6 @@ struct Lattice {
     const dvec3& at(int i, int j) const { return p[std::size_t(j) * std::size_t(nu + 1) + std::size_t(i)]; }
 };
 
-struct Shape {
-    dvec3 normal{0.0};
-    dvec3 centroid{0.0};
-    double area = 0.0;
-};
-
 double longest_edge(const std::array<dvec3, 3>& p) {
     return std::max({glm::length(p[1] - p[0]), glm::length(p[2] - p[1]), glm::length(p[0] - p[2])});
 }
@@ -235,25 +229,6 @@ std::vector<PatchCells> triangle_cells(const Polygon& t, const Settings& s) {
     return cells;
 }
 
-// Normal, area centroid and area of a planar convex polygon; a quad is taken as two triangles
-// so its centroid is the true area centroid, not the vertex mean.
-Shape shape_of(const Polygon& poly) {
-    Shape s;
-    if (poly.n == 3) {
-        const dvec3 c = glm::cross(poly.v[1] - poly.v[0], poly.v[2] - poly.v[0]);
-        s.area = 0.5 * glm::length(c);
-        s.normal = glm::normalize(c);
-        s.centroid = (poly.v[0] + poly.v[1] + poly.v[2]) / 3.0;
-        return s;
-    }
-    const double a1 = 0.5 * glm::length(glm::cross(poly.v[1] - poly.v[0], poly.v[2] - poly.v[0]));
-    const double a2 = 0.5 * glm::length(glm::cross(poly.v[2] - poly.v[0], poly.v[3] - poly.v[0]));
-    s.area = a1 + a2;
-    s.normal = glm::normalize(glm::cross(poly.v[2] - poly.v[0], poly.v[3] - poly.v[1]));
-    s.centroid = (a1 * (poly.v[0] + poly.v[1] + poly.v[2]) + a2 * (poly.v[0] + poly.v[2] + poly.v[3])) / (3.0 * s.area);
-    return s;
-}
-
 // Barycentric coordinates of p (in the triangle's plane) with respect to triangle t.
 dvec3 barycentric(const scene::Triangle& t, const dvec3& p) {
     const dvec3 e0 = t.p[1] - t.p[0], e1 = t.p[2] - t.p[0], e2 = p - t.p[0];
@@ -423,6 +398,25 @@ void check_settings(const Settings& s) {
 }
 
 }  // namespace
+
+// Normal, area centroid and area of a planar convex polygon; a quad is taken as two triangles
+// so its centroid is the true area centroid, not the vertex mean.
+Shape shape_of(const Polygon& poly) {
+    Shape s;
+    if (poly.n == 3) {
+        const dvec3 c = glm::cross(poly.v[1] - poly.v[0], poly.v[2] - poly.v[0]);
+        s.area = 0.5 * glm::length(c);
+        s.normal = glm::normalize(c);
+        s.centroid = (poly.v[0] + poly.v[1] + poly.v[2]) / 3.0;
+        return s;
+    }
+    const double a1 = 0.5 * glm::length(glm::cross(poly.v[1] - poly.v[0], poly.v[2] - poly.v[0]));
+    const double a2 = 0.5 * glm::length(glm::cross(poly.v[2] - poly.v[0], poly.v[3] - poly.v[0]));
+    s.area = a1 + a2;
+    s.normal = glm::normalize(glm::cross(poly.v[2] - poly.v[0], poly.v[3] - poly.v[1]));
+    s.centroid = (a1 * (poly.v[0] + poly.v[1] + poly.v[2]) + a2 * (poly.v[0] + poly.v[2] + poly.v[3])) / (3.0 * s.area);
+    return s;
+}
 
 Mesh build(const scene::Scene& scene, const Settings& settings) {
     check_settings(settings);

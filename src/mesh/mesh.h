@@ -61,4 +61,12 @@ struct Mesh {
 
 Mesh build(const scene::Scene& scene, const Settings& settings);
 
+// Normal (unit, front side), area centroid and area of a planar convex polygon.
+struct Shape {
+    glm::dvec3 normal{0.0};
+    glm::dvec3 centroid{0.0};
+    double area = 0.0;
+};
+Shape shape_of(const Polygon& poly);
+
 }  // namespace hemirad::mesh

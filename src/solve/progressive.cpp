@@ -16,7 +16,11 @@ double sum(const glm::dvec3& v) { return v.x + v.y + v.z; }
 }  // namespace
 
 Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings)
-    : mesh_(mesh), engine_(engine), settings_(settings), H_(mesh.elements.size(), glm::dvec3(0.0)) {
+    : mesh_(mesh),
+      engine_(engine),
+      settings_(settings),
+      H_(mesh.elements.size(), glm::dvec3(0.0)),
+      shot_(mesh.patches.size(), glm::dvec3(0.0)) {
     unshot_.reserve(mesh.patches.size());
     for (const auto& p : mesh.patches) {
         unshot_.push_back(p.emission);
@@ -74,6 +78,7 @@ void Progressive::apply(std::size_t best, const formfactor::ShotResult& shot) {
     const glm::dvec3 u = unshot_[best];
     const glm::dvec3 flux = u * shooter.area;
     unshot_[best] = glm::dvec3(0.0);
+    shot_[best] += u;
 
     // ΔH_j = ΔB_i F_ij A_i / A_j; what element j reflects, ρ_j ΔH_j A_j, joins its patch's pool.
     glm::dvec3 hit{0.0}, reflected{0.0};

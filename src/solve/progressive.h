@@ -63,6 +63,9 @@ public:
     glm::dvec3 ambient() const;
 
     Energy energy() const;
+    // Per patch, the radiosity it has shot in all (the sum of its passes' unshot radiosity):
+    // what a re-gather shoots again onto a refined mesh.
+    const std::vector<glm::dvec3>& shot() const { return shot_; }
 
 private:
     const mesh::Mesh& mesh_;
@@ -74,6 +77,7 @@ private:
 
     std::vector<glm::dvec3> H_;        // incident per element, shot so far
     std::vector<glm::dvec3> unshot_;   // unshot radiosity per patch
+    std::vector<glm::dvec3> shot_;     // radiosity shot so far per patch
     glm::dvec3 emitted_{0.0};          // flux per channel
     glm::dvec3 absorbed_{0.0};
     glm::dvec3 escaped_{0.0};

@@ -1,0 +1,204 @@
+// Adaptive refinement: contrast marking, splitting, and the flux-preserving re-gather.
+#include "solve/refinement.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+
+#include "mesh/refine.h"
+
+namespace hemirad::solve {
+namespace {
+
+double luminance(const glm::dvec3& c) {
+    return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+}
+
+// Two elements lie in one plane when their normals agree this closely.
+constexpr double kSamePlaneDot = 1.0 - 1e-6;
+
+struct PointKey {
+    std::uint64_t b[3];
+    bool operator==(const PointKey& o) const { return b[0] == o.b[0] && b[1] == o.b[1] && b[2] == o.b[2]; }
+};
+struct PointKeyHash {
+    std::size_t operator()(const PointKey& k) const {
+        return std::hash<std::uint64_t>()(k.b[0] * 0x9E3779B97F4A7C15ull ^ k.b[1] * 0xC2B2AE3D27D4EB4Full ^ k.b[2]);
+    }
+};
+PointKey key_of(const glm::dvec3& p) {
+    PointKey k{};
+    const double c[3] = {p.x + 0.0, p.y + 0.0, p.z + 0.0};  // −0 and +0 alike
+    std::memcpy(k.b, c, sizeof c);
+    return k;
+}
+
+double longest_edge(const mesh::Polygon& poly) {
+    double longest = 0.0;
+    for (int i = 0; i < poly.n; ++i)
+        longest = std::max(longest, glm::length(poly.v[std::size_t((i + 1) % poly.n)] - poly.v[std::size_t(i)]));
+    return longest;
+}
+
+// The emitters, then the other patches that shot the most light, most first, until they cover
+// settings.regather_share of all that was shot; at most settings.max_shooters.
+std::vector<std::uint32_t> strongest_shooters(const mesh::Mesh& mesh, const std::vector<glm::dvec3>& shot,
+                                              const RefineSettings& settings) {
+    std::vector<std::uint32_t> order;
+    std::vector<double> flux(mesh.patches.size(), 0.0);
+    double total = 0.0;
+    for (std::size_t p = 0; p < shot.size() && p < mesh.patches.size(); ++p) {
+        flux[p] = luminance(shot[p]) * mesh.patches[p].area;
+        if (flux[p] > 0.0) order.push_back(static_cast<std::uint32_t>(p));
+        total += std::max(0.0, flux[p]);
+    }
+    const auto emits = [&](std::uint32_t p) { return luminance(mesh.patches[p].emission) > 0.0; };
+    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+        if (emits(a) != emits(b)) return emits(a);
+        return flux[a] > flux[b];
+    });
+    double covered = 0.0;
+    std::size_t count = 0;
+    while (count < order.size() && count < static_cast<std::size_t>(std::max(1, settings.max_shooters)) &&
+           (emits(order[count]) || covered < settings.regather_share * total))
+        covered += flux[order[count++]];
+    order.resize(count);
+    return order;
+}
+
+}  // namespace
+
+std::vector<bool> mark_contrast(const mesh::Mesh& mesh, const std::vector<glm::dvec3>& irradiance,
+                                const std::vector<int>& level, const RefineSettings& settings) {
+    const std::size_t n = mesh.elements.size();
+    std::vector<bool> split(n, false);
+    double lum_area = 0.0, area = 0.0;
+    std::vector<double> lum(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        lum[k] = luminance(irradiance[k]);
+        lum_area += lum[k] * mesh.elements[k].area;
+        area += mesh.elements[k].area;
+    }
+    const double floor = area > 0.0 ? settings.noise_floor * lum_area / area : 0.0;
+    std::vector<double> edge(n);
+    for (std::size_t k = 0; k < n; ++k) edge[k] = longest_edge(mesh.elements[k].poly);
+    const auto splittable = [&](std::size_t k) {
+        return level[k] < settings.max_levels && edge[k] > settings.min_size;
+    };
+
+    // Elements meeting at a vertex are neighbours; a vertex hanging on a coarser element's edge
+    // links it to the children on either side of it through their shared corners.
+    std::unordered_map<PointKey, std::vector<std::uint32_t>, PointKeyHash> at;
+    at.reserve(n * 2);
+    for (std::size_t k = 0; k < n; ++k) {
+        const mesh::Polygon& poly = mesh.elements[k].poly;
+        for (int i = 0; i < poly.n; ++i) at[key_of(poly.v[std::size_t(i)])].push_back(static_cast<std::uint32_t>(k));
+    }
+    for (const auto& [point, around] : at) {
+        (void)point;
+        for (std::size_t x = 0; x < around.size(); ++x) {
+            for (std::size_t y = x + 1; y < around.size(); ++y) {
+                const std::uint32_t a = around[x], b = around[y];
+                const mesh::Element& ea = mesh.elements[a];
+                const mesh::Element& eb = mesh.elements[b];
+                if (ea.node != eb.node || ea.back != eb.back || glm::dot(ea.normal, eb.normal) < kSamePlaneDot)
+                    continue;
+                // The difference per element size of distance: diagonal neighbours, farther apart,
+                // see a smooth gradient's difference grow by √2 and are judged by that.
+                const double diff = std::abs(lum[a] - lum[b]);
+                const double size = std::max(edge[a], edge[b]);
+                const double distance = std::max(glm::length(ea.centroid - eb.centroid), 1e-300);
+                const double rate = diff * std::min(1.0, size / distance);
+                if (diff <= floor || rate <= settings.contrast * std::max(lum[a], lum[b])) continue;
+                if (splittable(a)) split[a] = true;
+                if (splittable(b)) split[b] = true;
+            }
+        }
+    }
+    return split;
+}
+
+RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const std::vector<glm::dvec3>& shot,
+                    const EngineFactory& make_engine, const RefineSettings& settings) {
+    RefineResult result;
+    std::vector<int> level(mesh.elements.size(), 0);
+    const std::vector<std::uint32_t> shooters = strongest_shooters(mesh, shot, settings);
+
+    for (int depth = 0; depth < settings.max_levels; ++depth) {
+        if (settings.cancelled && settings.cancelled()) break;
+        const std::vector<bool> marked = mark_contrast(mesh, irradiance, level, settings);
+        const std::size_t count = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
+        if (count == 0) break;
+        mesh::Refined refined = mesh::split_elements(mesh, marked);
+        const mesh::Mesh& m = refined.mesh;
+
+        // The re-gather: light arriving at the new children from every patch that shot.
+        std::vector<glm::dvec3> gathered(m.elements.size(), glm::dvec3(0.0));
+        std::unique_ptr<formfactor::Engine> engine = make_engine(m, depth + 1);
+        std::vector<formfactor::ShotRequest> requests;
+        std::vector<formfactor::ShotResult> results;
+        long shots = 0;
+        const std::size_t batch = static_cast<std::size_t>(std::max(1, settings.batch));
+        for (std::size_t first = 0; first < shooters.size(); first += batch) {
+            if (settings.cancelled && settings.cancelled()) break;
+            requests.clear();
+            for (std::size_t i = first; i < std::min(shooters.size(), first + batch); ++i)
+                requests.push_back(
+                    {shooters[i],
+                     settings.first_shot + static_cast<std::uint64_t>(depth) * mesh.patches.size() + shooters[i]});
+            engine->shoot_batch(requests, results);
+            shots += static_cast<long>(requests.size());
+            for (std::size_t r = 0; r < requests.size(); ++r) {
+                const std::uint32_t p = requests[r].patch;
+                const glm::dvec3 flux = shot[p] * m.patches[p].area;
+                const std::vector<double>& F = results[r].F;
+                for (std::size_t k = 0; k < m.elements.size(); ++k)
+                    if (refined.is_new[k] && F[k] != 0.0) gathered[k] += flux * F[k] / m.elements[k].area;
+            }
+        }
+
+        if (settings.cancelled && settings.cancelled()) break;  // a level half gathered is not used
+
+        // Each parent's children share its incident flux: the strong shooters' light as the
+        // re-gather found it, the rest (weaker shooters, the ambient estimate) evenly. Then
+        // Σ H_c A_c = H A exactly, so the books do not move.
+        std::vector<glm::dvec3> next(m.elements.size());
+        std::vector<int> next_level(m.elements.size());
+        for (std::size_t k = 0; k < m.elements.size();) {
+            const std::uint32_t parent = refined.origin[k];
+            if (!refined.is_new[k]) {
+                next[k] = irradiance[parent];
+                next_level[k] = level[parent];
+                ++k;
+                continue;
+            }
+            std::size_t end = k;
+            glm::dvec3 strong(0.0);
+            while (end < m.elements.size() && refined.is_new[end] && refined.origin[end] == parent) {
+                strong += gathered[end] * m.elements[end].area;
+                ++end;
+            }
+            const double parent_area = mesh.elements[parent].area;
+            const glm::dvec3 rest = glm::max(irradiance[parent] - strong / parent_area, glm::dvec3(0.0));
+            const glm::dvec3 total = strong + rest * parent_area;  // Σ (gathered_c + rest) A_c
+            for (std::size_t c = k; c < end; ++c) {
+                for (int ch = 0; ch < 3; ++ch)
+                    next[c][ch] = total[ch] > 0.0
+                                      ? (gathered[c][ch] + rest[ch]) * irradiance[parent][ch] * parent_area / total[ch]
+                                      : irradiance[parent][ch];
+                next_level[c] = level[parent] + 1;
+            }
+            k = end;
+        }
+        result.levels.push_back({count, m.elements.size(), shots});
+        mesh = std::move(refined.mesh);
+        irradiance = std::move(next);
+        level = std::move(next_level);
+    }
+    result.mesh = std::move(mesh);
+    result.irradiance = std::move(irradiance);
+    return result;
+}
+
+}  // namespace hemirad::solve

@@ -1,0 +1,71 @@
+// Adaptive refinement (the article's "intelligent subdivision"): after a solve, elements whose
+// irradiance contrasts with a neighbour's are split in four, down to a minimum size and a
+// maximum level; patches stay the shooters. The new children take their share of the parent's
+// irradiance from a re-gather: the patches that shot the most light shoot once more, with the
+// light they shot during the solve, onto the refined mesh, and each parent's incident flux is
+// shared out among its children in the proportions the re-gather found. The flux books therefore stay exactly as the
+// solve left them, while shadow boundaries and the light's surroundings get detail.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <glm/glm.hpp>
+#include <memory>
+#include <vector>
+
+#include "formfactor/engine.h"
+#include "mesh/mesh.h"
+
+namespace hemirad::solve {
+
+struct RefineSettings {
+    // Neighbours (same node, same plane, sharing a vertex) whose irradiance luminance differs by
+    // more than this share of the larger are both split. Hemicube noise per element is a few %
+    // (aliasing), far below it.
+    double contrast = 0.25;
+    // ... and by more than this share of the scene's area-mean irradiance: differences among
+    // the darkest elements are not worth elements.
+    double noise_floor = 0.02;
+    double min_size = 0.0;  // elements whose longest edge is at most this are not split
+    int max_levels = 2;     // splits of one original element at most
+    int batch = 64;         // re-gather shots per engine call
+    // The re-gather shoots again the emitters (whose direct light casts the sharp shadows), then
+    // the patches that shot the most light until all of them cover this share of the light shot;
+    // max_shooters at most. What the others shot reaches each parent's children evenly: it is
+    // the smooth part of the light.
+    double regather_share = 0.6;
+    int max_shooters = 256;
+    std::uint64_t first_shot = std::uint64_t{1} << 40;  // re-gather shot counters start here
+    // Checked between engine calls; when set the refinement stops at the level it is in.
+    std::function<bool()> cancelled;
+};
+
+struct RefineLevel {
+    std::size_t split = 0;     // elements split at this level
+    std::size_t elements = 0;  // elements after it
+    long shots = 0;            // re-gather hemicubes
+};
+
+struct RefineResult {
+    mesh::Mesh mesh;
+    std::vector<glm::dvec3> irradiance;  // per element of `mesh`
+    std::vector<RefineLevel> levels;     // one per level that split anything
+};
+
+// Elements to split: both members of every neighbouring pair whose irradiance contrasts by the
+// settings, that are longer than min_size and below max_levels (`level` per element).
+std::vector<bool> mark_contrast(const mesh::Mesh& mesh, const std::vector<glm::dvec3>& irradiance,
+                                const std::vector<int>& level, const RefineSettings& settings);
+
+// A form-factor engine for a refined mesh whose finest elements are `level` splits deep (a
+// hemicube engine can raise its resolution to match).
+using EngineFactory = std::function<std::unique_ptr<formfactor::Engine>(const mesh::Mesh&, int level)>;
+
+// Refines `mesh` level by level. `irradiance` is the solved incident light per element (with any
+// ambient estimate of the unshot light included); `shot` is, per patch, the radiosity it shot in
+// all (what a progressive solve shot, or a matrix solve's patch radiosity).
+// `make_engine` builds a form-factor engine for each refined mesh.
+RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const std::vector<glm::dvec3>& shot,
+                    const EngineFactory& make_engine, const RefineSettings& settings);
+
+}  // namespace hemirad::solve
