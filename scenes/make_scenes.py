@@ -8,6 +8,7 @@ writes, next to this script:
     cornell_box.gltf   the Cornell box from the Cornell Program of Computer Graphics
                        "Cornell Box Data" (https://www.graphics.cornell.edu/online/box/data.html)
     closed_room.gltf   a closed 4 m x 2.5 m x 5 m room with a ceiling panel light and a cube
+    empty_room.gltf    the same room, empty and grey, its light flush with the ceiling
 
 Python 3 standard library only; the output is byte-for-byte deterministic.
 
@@ -612,8 +613,57 @@ def make_room(path):
     )
 
 
+def make_empty_room(path):
+    """The closed room without its cube, all grey, its light panel flush with the ceiling: a
+    scene in which no surface can hide another and nothing is coloured (hemirad's effects
+    planner then skips occlusion and solves one channel)."""
+    hx, hz = ROOM_X / 2.0, ROOM_Z / 2.0
+    shell = box_faces(-hx, hx, 0.0, ROOM_Y, -hz, hz)
+    inside = (0.0, ROOM_Y / 2.0, 0.0)
+    y = ROOM_Y
+    # The ceiling is the four rectangles around the 1 m x 1 m light, all in the plane y = ROOM_Y.
+    ceiling = [
+        [(-hx, y, -hz), (-0.5, y, -hz), (-0.5, y, hz), (-hx, y, hz)],
+        [(0.5, y, -hz), (hx, y, -hz), (hx, y, hz), (0.5, y, hz)],
+        [(-0.5, y, -hz), (0.5, y, -hz), (0.5, y, -0.5), (-0.5, y, -0.5)],
+        [(-0.5, y, 0.5), (0.5, y, 0.5), (0.5, y, hz), (-0.5, y, hz)],
+    ]
+    light = [(-0.5, y, -0.5), (0.5, y, -0.5), (0.5, y, 0.5), (-0.5, y, 0.5)]
+
+    rules = {name: faces_towards(inside) for name in shell}
+    rules["light"] = faces_direction((0.0, -1.0, 0.0))
+
+    b = GltfBuilder(
+        {
+            "title": "Empty room",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres",
+            "layout": "room 4 x 2.5 x 5 m (x, y, z): x in [-2, 2], y in [0, 2.5], z in [-2.5, 2.5]; "
+                      "north = -Z, south = +Z, east = +X, west = -X",
+            "light": "1 m x 1 m panel flush with the ceiling centre, facing down, white emission x strength 10",
+            "purpose": "convex and grey: no surface hides another, every reflectance is grey",
+        }
+    )
+    b.material("wall_grey", (0.7, 0.7, 0.7))
+    b.material("floor_grey", (0.5, 0.5, 0.5))
+    b.material("light", (0.8, 0.8, 0.8), emission=(1.0, 1.0, 1.0), strength=10.0)
+    for name in ("floor", "wall_north", "wall_south", "wall_east", "wall_west"):
+        b.mesh_node(name, [orient_quad(shell[name], rules[name])], "floor_grey" if name == "floor" else "wall_grey")
+    b.mesh_node("ceiling", [orient_quad(q, rules["ceiling"]) for q in ceiling], "wall_grey")
+    b.mesh_node("light", [orient_quad(light, rules["light"])], "light")
+
+    cam_pos = (0.0, 1.4, hz - 0.2)
+    b.camera_node("camera", "room", 1.0, 4.0 / 3.0, 0.01, cam_pos)
+    b.write(path)
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, (0, 0, -1), (0, 1, 0)))
+
+
 def main():
-    for name, make in (("cornell_box.gltf", make_cornell), ("closed_room.gltf", make_room)):
+    for name, make in (
+        ("cornell_box.gltf", make_cornell),
+        ("closed_room.gltf", make_room),
+        ("empty_room.gltf", make_empty_room),
+    ):
         path = os.path.join(HERE, name)
         make(path)  # writes the file, reads it back and checks it (raises AssertionError on failure)
         print("wrote and checked", path)

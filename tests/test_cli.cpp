@@ -488,8 +488,7 @@ TEST_CASE("bakes are deterministic and the seed changes the result", "[cli]") {
     CHECK(a.at("passes") == b.at("passes"));
 
     CHECK(c.at("settings").at("seed").get<std::uint64_t>() == 7u);
-    CHECK(bin_c.size() == bin_a.size());  // same mesh
-    CHECK(bin_c != bin_a);                // different hemicube rotations
+    CHECK(bin_c != bin_a);  // different hemicube rotations (and so maybe other elements refined)
 }
 
 TEST_CASE("bad input exits 2 with one line on stderr and no output directory", "[cli]") {

@@ -62,6 +62,23 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "each still shoots its flux at the time it is applied")
         ->check(CLI::Range(1, 256))
         ->capture_default_str();
+    bake.add_option("--solver", o.solver,
+                    "matrix (a form-factor row per patch, then Gauss-Seidel), progressive (shooting), or auto: "
+                    "matrix up to a few thousand patches")
+        ->check(CLI::IsMember({"auto", "matrix", "progressive"}))
+        ->capture_default_str();
+    bake.add_option("--effects", o.effects,
+                    "force effects on or off, e.g. occlusion=off,colour=on (occlusion, colour, interreflection, "
+                    "two_sided, refinement, convergence; on|off|auto); by default each is planned from the scene "
+                    "and report.json says why");
+    bake.add_option("--refine-levels", o.refine_levels,
+                    "adaptive refinement: split an element at most this often where the irradiance contrasts (0: off)")
+        ->check(CLI::Range(0, 6))
+        ->capture_default_str();
+    bake.add_option("--contrast", o.contrast,
+                    "adaptive refinement: split neighbours whose irradiance differs by more than this share")
+        ->check(CLI::Range(0.01, 1.0))
+        ->capture_default_str();
     bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")->capture_default_str();
     bake.add_flag("--verify", o.verify, "check shots of the OpenCL engine against the scalar reference");
     bake.add_option("--verify-every", o.verify_every, "with --verify, check every K-th shot")

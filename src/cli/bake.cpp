@@ -23,7 +23,11 @@
 #include "mesh/mesh.h"
 #include "output/output.h"
 #include "scene/scene.h"
+#include "scene/effects.h"
+#include "formfactor/unoccluded.h"
+#include "solve/matrix.h"
 #include "solve/progressive.h"
+#include "solve/refinement.h"
 
 namespace hemirad::cli {
 namespace fs = std::filesystem;
@@ -147,6 +151,12 @@ void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const 
     fs::rename(tmp, file);
 }
 
+// Convergence forced off: shoot until this little is left (progressive), or solve to rounding (matrix).
+constexpr double kUnconvergedThreshold = 1e-6;
+constexpr double kUnconvergedTolerance = 1e-12;
+// The re-gather's hemicube doubles per refinement level up to this.
+constexpr int kMaxRegatherHemicube = 2048;
+
 class ProgressLine {
 public:
     explicit ProgressLine(bool on) : on_(on), start_(Clock::now()) {}
@@ -170,6 +180,14 @@ public:
         }
         std::fprintf(stderr, "\r\033[Kpass %ld  unshot %.2e  error %.2e  %.1f s  left %s", solver.passes(),
                      solver.unshot_fraction(), err, elapsed, eta.c_str());
+        std::fflush(stderr);
+    }
+    void rows(long done, long total) {
+        if (!on_) return;
+        const double elapsed = seconds_since(start_);
+        if (elapsed - last_ < 0.2 && done < total) return;
+        last_ = elapsed;
+        std::fprintf(stderr, "\r\033[Kform-factor rows %ld / %ld  %.1f s", done, total, elapsed);
         std::fflush(stderr);
     }
     void finish() {
@@ -206,6 +224,23 @@ void list_devices(std::ostream& out, bool json) {
     if (devices.empty()) out << "(no OpenCL platform or device found)\n";
 }
 
+// What either solver leaves for the output and the report.
+struct Solution {
+    std::vector<glm::dvec3> radiosity, irradiance;  // per element, the ambient term included
+    glm::dvec3 ambient{0.0};
+    std::vector<glm::dvec3> shot;  // per patch, the radiosity it shot in all
+    solve::Energy energy;
+    long passes = 0;  // hemicubes shot by the solver
+    bool converged = false;
+    double error = 0.0;
+    double unshot_fraction = 0.0;
+    int iterations = 0;  // Gauss–Seidel sweeps (matrix)
+};
+
+ordered_json effect_json(const scene::EffectDecision& d) {
+    return {{"on", d.on}, {"forced", d.forced}, {"why", d.why}};
+}
+
 void run_bake(const BakeOptions& options) {
     const auto t_total = Clock::now();
     const QualityPreset& quality = quality_preset(options.quality);
@@ -213,11 +248,30 @@ void run_bake(const BakeOptions& options) {
     if (o.hemicube == 0) o.hemicube = quality.hemicube;
     if (o.threshold < 0.0) o.threshold = quality.threshold;
     if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
+    if (o.solver != "auto" && o.solver != "matrix" && o.solver != "progressive")
+        throw InputError(fmt::format("--solver {}: expected auto, matrix or progressive", o.solver));
+    scene::EffectOverrides overrides;
+    try {
+        overrides = scene::parse_effect_overrides(o.effects);
+    } catch (const std::invalid_argument& e) {
+        throw InputError(fmt::format("--effects {}: {}", o.effects, e.what()));
+    }
 
     auto t0 = Clock::now();
-    const scene::Scene scene = scene::load(o.scene);
+    scene::Scene scene = scene::load(o.scene);
     check_scene(scene);
     const double t_load = seconds_since(t0);
+
+    // Which effects this scene calls for (report.json `effects` says why).
+    scene::EffectsPlan plan = scene::plan_effects(scene, overrides);
+    scene::apply_two_sided(scene, plan, overrides);
+    if (o.verify && !plan.occlusion.on) {
+        if (plan.occlusion.forced)
+            throw InputError("--verify checks the hemicube engines, which --effects occlusion=off does not use");
+        plan.occlusion = {true, false, "kept on for --verify, which checks the hemicube engines (" + plan.occlusion.why + ")"};
+    }
+    if (overrides.interreflection == scene::Force::off && o.solver == "progressive")
+        throw InputError("--solver progressive: direct light only (--effects interreflection=off) is solved by --solver matrix");
 
     mesh::Settings mesh_settings;
     const double diagonal = scene.diagonal();
@@ -232,51 +286,139 @@ void run_bake(const BakeOptions& options) {
     const int height = std::max(1, static_cast<int>(std::lround(width / view.aspect)));
 
     t0 = Clock::now();
-    const mesh::Mesh mesh = mesh::build(scene, mesh_settings);
+    mesh::Mesh mesh = mesh::build(scene, mesh_settings);
     const double t_mesh = seconds_since(t0);
     if (mesh.patches.empty())
         throw InputError(fmt::format("{}: every triangle has zero area; nothing to bake", o.scene));
 
+    const bool direct_only = !plan.interreflection.on;
+    std::string solver_name = o.solver;
+    // Direct light only is a matrix of the emitters' rows; previews show the progressive solution
+    // pass by pass, which a matrix solve does not have; otherwise the matrix while it is small.
+    if (solver_name == "auto") {
+        if (overrides.interreflection == scene::Force::off) solver_name = "matrix";
+        else if (o.preview_every > 0) solver_name = "progressive";
+        else solver_name = direct_only || solve::Matrix::suits(mesh) ? "matrix" : "progressive";
+    }
+    if (o.preview_every > 0 && solver_name == "matrix")
+        throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");
+
     formfactor::Settings ff_settings;
     ff_settings.hemicube = o.hemicube;
     ff_settings.seed = o.seed;
-    EngineChoice choice = choose_engine(o.device, o.verify, o.verify_every, mesh, ff_settings);
+    // With nothing to hide anything, exact unoccluded form factors replace the hemicube.
+    EngineChoice choice;
+    if (plan.occlusion.on) {
+        choice = choose_engine(o.device, o.verify, o.verify_every, mesh, ff_settings);
+    } else {
+        choice.backend = "analytic";
+        choice.platform = "host";
+        choice.name = "exact unoccluded form factors (Lambert, point to polygon)";
+        choice.id = "analytic";
+    }
     formfactor::VerifyingEngine* const verifier = choice.verifier;
+    // A form-factor engine of the chosen kind for a mesh: the hemicube ones get the near-field correction.
+    // A refined mesh's engine raises the hemicube's resolution with the level, so that children
+    // cover as many cells as their parents did.
+    const auto make_engine = [&](const mesh::Mesh& m, int level) -> std::unique_ptr<formfactor::Engine> {
+        if (!plan.occlusion.on) return std::make_unique<formfactor::UnoccludedEngine>(m);
+        formfactor::Settings s = ff_settings;
+        s.hemicube = std::min(kMaxRegatherHemicube, ff_settings.hemicube << level);
+        return std::make_unique<formfactor::NearFieldEngine>(m, engine_like(choice, m, s));
+    };
 
     OutputTransaction out(o.output);
     // Only now, so that bad input is always exactly one line on stderr.
     for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
     if (!choice.warning.empty()) std::cerr << "hemirad: warning: " << choice.warning << "\n";
-    if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({})\n", choice.id, choice.name);
-    formfactor::NearFieldEngine near_field(mesh, std::move(choice.engine));
-    TimedEngine engine(near_field);
-    solve::Settings solve_settings;
-    solve_settings.threshold = o.threshold;
-    solve_settings.max_passes = o.max_passes;
-    solve_settings.batch = o.batch;
+    if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({}), {} solver\n", choice.id, choice.name, solver_name);
+    std::unique_ptr<formfactor::Engine> base_engine =
+        plan.occlusion.on ? std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice.engine))
+                          : make_engine(mesh, 0);
+    TimedEngine engine(*base_engine);
+    const double threshold = plan.convergence.on ? o.threshold : kUnconvergedThreshold;
 
     t0 = Clock::now();
-    solve::Progressive solver(mesh, engine, solve_settings);
+    Solution solution;
     ProgressLine progress(o.progress);
-    long previews = 0;  // preview frames written: one each time the passes cross a multiple of K
-    while (solver.step()) {
-        if (o.interrupted && *o.interrupted) throw Interrupted();
-        progress.update(solver, o.threshold);
-        if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
-            previews = solver.passes() / o.preview_every;
-            write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
+    if (solver_name == "matrix") {
+        solve::MatrixSettings ms;
+        ms.tolerance = plan.convergence.on ? std::min(1e-4, o.threshold * 1e-2) : kUnconvergedTolerance;
+        ms.batch = std::max(o.batch, 64);
+        ms.grey = !plan.colour.on;
+        ms.interreflection = !direct_only;
+        solve::Matrix solver(mesh, engine, ms);
+        solver.solve([&](long done, long total) {
+            if (o.interrupted && *o.interrupted) throw Interrupted();
+            progress.rows(done, total);
+        });
+        solution.radiosity = solver.radiosity();
+        solution.irradiance = solver.irradiance();
+        solution.shot = solver.patch_radiosity();
+        solution.energy = solver.energy();
+        solution.passes = solver.rows();
+        solution.converged = solver.converged();
+        solution.error = solver.residual();
+        solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
+        solution.iterations = solver.iterations();
+    } else {
+        solve::Settings solve_settings;
+        solve_settings.threshold = threshold;
+        solve_settings.max_passes = o.max_passes;
+        solve_settings.batch = o.batch;
+        solve::Progressive solver(mesh, engine, solve_settings);
+        long previews = 0;  // preview frames written: one each time the passes cross a multiple of K
+        while (solver.step()) {
+            if (o.interrupted && *o.interrupted) throw Interrupted();
+            progress.update(solver, threshold);
+            if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
+                previews = solver.passes() / o.preview_every;
+                write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
+            }
         }
+        progress.update(solver, threshold);
+        solution.radiosity = solver.radiosity(/*ambient=*/true);
+        solution.irradiance = solver.irradiance(/*ambient=*/true);
+        solution.ambient = solver.ambient();
+        solution.shot = solver.shot();
+        solution.energy = solver.energy();
+        solution.passes = solver.passes();
+        solution.converged = solver.converged();
+        solution.error = solver.error();
+        solution.unshot_fraction = solver.unshot_fraction();
     }
-    progress.update(solver, o.threshold);
     progress.finish();
-    const double t_solve = seconds_since(t0) - engine.seconds();
-    if (!solver.converged() && !o.quiet)
+    if (!solution.converged && !o.quiet)
         std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
-                                 o.max_passes, o.threshold, solver.error());
+                                 o.max_passes, threshold, solution.error);
+
+    const double t_solve = seconds_since(t0) - engine.seconds();
+
+    // Adaptive refinement: split where the irradiance contrasts, re-gather onto the children.
+    t0 = Clock::now();
+    const std::size_t elements_before = mesh.elements.size();
+    std::vector<solve::RefineLevel> levels;
+    if (plan.refinement.on && o.refine_levels > 0) {
+        solve::RefineSettings rs;
+        rs.contrast = o.contrast;
+        rs.max_levels = o.refine_levels;
+        rs.batch = std::max(o.batch, 64);
+        rs.cancelled = [&] { return o.interrupted && *o.interrupted; };
+        solve::RefineResult refined =
+            solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
+        if (o.interrupted && *o.interrupted) throw Interrupted();
+        mesh = std::move(refined.mesh);
+        solution.irradiance = std::move(refined.irradiance);
+        solution.radiosity.resize(mesh.elements.size());
+        for (std::size_t k = 0; k < mesh.elements.size(); ++k)
+            solution.radiosity[k] = mesh.elements[k].emission + mesh.elements[k].rho * solution.irradiance[k];
+        levels = std::move(refined.levels);
+    }
+    const double t_refine = seconds_since(t0);
 
     t0 = Clock::now();
-    const auto radiosity = solver.radiosity(/*ambient=*/true);
-    const auto irradiance = solver.irradiance(/*ambient=*/true);
+    const auto& radiosity = solution.radiosity;
+    const auto& irradiance = solution.irradiance;
     if (!all_finite(radiosity) || !all_finite(irradiance))
         throw InternalError("the solution has a non-finite value; nothing written");
     output::write_baked_gltf(out.staged("baked.gltf"), scene, mesh, radiosity);
@@ -285,8 +427,7 @@ void run_bake(const BakeOptions& options) {
     output::write_png(image, out.staged("render.png"), output::auto_exposure(image));
     const double t_output_files = seconds_since(t0);
 
-    const solve::Energy energy = solver.energy();
-    const glm::dvec3 ambient = solver.ambient();
+    const solve::Energy& energy = solution.energy;
     ordered_json report;
     report["version"] = HEMIRAD_VERSION;
     report["scene"] = o.scene;
@@ -296,14 +437,17 @@ void run_bake(const BakeOptions& options) {
         {"hemicube", o.hemicube},
         {"patch_size", mesh_settings.patch_size},
         {"element_size", mesh_settings.element_size},
-        {"threshold", o.threshold},
+        {"threshold", threshold},
         {"max_passes", o.max_passes},
         {"batch", o.batch},
         {"seed", o.seed},
         {"device", o.device},
         {"verify", o.verify},
         {"verify_every", o.verify_every},
-        {"solver", "progressive"},
+        {"solver", solver_name},
+        {"effects", o.effects},
+        {"refine_levels", o.refine_levels},
+        {"contrast", o.contrast},
         {"camera", view.name},
         {"image", {width, height}},
         {"preview_every", o.preview_every},
@@ -311,27 +455,44 @@ void run_bake(const BakeOptions& options) {
     report["counts"] = {{"triangles", scene.triangles.size()},
                         {"patches", mesh.patches.size()},
                         {"elements", mesh.elements.size()},
+                        {"elements_before_refinement", elements_before},
                         {"quads", mesh.quads},
                         {"dropped_triangles", mesh.dropped_triangles},
                         {"skipped_primitives", scene.skipped_primitives}};
-    report["passes"] = solver.passes();
-    report["converged"] = solver.converged();
-    report["error"] = solver.error();
+    report["passes"] = solution.passes;
+    report["converged"] = solution.converged;
+    report["error"] = solution.error;
+    if (solver_name == "matrix") report["iterations"] = solution.iterations;
     report["energy"] = {{"emitted", energy.emitted},
                         {"absorbed", energy.absorbed},
                         {"escaped", energy.escaped},
                         {"unshot", energy.unshot},
-                        {"unshot_fraction", solver.unshot_fraction()},
-                        {"ambient_irradiance", vec3(ambient)}};
+                        {"unshot_fraction", solution.unshot_fraction},
+                        {"ambient_irradiance", vec3(solution.ambient)}};
+    std::string refine_why = plan.refinement.why;
+    if (plan.refinement.on) {
+        std::size_t split = 0;
+        for (const auto& l : levels) split += l.split;
+        refine_why += levels.empty()
+                          ? fmt::format("; no neighbours' irradiance differed by more than {:g}: nothing split", o.contrast)
+                          : fmt::format("; {} elements split over {} levels ({} → {} elements)", split, levels.size(),
+                                        elements_before, mesh.elements.size());
+    }
+    const bool hemicube = plan.occlusion.on;
     report["effects"] = {
-        {"occlusion", {{"on", true}, {"why", "hemicube z-buffer; per-scene planning is not implemented yet"}}},
-        {"colour", {{"on", true}, {"why", "three channels solved; per-scene planning is not implemented yet"}}},
-        {"interreflection", {{"on", true}, {"why", "progressive shooting until the threshold"}}},
-        {"near_field", {{"on", true}, {"why", fmt::format("receivers within {} shooter radii get the exact form factor at their centroid, scaled by the visible share the hemicube measured", formfactor::NearFieldEngine::kDefaultReach)}}},
-        {"ambient", {{"on", true}, {"why", "the unshot flux is added as an ambient term (Cohen et al. 1988) with the measured reflectance"}}},
-        {"two_sided", {{"on", std::any_of(scene.materials.begin(), scene.materials.end(), [](const auto& m) { return m.double_sided; })},
-                       {"why", "doubleSided materials get patches on both sides"}}},
-        {"refinement", {{"on", false}, {"why", "adaptive subdivision is not implemented yet"}}},
+        {"occlusion", effect_json(plan.occlusion)},
+        {"colour", effect_json(plan.colour)},
+        {"interreflection", effect_json(plan.interreflection)},
+        {"two_sided", effect_json(plan.two_sided)},
+        {"refinement", effect_json({plan.refinement.on && !levels.empty(), plan.refinement.forced, refine_why})},
+        {"convergence", effect_json({plan.convergence.on, plan.convergence.forced,
+                                     plan.convergence.why + fmt::format(" (solver {}, threshold {:g})", solver_name, threshold)})},
+        {"near_field", {{"on", hemicube}, {"forced", false},
+                        {"why", hemicube ? fmt::format("receivers within {} shooter radii get the exact form factor at their centroid, scaled by the visible share the hemicube measured", formfactor::NearFieldEngine::kDefaultReach)
+                                         : std::string("the form factors are exact: nothing to correct")}}},
+        {"ambient", {{"on", solver_name == "progressive"}, {"forced", false},
+                     {"why", solver_name == "progressive" ? "the unshot flux is added as an ambient term (Cohen et al. 1988) with the measured reflectance"
+                                                          : "the matrix solve leaves no unshot light to stand in for"}}},
     };
     report["timings_s"] = ordered_json::object();  // keeps the contract's key order; filled last
     ordered_json meshes = ordered_json::array();
@@ -354,6 +515,7 @@ void run_bake(const BakeOptions& options) {
                            {"mesh", t_mesh},
                            {"formfactors", engine.seconds()},
                            {"solve", t_solve},
+                           {"refine", t_refine},
                            {"output", t_output_files},
                            {"total", seconds_since(t_total)}};
     {
@@ -364,7 +526,7 @@ void run_bake(const BakeOptions& options) {
     out.commit({"baked.gltf", "baked.bin", "render.exr", "render.png", "report.json"});
     if (!o.quiet)
         std::cerr << fmt::format("hemirad: {} passes, error {:.2e}, wrote {}/report.json, baked.gltf, render.exr, render.png\n",
-                                 solver.passes(), solver.error(), o.output);
+                                 solution.passes, solution.error, o.output);
 }
 
 }  // namespace hemirad::cli

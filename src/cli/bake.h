@@ -22,6 +22,10 @@ struct BakeOptions {
     double threshold = -1.0;      // < 0: from the quality
     long max_passes = 100000;
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
+    std::string solver = "auto";  // auto | matrix | progressive
+    std::string effects;          // overrides: "occlusion=off,colour=on,…" (scene::parse_effect_overrides)
+    int refine_levels = 2;        // adaptive refinement: splits of one element at most
+    double contrast = 0.25;       // … of neighbours whose irradiance differs by more than this share
     std::uint64_t seed = 1;
     bool verify = false;
     long verify_every = 1;        // with --verify: check shots 0, K, 2K, …

@@ -87,4 +87,10 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
     return out;
 }
 
+std::unique_ptr<formfactor::Engine> engine_like(const EngineChoice& choice, const mesh::Mesh& mesh,
+                                                const formfactor::Settings& settings) {
+    if (choice.context) return make_opencl_engine(mesh, *choice.context, settings);
+    return std::make_unique<formfactor::ReferenceEngine>(mesh, settings);
+}
+
 }  // namespace hemirad::cli

@@ -27,4 +27,9 @@ struct EngineChoice {
 EngineChoice choose_engine(const std::string& device, bool verify, long verify_every, const mesh::Mesh& mesh,
                            const formfactor::Settings& settings);
 
+// Another engine of the kind `choice` holds, on its device and context, for another mesh (a
+// refined one); never verifying.
+std::unique_ptr<formfactor::Engine> engine_like(const EngineChoice& choice, const mesh::Mesh& mesh,
+                                                const formfactor::Settings& settings);
+
 }  // namespace hemirad::cli
