@@ -22,6 +22,7 @@
 #include <catch2/catch.hpp>
 
 #include "cl/runtime.h"
+#include "bench/room_reference.h"
 #include "core/quality.h"
 #include <nlohmann/json.hpp>
 #include <OpenImageIO/imageio.h>
@@ -1078,4 +1079,83 @@ TEST_CASE("bench --accuracy --quick: analytic errors, room runs, the front and t
     };
     bad({"bench", "--quick", "procedural:100"});
     bad({"bench", "--accuracy", "procedural:100"});
+}
+
+namespace {
+
+// Mean over all pixels and channels of |a − b| in 8-bit display steps.
+double mean_display_difference(const ImageData& a, const ImageData& b) {
+    REQUIRE(a.pixels.size() == b.pixels.size());
+    double sum = 0.0;
+    for (std::size_t i = 0; i < a.pixels.size(); ++i) sum += std::abs(double(a.pixels[i]) - double(b.pixels[i])) * 255.0;
+    return sum / double(a.pixels.size());
+}
+
+// The mesh averages of a report by name.
+std::map<std::string, std::array<double, 3>> averages(const json& report) {
+    std::map<std::string, std::array<double, 3>> out;
+    for (const json& m : report.at("meshes"))
+        out[m.at("name").get<std::string>()] = {m.at("radiosity")[0].get<double>(), m.at("radiosity")[1].get<double>(),
+                                                m.at("radiosity")[2].get<double>()};
+    return out;
+}
+
+}  // namespace
+
+TEST_CASE("effects: the empty room skips occlusion and colour and still matches the independent reference", "[cli]") {
+    // scenes/empty_room.gltf is the room of src/bench/room_reference.h, grey: solved there with exact
+    // form factors on 0.2 m cells (surface averages within ~0.02% of converged).
+    hemirad::bench::Room room;
+    for (auto& rho : room.rho) rho = glm::dvec3(0.7);
+    room.rho[int(hemirad::bench::Surface::floor)] = glm::dvec3(0.5);
+    room.rho[int(hemirad::bench::Surface::light)] = glm::dvec3(0.8);
+    const hemirad::bench::RoomSolution reference = hemirad::bench::solve_room(room, 0.2);
+
+    TempDir dir;
+    const fs::path scene = kSourceDir / "scenes" / "empty_room.gltf";
+    const json planned = bake_ok(dir, scene, dir / "planned", {"--quiet", "--image-width", "32"});
+    const json forced = bake_ok(dir, scene, dir / "forced",
+                                {"--quiet", "--image-width", "32", "--device", "ref", "--effects", "occlusion=on,colour=on"});
+    const json& effects = planned.at("effects");
+    CHECK_FALSE(effects.at("occlusion").at("on").get<bool>());
+    CHECK_FALSE(effects.at("colour").at("on").get<bool>());
+    CHECK(planned.at("device").at("backend") == "analytic");
+    CHECK(forced.at("effects").at("occlusion").at("forced").get<bool>());
+    CHECK(forced.at("device").at("backend") == "ref");
+
+    // Measured: the exact form factors are within 0.17% of the reference on every surface (what is
+    // left is the elements' size), the hemicube within 0.30%: skipping the depth test and two of
+    // the three channels costs nothing measurable.
+    const auto a = averages(planned), b = averages(forced);
+    for (int s = 0; s < hemirad::bench::kSurfaceCount; ++s) {
+        const std::string name = hemirad::bench::surface_name(hemirad::bench::Surface(s));
+        const double want = reference.average(hemirad::bench::Surface(s)).x;
+        REQUIRE(a.count(name) == 1);
+        CAPTURE(name, want, a.at(name)[0], b.at(name)[0]);
+        CHECK(std::abs(a.at(name)[0] / want - 1.0) < 0.005);
+        CHECK(std::abs(b.at(name)[0] / want - 1.0) < 0.01);
+        CHECK(a.at(name)[1] == a.at(name)[0]);  // one channel solved, copied
+        CHECK(a.at(name)[2] == a.at(name)[0]);
+    }
+}
+
+TEST_CASE("effects: stopping at the threshold changes the image less than the hemicube's own noise", "[cli]") {
+    // Progressive shooting stopped by the convergence rule, against shooting on until 1e-6 is left,
+    // and against another seed (other hemicube rotations) shot out as far: the early stop must
+    // change the rendered image (8-bit, tone mapped) much less than the noise of the form factors.
+    TempDir dir;
+    const std::vector<std::string> args = {"--quiet", "--quality", "draft", "--solver", "progressive",
+                                           "--image-width", "160"};
+    const json stopped = bake_ok(dir, kCornellBox, dir / "stopped", concat(args, {"--effects", "refinement=off"}));
+    const json full = bake_ok(dir, kCornellBox, dir / "full", concat(args, {"--effects", "refinement=off,convergence=off"}));
+    const json other = bake_ok(dir, kCornellBox, dir / "other",
+                               concat(args, {"--effects", "refinement=off,convergence=off", "--seed", "5"}));
+    CHECK(stopped.at("effects").at("convergence").at("on").get<bool>());
+    CHECK_FALSE(full.at("effects").at("convergence").at("on").get<bool>());
+    CHECK(full.at("passes").get<long>() > 2 * stopped.at("passes").get<long>());
+    const double early = mean_display_difference(read_image(dir / "stopped" / "render.png"), read_image(dir / "full" / "render.png"));
+    const double noise = mean_display_difference(read_image(dir / "other" / "render.png"), read_image(dir / "full" / "render.png"));
+    // Measured: 0.25 display steps against 2.3.
+    CAPTURE(early, noise);
+    CHECK(early < 0.25 * noise);
 }
