@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "mesh/mesh.h"
+#include "mesh/refine.h"
 #include "output/welded_mesh.h"
 #include "test_scenes.h"
 
@@ -41,26 +42,16 @@ mesh::Element square(double x0, double y0, double x1, double y1) {
     return element({{x0, y0, 0}, {x1, y0, 0}, {x1, y1, 0}, {x0, y1, 0}});
 }
 
-// The 4 children of an element, with edge midpoints 0.5·(a + b) (and a quad's centre
-// 0.25·(v0 + v1 + v2 + v3)), as adaptive refinement makes them.
+// The 4 children of an element, as adaptive refinement makes them (mesh::split_polygon: edge
+// midpoints 0.5·(a + b), a quad's centre 0.25·(v0 + v1 + v2 + v3)).
 std::vector<mesh::Element> children(const mesh::Element& e) {
-    const auto& v = e.poly.v;
-    auto mid = [](const dvec3& a, const dvec3& b) { return 0.5 * (a + b); };
     std::vector<mesh::Element> out;
-    if (e.poly.n == 4) {
-        const dvec3 m01 = mid(v[0], v[1]), m12 = mid(v[1], v[2]), m23 = mid(v[2], v[3]), m30 = mid(v[3], v[0]);
-        const dvec3 c = 0.25 * (v[0] + v[1] + v[2] + v[3]);
-        out = {element({v[0], m01, c, m30}), element({m01, v[1], m12, c}), element({c, m12, v[2], m23}),
-               element({m30, c, m23, v[3]})};
-    } else {
-        const dvec3 m01 = mid(v[0], v[1]), m12 = mid(v[1], v[2]), m20 = mid(v[2], v[0]);
-        out = {element({v[0], m01, m20}), element({m01, v[1], m12}), element({m20, m12, v[2]}),
-               element({m01, m12, m20})};
-    }
-    for (auto& c : out) {
+    for (const mesh::Polygon& p : mesh::split_polygon(e.poly)) {
+        mesh::Element c = element(std::vector<dvec3>(p.v.begin(), p.v.begin() + p.n));
         c.node = e.node;
         c.has_twin = e.has_twin;
         c.back = e.back;
+        out.push_back(c);
     }
     return out;
 }
