@@ -216,6 +216,30 @@ TEST_CASE("effects: colour, interreflection and two-sidedness from materials", "
     }
 }
 
+TEST_CASE("effects: colour off solves the luminance and leaves a grey scene as it is", "[effects]") {
+    scene::Scene cornell = scene::load(kSourceDir / "scenes" / "cornell_box.gltf");
+    const scene::Scene original = cornell;
+    scene::EffectOverrides forced;
+    forced.colour = scene::Force::off;
+    scene::apply_colour(cornell, scene::plan_effects(cornell, forced));
+    for (std::size_t t = 0; t < cornell.triangles.size(); ++t) {
+        for (int k = 0; k < 3; ++k) {
+            const glm::dvec3 was = original.triangles[t].rho[std::size_t(k)];
+            const glm::dvec3 now = cornell.triangles[t].rho[std::size_t(k)];
+            CHECK(now.x == now.y);
+            CHECK(now.y == now.z);
+            CHECK(now.x == Approx(0.2126 * was.x + 0.7152 * was.y + 0.0722 * was.z).epsilon(1e-12));
+        }
+    }
+    const scene::Scene room = scene::load(kSourceDir / "scenes" / "empty_room.gltf");
+    scene::Scene copy = room;
+    const scene::EffectsPlan plan = scene::plan_effects(copy, {});
+    REQUIRE_FALSE(plan.colour.on);
+    scene::apply_colour(copy, plan);
+    for (std::size_t t = 0; t < room.triangles.size(); ++t) CHECK(copy.triangles[t].rho == room.triangles[t].rho);
+    for (std::size_t m = 0; m < room.materials.size(); ++m) CHECK(copy.materials[m].emission == room.materials[m].emission);
+}
+
 TEST_CASE("effects: overrides parse and force decisions", "[effects]") {
     const scene::EffectOverrides o = scene::parse_effect_overrides(" occlusion=off, colour = ON ,refinement=auto");
     CHECK(o.occlusion == scene::Force::off);

@@ -265,6 +265,7 @@ void run_bake(const BakeOptions& options) {
     // Which effects this scene calls for (report.json `effects` says why).
     scene::EffectsPlan plan = scene::plan_effects(scene, overrides);
     scene::apply_two_sided(scene, plan, overrides);
+    scene::apply_colour(scene, plan);
     if (o.verify && !plan.occlusion.on) {
         if (plan.occlusion.forced)
             throw InputError("--verify checks the hemicube engines, which --effects occlusion=off does not use");

@@ -354,4 +354,18 @@ void apply_two_sided(Scene& scene, const EffectsPlan& plan, const EffectOverride
     }
 }
 
+void apply_colour(Scene& scene, const EffectsPlan& plan) {
+    if (plan.colour.on) return;
+    // Rec. 709 luminance; a grey value is kept bit for bit, so a grey scene is unchanged.
+    const auto grey = [](const glm::dvec3& c) {
+        return c.x == c.y && c.y == c.z ? c : glm::dvec3(0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z);
+    };
+    for (Material& m : scene.materials) {
+        m.base_color = grey(m.base_color);
+        m.emission = grey(m.emission);
+    }
+    for (Triangle& t : scene.triangles)
+        for (glm::dvec3& rho : t.rho) rho = grey(rho);
+}
+
 }  // namespace hemirad::scene

@@ -60,6 +60,11 @@ EffectsPlan plan_effects(const Scene& scene, const EffectOverrides& overrides);
 void apply_two_sided(Scene& scene, const EffectsPlan& plan, const EffectOverrides& overrides);
 
 // "on", "off" or "auto".
+// Applies the colour decision: off (planned for a grey scene, or forced) replaces every
+// reflectance and emission by its luminance, so one channel holds the whole solution; a grey
+// scene is unchanged.
+void apply_colour(Scene& scene, const EffectsPlan& plan);
+
 const char* to_string(Force force);
 
 }  // namespace hemirad::scene
