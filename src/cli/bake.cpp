@@ -154,6 +154,9 @@ void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const 
 // Convergence forced off: shoot until this little is left (progressive), or solve to rounding (matrix).
 constexpr double kUnconvergedThreshold = 1e-6;
 constexpr double kUnconvergedTolerance = 1e-12;
+// Gauss–Seidel sweeps at most (each costs P² per channel; --solver auto avoids the matrix where
+// reflectances are high enough to need many).
+constexpr int kMaxSweeps = 20000;
 // The re-gather's hemicube doubles per refinement level up to this.
 constexpr int kMaxRegatherHemicube = 2048;
 
@@ -348,6 +351,7 @@ void run_bake(const BakeOptions& options) {
         ms.batch = std::max(o.batch, 64);
         ms.grey = !plan.colour.on;
         ms.interreflection = !direct_only;
+        ms.max_iterations = kMaxSweeps;
         solve::Matrix solver(mesh, engine, ms);
         solver.solve([&](long done, long total) {
             if (o.interrupted && *o.interrupted) throw Interrupted();
@@ -389,9 +393,14 @@ void run_bake(const BakeOptions& options) {
         solution.unshot_fraction = solver.unshot_fraction();
     }
     progress.finish();
-    if (!solution.converged && !o.quiet)
-        std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
-                                 o.max_passes, threshold, solution.error);
+    if (!solution.converged && !o.quiet) {
+        if (solver_name == "matrix")
+            std::cerr << fmt::format("hemirad: warning: Gauss-Seidel stopped after {} sweeps at residual {:.3g}\n",
+                                     solution.iterations, solution.error);
+        else
+            std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
+                                     o.max_passes, threshold, solution.error);
+    }
 
     const double t_solve = seconds_since(t0) - engine.seconds();
 

@@ -61,6 +61,13 @@ Matrix::Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixS
     for (const auto& e : mesh.elements) B_.push_back(e.emission);
 }
 
+bool Matrix::suits(const mesh::Mesh& mesh) {
+    if (mesh.patches.size() > kDefaultMaxPatches) return false;
+    for (const mesh::Element& e : mesh.elements)
+        if (std::max({e.rho.x, e.rho.y, e.rho.z}) > kMaxReflectance) return false;
+    return true;
+}
+
 std::size_t Matrix::estimate_bytes(const mesh::Mesh& mesh, const MatrixSettings& settings) {
     const std::size_t rows = active_patches(mesh, settings).size();
     const std::size_t elements = mesh.elements.size();
