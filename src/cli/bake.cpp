@@ -480,7 +480,9 @@ void run_bake(const BakeOptions& options) {
                         {"unshot_fraction", solution.unshot_fraction},
                         {"ambient_irradiance", vec3(solution.ambient)}};
     std::string refine_why = plan.refinement.why;
-    if (plan.refinement.on) {
+    if (plan.refinement.on && o.refine_levels == 0) {
+        refine_why = "turned off by --refine-levels 0";
+    } else if (plan.refinement.on) {
         std::size_t split = 0;
         for (const auto& l : levels) split += l.split;
         refine_why += levels.empty()
