@@ -6,9 +6,12 @@
 #include <stdexcept>
 
 #include "formfactor/analytic.h"
+#include "formfactor/reference.h"
 #include "formfactor/unoccluded.h"
 #include "mesh/mesh.h"
 #include "scene/effects.h"
+#include "solve/matrix.h"
+#include "solve/progressive.h"
 #include "test_scenes.h"
 
 using namespace hemirad;
@@ -376,4 +379,52 @@ TEST_CASE("effects: analytic engine is deterministic and ignores the shot counte
     CHECK(formfactor::UnoccludedEngine::subdivisions(3.0, 1.0) == 2);
     CHECK(formfactor::UnoccludedEngine::subdivisions(1.5, 1.0) == 4);
     CHECK(formfactor::UnoccludedEngine::subdivisions(1.0, 1.0) == 8);
+}
+
+TEST_CASE("effects: a scene that reflects nothing needs only its lamps' shots", "[effects]") {
+    // A lamp (ρ = 0) above a black floor with a black block between them: interreflection is
+    // planned off. Solving it with bounces anyway (the matrix solver, every patch that could
+    // hold light) shoots the same rows and gives the same numbers, bit for bit; the progressive
+    // solver, which shoots only what holds unshot light, shoots the lamps alone too.
+    scene::Scene s;
+    const std::uint32_t lamp = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
+    const std::uint32_t black = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(0.0));
+    scene::add_quad(s, {-2, -2, 0}, {2, -2, 0}, {2, 2, 0}, {-2, 2, 0}, black, "floor");
+    add_block(s, {-0.3, -0.3, 0.5}, {0.3, 0.3, 0.8}, black);
+    scene::add_quad(s, {-0.5, -0.5, 2}, {-0.5, 0.5, 2}, {0.5, 0.5, 2}, {0.5, -0.5, 2}, lamp, "lamp");
+    scene::finish(s);
+    const scene::EffectsPlan plan = scene::plan_effects(s, {});
+    CHECK_FALSE(plan.interreflection.on);
+    CHECK(plan.occlusion.on);
+
+    const mesh::Mesh m = mesh::build(s, {0.5, 0.25});
+    std::uint32_t lamp_patches = 0;
+    for (const mesh::Patch& p : m.patches) lamp_patches += p.emission.x > 0.0 ? 1 : 0;
+    formfactor::ReferenceEngine engine(m, {64, 1});
+    solve::MatrixSettings direct;
+    direct.interreflection = false;
+    solve::Matrix planned(m, engine, direct);
+    planned.solve();
+    solve::Matrix bounced(m, engine, {});
+    bounced.solve();
+    CHECK(planned.rows() == lamp_patches);
+    CHECK(bounced.rows() == lamp_patches);
+    CHECK(planned.radiosity() == bounced.radiosity());
+    CHECK(planned.irradiance() == bounced.irradiance());
+
+    solve::Settings settings;
+    settings.threshold = 0.0;
+    solve::Progressive progressive(m, engine, settings);
+    while (progressive.step()) {
+    }
+    CHECK(progressive.passes() == lamp_patches);
+    // Its hemicubes turn by other angles (its shot counter is the pass), so the flux agrees to
+    // the hemicube's noise, not bit for bit.
+    double flux_progressive = 0.0, flux_matrix = 0.0;
+    const std::vector<glm::dvec3> H = progressive.irradiance(false);
+    for (std::size_t k = 0; k < H.size(); ++k) {
+        flux_progressive += H[k].x * m.elements[k].area;
+        flux_matrix += planned.irradiance()[k].x * m.elements[k].area;
+    }
+    CHECK_THAT(flux_progressive, Catch::WithinRel(flux_matrix, 1e-3));
 }
