@@ -123,8 +123,12 @@ void add_bench_options(CLI::App& cmd, BenchCommand& c) {
         "skip measuring the machine's limit (fill rate, bandwidth)");
     cmd.add_flag("--accuracy", c.accuracy,
                  "instead of throughput: error against time over the settings, on analytic cases and a room");
-    cmd.add_flag("--quick", c.quick, "with --accuracy: a smoke test of a few coarse runs (seconds)");
-    cmd.add_option("--device", c.device, "with --accuracy: auto, ref or opencl:P.D")->capture_default_str();
+    cmd.add_flag("--effects", c.effects,
+                 "instead of throughput: bake the bundled scenes with each effect as planned and forced the other "
+                 "way, and report the time saved and what changed (run from the repository root)");
+    cmd.add_flag("--quick", c.quick, "with --accuracy or --effects: a smoke test of a few coarse runs (seconds)");
+    cmd.add_option("--device", c.device, "with --accuracy or --effects: auto, ref or opencl:P.D")
+        ->capture_default_str();
     cmd.add_option("--json", c.json, "also write the results here (JSON)");
 }
 

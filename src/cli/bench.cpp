@@ -8,6 +8,7 @@
 #include <fstream>
 #include <system_error>
 
+#include "cli/bench_effects.h"
 #include "core/error.h"
 
 namespace hemirad::cli {
@@ -53,11 +54,24 @@ private:
 
 void run_bench(const BenchCommand& command, std::ostream& log) {
     JsonFile json(command.json);
+    if (command.accuracy && command.effects) throw InputError("bench: --accuracy and --effects are separate runs");
     if (command.accuracy && !command.throughput.scenes.empty())
         throw InputError("bench --accuracy: takes no scenes (it builds its own)");
-    if (command.quick && !command.accuracy) throw InputError("bench: --quick goes with --accuracy");
-    const nlohmann::ordered_json doc = command.accuracy ? bench::run_accuracy({command.device, command.quick}, log)
-                                                        : bench::run_throughput(command.throughput, log);
+    if (command.effects && !command.throughput.scenes.empty())
+        throw InputError("bench --effects: takes no scenes (it bakes the bundled ones)");
+    if (command.quick && !command.accuracy && !command.effects)
+        throw InputError("bench: --quick goes with --accuracy or --effects");
+    nlohmann::ordered_json doc;
+    if (command.accuracy) {
+        doc = bench::run_accuracy({command.device, command.quick}, log);
+    } else if (command.effects) {
+        EffectsBenchOptions options;
+        options.device = command.device;
+        options.quick = command.quick;
+        doc = run_effects_bench(options, log);
+    } else {
+        doc = bench::run_throughput(command.throughput, log);
+    }
     json.commit(doc);
     if (!command.json.empty()) log << fmt::format("\nwrote {}\n", command.json);
 }

@@ -1,5 +1,6 @@
-// `hemirad bench`: throughput of the form-factor engines (bench/throughput.h) or the
-// accuracy-against-time sweep (bench/accuracy.h), printed as tables and written as JSON.
+// `hemirad bench`: throughput of the form-factor engines (bench/throughput.h), the
+// accuracy-against-time sweep (bench/accuracy.h) or what planning the effects saves
+// (cli/bench_effects.h), printed as tables and written as JSON.
 #pragma once
 
 #include <ostream>
@@ -13,8 +14,9 @@ namespace hemirad::cli {
 struct BenchCommand {
     bench::ThroughputOptions throughput;
     bool accuracy = false;        // the accuracy-against-time sweep instead of throughput
-    bool quick = false;           // with accuracy: a smaller sweep
-    std::string device = "auto";  // with accuracy: the engine of every run
+    bool effects = false;         // each effect as planned against forced, instead of throughput
+    bool quick = false;           // with accuracy or effects: a smaller sweep
+    std::string device = "auto";  // with accuracy or effects: the engine of every run
     std::string json;             // also write the JSON document here (atomically)
 };
 
