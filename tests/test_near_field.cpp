@@ -68,18 +68,24 @@ RowErrors wall_errors(const mesh::Mesh& m, formfactor::Engine& engine) {
     return out;
 }
 
+// Patch and element sizes of a bake at the default quality.
+mesh::Settings default_sizes(const scene::Scene& s) {
+    const QualityPreset& q = quality_preset("default");
+    mesh::Settings ms;
+    ms.patch_size = s.diagonal() * q.patch_fraction;
+    ms.element_size = ms.patch_size / q.elements_per_patch_edge;
+    return ms;
+}
+
 }  // namespace
 
 TEST_CASE("near field: perpendicular squares within 1% at the default quality", "[near_field]") {
     scene::Scene base;
     const std::uint32_t grey = scene::add_material(base, glm::dvec3(0.5), glm::dvec3(0.0));
     const scene::Scene s = test::perpendicular_rectangles(1, 1, 1, grey, grey, base);
-    const QualityPreset& q = quality_preset("default");
-    mesh::Settings ms;
-    ms.patch_size = s.diagonal() * q.patch_fraction;
-    ms.element_size = ms.patch_size / q.elements_per_patch_edge;
+    const mesh::Settings ms = default_sizes(s);
     const mesh::Mesh m = mesh::build(s, ms);
-    const formfactor::Settings settings{q.hemicube, 1};
+    const formfactor::Settings settings{quality_preset("default").hemicube, 1};
 
     formfactor::ReferenceEngine plain(m, settings);
     formfactor::NearFieldEngine corrected(m, std::make_unique<formfactor::ReferenceEngine>(m, settings));
@@ -113,12 +119,9 @@ TEST_CASE("near field: the corners of a room", "[near_field]") {
     const bench::Room room;
     const bench::RoomSolution reference = bench::solve_room(room, 0.2);
     const scene::Scene s = bench::make_room_scene(room);
-    const QualityPreset& q = quality_preset("default");
-    mesh::Settings ms;
-    ms.patch_size = s.diagonal() * q.patch_fraction;
-    ms.element_size = ms.patch_size / q.elements_per_patch_edge;
+    const mesh::Settings ms = default_sizes(s);
     const mesh::Mesh m = mesh::build(s, ms);
-    const formfactor::Settings settings{q.hemicube, 1};
+    const formfactor::Settings settings{quality_preset("default").hemicube, 1};
 
     // Per element: the reference's average over it, and whether it lies within one patch of an
     // edge of the box (the distance from its centroid to the nearest wall it does not lie on).
