@@ -1,6 +1,8 @@
-// The accuracy-against-time sweep (see accuracy.h). Every run uses the engine stack of a bake
-// (the hemicube engine under the near-field correction) and the progressive solver; its time
-// is the wall time of meshing and solving, kernel builds excluded (a context keeps them).
+// The accuracy-against-time sweep (see accuracy.h). Most runs use the hemicube engine stack of
+// a bake (the hemicube engine under the near-field correction) and the progressive solver; the
+// "solver" sweep also bakes the room as a bake plans it (exact unoccluded form factors, the
+// matrix solver, adaptive refinement) and the combinations in between. A run's time is the
+// wall time of meshing, solving and refining, kernel builds excluded (a context keeps them).
 #include "bench/accuracy.h"
 
 #include <fmt/core.h>
@@ -15,14 +17,19 @@
 #include "bench/throughput.h"
 #include "cl/runtime.h"
 #include "core/error.h"
+#include "core/quality.h"
 #include "core/timing.h"
 #include "formfactor/near_field.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
+#include "formfactor/unoccluded.h"
 #include "mesh/mesh.h"
 #include "output/output.h"
 #include "scene/builder.h"
+#include "scene/effects.h"
+#include "solve/matrix.h"
 #include "solve/progressive.h"
+#include "solve/refinement.h"
 
 namespace hemirad::bench {
 namespace {
@@ -31,6 +38,8 @@ using ordered_json = nlohmann::ordered_json;
 
 // Probes per surface edge: 8 × 8 points on each of the seven surfaces.
 constexpr int kProbesPerEdge = 8;
+// As in a bake (src/cli/bake.cpp): the re-gather's hemicube doubles per refinement level up to this.
+constexpr int kMaxRegatherHemicube = 2048;
 
 // The engine every run uses: an OpenCL device (one context for the whole sweep, so kernels
 // build once per N) or the reference.
@@ -138,7 +147,11 @@ struct RoomSettings {
     double elements_per_edge = 3.0;      // element size = patch size / this
     double threshold = 1e-3;
     int batch = 1;
+    std::string solver = "progressive";  // progressive | matrix (tolerance and batch as a bake sets them)
+    bool exact = false;                  // formfactor::UnoccludedEngine instead of the hemicube stack
+    int refine_levels = 0;               // adaptive refinement after the solve, as a bake does it
     std::string sweep;
+    std::string note;  // printed beside the sweep, e.g. "as a bake plans it"
 };
 
 double luminance(const glm::dvec3& c) {
@@ -170,17 +183,59 @@ std::size_t element_at(const mesh::Mesh& m, std::uint32_t node, const glm::dvec3
 
 ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, const std::vector<Probe>& probes,
                       EngineFactory& engines, const RoomSettings& r) {
+    if (r.solver != "progressive" && r.solver != "matrix") throw InternalError("accuracy: unknown solver " + r.solver);
     const auto t0 = Clock::now();
     const double patch = room.diagonal() * r.patch_fraction;
-    const mesh::Mesh m = mesh::build(room, {patch, patch / r.elements_per_edge});
-    auto engine = engines.make(m, {r.hemicube, 1});
-    solve::Settings settings;
-    settings.threshold = r.threshold;
-    settings.batch = r.batch;
-    solve::Progressive solver(m, *engine, settings);
-    while (solver.step()) {
+    mesh::Mesh m = mesh::build(room, {patch, patch / r.elements_per_edge});
+    const std::size_t elements_before = m.elements.size();
+    // As a bake's make_engine: the same kind of engine for a refined mesh, a hemicube's N doubled
+    // per level of refinement (capped), so that children cover as many cells as their parents did.
+    const auto make_engine = [&](const mesh::Mesh& mm, int level) -> std::unique_ptr<formfactor::Engine> {
+        if (r.exact) return std::make_unique<formfactor::UnoccludedEngine>(mm);
+        return engines.make(mm, {std::min(kMaxRegatherHemicube, r.hemicube << level), 1});
+    };
+    std::unique_ptr<formfactor::Engine> engine = make_engine(m, 0);
+    std::vector<glm::dvec3> irradiance, shot;  // per element (the ambient term included); per patch
+    long passes = 0;                           // hemicubes (rows, or passes) the solver shot
+    int iterations = 0;                        // Gauss–Seidel sweeps (matrix)
+    if (r.solver == "matrix") {
+        solve::MatrixSettings ms;  // as a bake sets them
+        ms.tolerance = std::min(1e-4, r.threshold * 1e-2);
+        ms.batch = std::max(r.batch, 64);
+        ms.grey = false;  // the room has a red wall: a bake plans colour on
+        solve::Matrix solver(m, *engine, ms);
+        solver.solve();
+        if (!solver.converged()) throw InternalError("accuracy: the matrix solve did not converge");
+        irradiance = solver.irradiance();
+        shot = solver.patch_radiosity();
+        passes = solver.rows();
+        iterations = solver.iterations();
+    } else {
+        solve::Settings settings;
+        settings.threshold = r.threshold;
+        settings.batch = r.batch;
+        solve::Progressive solver(m, *engine, settings);
+        while (solver.step()) {
+        }
+        irradiance = solver.irradiance(/*ambient=*/true);
+        shot = solver.shot();
+        passes = solver.passes();
     }
-    const std::vector<glm::dvec3> radiosity = solver.radiosity(/*ambient=*/true);
+    engine.reset();  // it holds the unrefined mesh
+    long regather_shots = 0;
+    if (r.refine_levels > 0) {  // as a bake: split where the irradiance contrasts, re-gather
+        solve::RefineSettings rs;
+        rs.contrast = 0.25;  // a bake's default --contrast
+        rs.max_levels = r.refine_levels;
+        rs.batch = std::max(r.batch, 64);
+        solve::RefineResult refined = solve::refine(std::move(m), std::move(irradiance), shot, make_engine, rs);
+        m = std::move(refined.mesh);
+        irradiance = std::move(refined.irradiance);
+        for (const solve::RefineLevel& level : refined.levels) regather_shots += level.shots;
+    }
+    std::vector<glm::dvec3> radiosity(m.elements.size());
+    for (std::size_t k = 0; k < m.elements.size(); ++k)
+        radiosity[k] = m.elements[k].emission + m.elements[k].rho * irradiance[k];
     const double seconds = seconds_since(t0);
 
     // The error a user sees: radiosity (luminance) at probe points over every surface.
@@ -195,32 +250,47 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
         squares += (got - want) * (got - want) / (want * want);
     }
     double worst_surface = 0.0;
-    const std::vector<output::NodeSummary> summary =
-        output::summarize(room, m, radiosity, solver.irradiance(/*ambient=*/true));
+    const std::vector<output::NodeSummary> summary = output::summarize(room, m, radiosity, irradiance);
     for (const auto& [name, average] : reference.surface_average)
         for (const auto& s : summary)
             if (s.name == name)
                 worst_surface =
                     std::max(worst_surface, std::abs(luminance(s.radiosity) - luminance(average)) / luminance(average));
-    return {{"hemicube", r.hemicube},
-            {"patch_size", patch},
-            {"element_size", patch / r.elements_per_edge},
-            {"patch_fraction", r.patch_fraction},
-            {"elements_per_patch_edge", r.elements_per_edge},
-            {"threshold", r.threshold},
-            {"batch", r.batch},
-            {"elements", m.elements.size()},
-            {"passes", solver.passes()},
-            {"seconds", seconds},
-            {"rms_rel_error", std::sqrt(squares / static_cast<double>(probes.size()))},
-            {"max_surface_error", worst_surface},
-            {"sweep", r.sweep}};
+    ordered_json run = {{"hemicube", r.hemicube},
+                        {"patch_size", patch},
+                        {"element_size", patch / r.elements_per_edge},
+                        {"patch_fraction", r.patch_fraction},
+                        {"elements_per_patch_edge", r.elements_per_edge},
+                        {"threshold", r.threshold},
+                        {"batch", r.batch},
+                        {"solver", r.solver},
+                        {"exact", r.exact},
+                        {"refine_levels", r.refine_levels},
+                        {"elements", m.elements.size()},
+                        {"elements_before_refinement", elements_before},
+                        {"passes", passes},
+                        {"regather_shots", regather_shots},
+                        {"seconds", seconds},
+                        {"rms_rel_error", std::sqrt(squares / static_cast<double>(probes.size()))},
+                        {"max_surface_error", worst_surface},
+                        {"sweep", r.sweep}};
+    if (r.solver == "matrix") run["iterations"] = iterations;
+    if (!r.note.empty()) run["note"] = r.note;
+    return run;
 }
 
-std::vector<RoomSettings> room_sweep(bool quick) {
+// `bake_plan`: a bake of the room plans occlusion off and refinement on (scene::plan_effects),
+// so that exact form factors, the matrix solver and refinement are what `hemirad bake` does.
+std::vector<RoomSettings> room_sweep(bool quick, bool bake_plan) {
     std::vector<RoomSettings> runs;
     // From the settings that were a bake's defaults; --quick, from coarse ones (a smoke test).
-    const RoomSettings base = quick ? RoomSettings{64, 1.0 / 6.0, 2.0, 1e-2, 1, ""} : RoomSettings{};
+    RoomSettings base;
+    if (quick) {
+        base.hemicube = 64;
+        base.patch_fraction = 1.0 / 6.0;
+        base.elements_per_edge = 2.0;
+        base.threshold = 1e-2;
+    }
     runs.push_back(base);
     runs.back().sweep = "default";
     const auto add = [&](const std::string& sweep, auto change) {
@@ -248,15 +318,55 @@ std::vector<RoomSettings> room_sweep(bool quick) {
                         r.elements_per_edge = e;
                         r.threshold = 1e-2;
                     });
+    // What a bake's plan for this room costs and buys: the matrix solver, exact unoccluded form
+    // factors and refinement, one by one and together (the last is the bake's plan). At the
+    // base settings, and (full mode) at the default preset's, which a bake uses.
+    struct Kind {
+        const char* solver;
+        bool exact;
+        int refine_levels;
+    };
+    const Kind kinds[] = {
+        {"matrix", false, 0}, {"matrix", true, 0}, {"progressive", true, 0}, {"matrix", false, 2}, {"matrix", true, 2}};
+    const QualityPreset& preset = quality_preset("default");
+    RoomSettings at_preset = base;
+    at_preset.hemicube = preset.hemicube;
+    at_preset.patch_fraction = preset.patch_fraction;
+    at_preset.elements_per_edge = preset.elements_per_patch_edge;
+    at_preset.threshold = preset.threshold;
+    const bool preset_differs =
+        base.hemicube != at_preset.hemicube || base.patch_fraction != at_preset.patch_fraction ||
+        base.elements_per_edge != at_preset.elements_per_edge || base.threshold != at_preset.threshold;
+    for (int at_default_preset = 0; at_default_preset < (quick || !preset_differs ? 1 : 2); ++at_default_preset)
+        for (const Kind& kind : kinds) {
+            RoomSettings r = at_default_preset ? at_preset : base;
+            r.solver = kind.solver;
+            r.exact = kind.exact;
+            r.refine_levels = kind.refine_levels;
+            r.sweep = "solver";
+            const bool planned = bake_plan && r.solver == "matrix" && r.exact && r.refine_levels == 2;
+            if (at_default_preset)
+                r.note = planned ? "as `hemirad bake` plans it (--quality default)" : "at --quality default";
+            else if (planned)
+                r.note = "as a bake plans it";
+            runs.push_back(r);
+        }
     return runs;
 }
 
 }  // namespace
 
+bool preset_eligible(const ordered_json& run) {
+    // A field that is absent has the value of the original kind of run.
+    return run["threshold"].get<double>() <= kPresetMaxThreshold &&
+           run.value("solver", "progressive") == "progressive" && !run.value("exact", false) &&
+           run.value("refine_levels", 0) == 0;
+}
+
 std::vector<std::size_t> pareto_front(const ordered_json& runs) {
     std::vector<std::size_t> order;
     for (std::size_t i = 0; i < runs.size(); ++i)
-        if (runs[i]["threshold"].get<double>() <= kPresetMaxThreshold) order.push_back(i);
+        if (preset_eligible(runs[i])) order.push_back(i);
     std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
         return runs[a]["seconds"].get<double>() < runs[b]["seconds"].get<double>();
     });
@@ -310,34 +420,55 @@ ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
     log << fmt::format("\nroom: independent reference ({} m cells, exact form factors) in {:.1f} s; {} probes\n\n",
                        cell_size, reference_seconds, probes.size());
 
-    {  // warm-up: kernel builds for the N values of the sweep stay out of the timings
+    // What a bake plans for the room: the "solver" sweep's combination of exact form factors,
+    // the matrix solver and refinement is a bake's only if the planner turns occlusion off and
+    // refinement on (and leaves colour and interreflection on, as the runs assume).
+    const scene::EffectsPlan plan = scene::plan_effects(room, {});
+    const bool bake_plan =
+        !plan.occlusion.on && plan.refinement.on && plan.colour.on && plan.interreflection.on && plan.convergence.on;
+    log << fmt::format("a bake plans for the room: occlusion {} ({}); refinement {}; colour {}\n\n",
+                       plan.occlusion.on ? "on" : "off", plan.occlusion.why, plan.refinement.on ? "on" : "off",
+                       plan.colour.on ? "on" : "off");
+    const std::vector<RoomSettings> sweep = room_sweep(o.quick, bake_plan);
+
+    {  // warm-up: kernel builds for the N values of the sweep (re-gathers' too) stay out of the timings
         std::set<int> hemicubes;
-        for (const RoomSettings& r : room_sweep(o.quick)) hemicubes.insert(r.hemicube);
+        for (const RoomSettings& r : sweep)
+            if (!r.exact)
+                for (int level = 0; level <= r.refine_levels; ++level)
+                    hemicubes.insert(std::min(kMaxRegatherHemicube, r.hemicube << level));
         const mesh::Mesh m = mesh::build(room, {room.diagonal() / 4.0, room.diagonal() / 4.0});
         formfactor::ShotResult shot;
         for (int n : hemicubes) engines.make(m, {n, 1})->shoot(0, 0, shot);
     }
-    log << "| sweep | N | patch | element | threshold | batch | passes | s | rms error | worst surface |\n"
-           "|---|---|---|---|---|---|---|---|---|---|\n";
+    log << "| sweep | solver | form factors | refine | N | patch | element | threshold | batch | passes | elements "
+           "| s | rms error | worst surface |\n"
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     ordered_json runs = ordered_json::array();
-    for (const RoomSettings& r : room_sweep(o.quick)) {
+    for (const RoomSettings& r : sweep) {
         ordered_json run = room_run(room, reference, probes, engines, r);
-        log << fmt::format("| {} | {} | {:.3f} | {:.3f} | {:g} | {} | {} | {:.2f} | {:.2f}% | {:.2f}% |\n", r.sweep,
-                           r.hemicube, run["patch_size"].get<double>(), run["element_size"].get<double>(), r.threshold,
-                           r.batch, run["passes"].get<long>(), run["seconds"].get<double>(),
-                           100.0 * run["rms_rel_error"].get<double>(), 100.0 * run["max_surface_error"].get<double>());
+        log << fmt::format(
+            "| {} | {} | {} | {} | {} | {:.3f} | {:.3f} | {:g} | {} | {} | {} | {:.2f} | {:.2f}% | {:.2f}% |\n",
+            r.note.empty() ? r.sweep : r.sweep + ": " + r.note, r.solver, r.exact ? "exact" : "hemicube",
+            r.refine_levels, r.exact ? "-" : std::to_string(r.hemicube), run["patch_size"].get<double>(),
+            run["element_size"].get<double>(), r.threshold, r.batch, run["passes"].get<long>(),
+            run["elements"].get<long>(), run["seconds"].get<double>(), 100.0 * run["rms_rel_error"].get<double>(),
+            100.0 * run["max_surface_error"].get<double>());
         runs.push_back(run);
     }
     const std::vector<std::size_t> front = pareto_front(runs);
     out["room"] = {{"reference", {{"cell_size", cell_size}, {"seconds", reference_seconds}, {"probes", probes.size()}}},
+                   {"bake_plan",
+                    {{"occlusion", plan.occlusion.on}, {"refinement", plan.refinement.on}, {"colour", plan.colour.on}}},
                    {"runs", runs},
                    {"pareto", front},
                    {"presets", derive_presets(runs, front)}};
-    log << "\nPareto front of the runs with threshold <= 1e-2 (fastest first):";
+    log << "\nPareto front of the progressive hemicube runs without refinement with threshold <= 1e-2 (fastest "
+           "first):";
     for (std::size_t i : front)
         log << fmt::format(" [{:.2f} s, {:.2f}%]", runs[i]["seconds"].get<double>(),
                            100.0 * runs[i]["rms_rel_error"].get<double>());
-    log << "\n\npresets, from runs with threshold <= 1e-2 (draft: fastest within 2x the defaults' error; default:\n"
+    log << "\n\npresets, from those runs (draft: fastest within 2x the defaults' error; default:\n"
            "fastest at most as wrong as the defaults; high: most accurate within 8x their time)\n\n| preset | N | "
            "patch / diagonal | elements per "
            "patch edge | threshold | batch | s | rms error |\n|---|---|---|---|---|---|---|---|\n";
