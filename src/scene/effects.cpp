@@ -168,22 +168,11 @@ EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
         ys[k] = vertices[k].p.y;
         zs[k] = vertices[k].p.z;
     }
-    std::size_t last_offender = 0;  // a vertex behind one plane is likely behind the next
     for (const Plane& plane : planes) {
         const double nx = plane.n.x, ny = plane.n.y, nz = plane.n.z, limit = plane.d - tolerance;
-        auto behind = [&](std::size_t k) { return nx * xs[k] + ny * ys[k] + nz * zs[k] < limit; };
-        std::size_t found = nv;
-        if (behind(last_offender)) {
-            found = last_offender;
-        } else {
-            for (std::size_t k = 0; k < nv; ++k)
-                if (behind(k)) {
-                    found = k;
-                    break;
-                }
-        }
+        std::size_t found = 0;
+        while (found < nv && nx * xs[found] + ny * ys[found] + nz * zs[found] >= limit) ++found;
         if (found == nv) continue;
-        last_offender = found;
         const Vertex& v = vertices[found];
         const double depth = plane.d - glm::dot(plane.n, v.p);
         return automatic(true, fmt::format("vertex {} of node '{}' (triangle {}) lies {:.4g} behind the plane of "
