@@ -16,6 +16,7 @@
 #include "bench/room_reference.h"
 #include "bench/throughput.h"
 #include "cl/runtime.h"
+#include "core/colour.h"
 #include "core/error.h"
 #include "core/quality.h"
 #include "core/timing.h"
@@ -153,10 +154,6 @@ struct RoomSettings {
     std::string sweep;
     std::string note;  // printed beside the sweep, e.g. "as a bake plans it"
 };
-
-double luminance(const glm::dvec3& c) {
-    return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
-}
 
 // The element of node `node` whose polygon holds `point` (in its plane), or the nearest centroid.
 std::size_t element_at(const mesh::Mesh& m, std::uint32_t node, const glm::dvec3& point) {

@@ -10,16 +10,6 @@
 
 namespace hemirad::formfactor {
 
-namespace {
-
-double longest_edge(const mesh::Polygon& poly) {
-    double s = 0.0;
-    for (int i = 0; i < poly.n; ++i) s = std::max(s, glm::length(poly.v[(i + 1) % poly.n] - poly.v[i]));
-    return s;
-}
-
-}  // namespace
-
 int UnoccludedEngine::subdivisions(double d, double s) {
     if (d > 4.0 * s) return 1;
     if (d > 2.0 * s) return 2;
@@ -38,7 +28,7 @@ UnoccludedEngine::UnoccludedEngine(const mesh::Mesh& mesh) : mesh_(mesh) {
         r.normal = e.normal;
         r.centroid = e.centroid;
         r.area = e.area;
-        r.size = longest_edge(e.poly);
+        r.size = mesh::longest_edge(e.poly);
         r.patch = e.patch;
         receivers_.push_back(r);
         for (int i = 0; i < e.poly.n; ++i) {
@@ -48,7 +38,7 @@ UnoccludedEngine::UnoccludedEngine(const mesh::Mesh& mesh) : mesh_(mesh) {
         }
     }
     patch_size_.reserve(mesh.patches.size());
-    for (const mesh::Patch& p : mesh.patches) patch_size_.push_back(longest_edge(p.poly));
+    for (const mesh::Patch& p : mesh.patches) patch_size_.push_back(mesh::longest_edge(p.poly));
     eps_ = 1e-9 * glm::length(hi - lo);
 }
 

@@ -418,6 +418,13 @@ Shape shape_of(const Polygon& poly) {
     return s;
 }
 
+double longest_edge(const Polygon& poly) {
+    double longest = 0.0;
+    for (int i = 0; i < poly.n; ++i)
+        longest = std::max(longest, glm::length(poly.v[std::size_t((i + 1) % poly.n)] - poly.v[std::size_t(i)]));
+    return longest;
+}
+
 Mesh build(const scene::Scene& scene, const Settings& settings) {
     check_settings(settings);
     Mesh mesh;

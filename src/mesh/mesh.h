@@ -69,4 +69,7 @@ struct Shape {
 };
 Shape shape_of(const Polygon& poly);
 
+// The longest edge of a polygon.
+double longest_edge(const Polygon& poly);
+
 }  // namespace hemirad::mesh

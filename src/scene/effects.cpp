@@ -11,6 +11,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "core/colour.h"
+
 namespace hemirad::scene {
 
 namespace {
@@ -347,7 +349,7 @@ void apply_colour(Scene& scene, const EffectsPlan& plan) {
     if (plan.colour.on) return;
     // Rec. 709 luminance; a grey value is kept bit for bit, so a grey scene is unchanged.
     const auto grey = [](const glm::dvec3& c) {
-        return c.x == c.y && c.y == c.z ? c : glm::dvec3(0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z);
+        return c.x == c.y && c.y == c.z ? c : glm::dvec3(luminance(c));
     };
     for (Material& m : scene.materials) {
         m.base_color = grey(m.base_color);

@@ -6,14 +6,11 @@
 #include <cstring>
 #include <unordered_map>
 
+#include "core/colour.h"
 #include "mesh/refine.h"
 
 namespace hemirad::solve {
 namespace {
-
-double luminance(const glm::dvec3& c) {
-    return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
-}
 
 // Two elements lie in one plane when their normals agree this closely.
 constexpr double kSamePlaneDot = 1.0 - 1e-6;
@@ -32,13 +29,6 @@ PointKey key_of(const glm::dvec3& p) {
     const double c[3] = {p.x + 0.0, p.y + 0.0, p.z + 0.0};  // −0 and +0 alike
     std::memcpy(k.b, c, sizeof c);
     return k;
-}
-
-double longest_edge(const mesh::Polygon& poly) {
-    double longest = 0.0;
-    for (int i = 0; i < poly.n; ++i)
-        longest = std::max(longest, glm::length(poly.v[std::size_t((i + 1) % poly.n)] - poly.v[std::size_t(i)]));
-    return longest;
 }
 
 // The emitters, then the other patches that shot the most light, most first, until they cover
@@ -82,7 +72,7 @@ std::vector<bool> mark_contrast(const mesh::Mesh& mesh, const std::vector<glm::d
     }
     const double floor = area > 0.0 ? settings.noise_floor * lum_area / area : 0.0;
     std::vector<double> edge(n);
-    for (std::size_t k = 0; k < n; ++k) edge[k] = longest_edge(mesh.elements[k].poly);
+    for (std::size_t k = 0; k < n; ++k) edge[k] = mesh::longest_edge(mesh.elements[k].poly);
     const auto splittable = [&](std::size_t k) {
         return level[k] < settings.max_levels && edge[k] > settings.min_size;
     };
