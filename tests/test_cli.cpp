@@ -1159,3 +1159,18 @@ TEST_CASE("effects: stopping at the threshold changes the image less than the he
     CAPTURE(early, noise);
     CHECK(early < 0.25 * noise);
 }
+
+TEST_CASE("effects and solver options that cannot go together exit 2 with one line", "[cli]") {
+    TempDir dir;
+    const fs::path out = dir / "out";
+    const auto bake = [&](std::vector<std::string> extra) {
+        return concat({"bake", kCornellBox.string(), "-o", out.string(), "--quiet"}, extra);
+    };
+    expect_bad_input(dir, bake({"--effects", "occlusion=maybe"}), out, "maybe");
+    expect_bad_input(dir, bake({"--effects", "shadows=off"}), out, "shadows");
+    expect_bad_input(dir, bake({"--effects", "occlusion=off,occlusion=on"}), out, "occlusion");
+    expect_bad_input(dir, bake({"--solver", "matrix", "--preview-every", "5"}), out, "--preview-every");
+    expect_bad_input(dir, bake({"--solver", "progressive", "--effects", "interreflection=off"}), out, "interreflection");
+    expect_bad_input(dir, bake({"--verify", "--device", "ref", "--effects", "occlusion=off"}), out, "--verify");
+    expect_bad_input(dir, bake({"--solver", "gauss"}), out, "--solver");
+}
