@@ -52,7 +52,8 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "maximum element edge, scene units (default: patch size / the quality's elements a side)")
         ->check(CLI::PositiveNumber);
     bake.add_option("--threshold", o.threshold,
-                    "stop when the share of final flux not yet placed is below this (default: the quality's)")
+                    "progressive: stop when the share of final flux not yet placed is below this; matrix: iterate to a "
+                    "residual of min(1e-4, T/100) (default: the quality's)")
         ->check(CLI::Range(0.0, 1.0));
     bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
         ->check(CLI::NonNegativeNumber)
@@ -64,7 +65,7 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->capture_default_str();
     bake.add_option("--solver", o.solver,
                     "matrix (a form-factor row per patch, then Gauss-Seidel), progressive (shooting), or auto: "
-                    "matrix up to a few thousand patches")
+                    "matrix up to 3000 patches and reflectances up to 0.95, unless --preview-every is given")
         ->check(CLI::IsMember({"auto", "matrix", "progressive"}))
         ->capture_default_str();
     bake.add_option("--effects", o.effects,
