@@ -87,7 +87,7 @@ struct FloorResult {
 // As a bake does: the hemicube's resolution doubles with the refinement level.
 std::unique_ptr<formfactor::Engine> engine_for(const mesh::Mesh& m, int level = 0) {
     return std::make_unique<formfactor::NearFieldEngine>(
-        m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{256 << level, 7}));
+        m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{solve::regather_hemicube(256, level), 7}));
 }
 
 // Solves the shadow scene with floor elements of `element_size`, refines `levels` times, and

@@ -39,8 +39,6 @@ using ordered_json = nlohmann::ordered_json;
 
 // Probes per surface edge: 8 × 8 points on each of the seven surfaces.
 constexpr int kProbesPerEdge = 8;
-// As in a bake (src/cli/bake.cpp): the re-gather's hemicube doubles per refinement level up to this.
-constexpr int kMaxRegatherHemicube = 2048;
 
 // The engine every run uses: an OpenCL device (one context for the whole sweep, so kernels
 // build once per N) or the reference.
@@ -189,7 +187,7 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
     // per level of refinement (capped), so that children cover as many cells as their parents did.
     const auto make_engine = [&](const mesh::Mesh& mm, int level) -> std::unique_ptr<formfactor::Engine> {
         if (r.exact) return std::make_unique<formfactor::UnoccludedEngine>(mm);
-        return engines.make(mm, {std::min(kMaxRegatherHemicube, r.hemicube << level), 1});
+        return engines.make(mm, {solve::regather_hemicube(r.hemicube, level), 1});
     };
     std::unique_ptr<formfactor::Engine> engine = make_engine(m, 0);
     std::vector<glm::dvec3> irradiance, shot;  // per element (the ambient term included); per patch
@@ -433,7 +431,7 @@ ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
         for (const RoomSettings& r : sweep)
             if (!r.exact)
                 for (int level = 0; level <= r.refine_levels; ++level)
-                    hemicubes.insert(std::min(kMaxRegatherHemicube, r.hemicube << level));
+                    hemicubes.insert(solve::regather_hemicube(r.hemicube, level));
         const mesh::Mesh m = mesh::build(room, {room.diagonal() / 4.0, room.diagonal() / 4.0});
         formfactor::ShotResult shot;
         for (int n : hemicubes) engines.make(m, {n, 1})->shoot(0, 0, shot);

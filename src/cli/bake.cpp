@@ -157,8 +157,6 @@ constexpr double kUnconvergedTolerance = 1e-12;
 // Gauss–Seidel sweeps at most (each costs P² per channel; --solver auto avoids the matrix where
 // reflectances are high enough to need many).
 constexpr int kMaxSweeps = 20000;
-// The re-gather's hemicube doubles per refinement level up to this.
-constexpr int kMaxRegatherHemicube = 2048;
 
 class ProgressLine {
 public:
@@ -327,7 +325,7 @@ void run_bake(const BakeOptions& options) {
     const auto make_engine = [&](const mesh::Mesh& m, int level) -> std::unique_ptr<formfactor::Engine> {
         if (!plan.occlusion.on) return std::make_unique<formfactor::UnoccludedEngine>(m);
         formfactor::Settings s = ff_settings;
-        s.hemicube = std::min(kMaxRegatherHemicube, ff_settings.hemicube << level);
+        s.hemicube = solve::regather_hemicube(ff_settings.hemicube, level);
         return std::make_unique<formfactor::NearFieldEngine>(m, engine_like(choice, m, s));
     };
 

@@ -7,6 +7,7 @@
 // solve left them, while shadow boundaries and the light's surroundings get detail.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <glm/glm.hpp>
@@ -57,8 +58,13 @@ struct RefineResult {
 std::vector<bool> mark_contrast(const mesh::Mesh& mesh, const std::vector<glm::dvec3>& irradiance,
                                 const std::vector<int>& level, const RefineSettings& settings);
 
+// The hemicube resolution for a re-gather onto elements `level` splits deep: the base N doubled
+// per level, so children cover as many cells as their parents did, up to kMaxRegatherHemicube.
+inline constexpr int kMaxRegatherHemicube = 2048;
+inline int regather_hemicube(int hemicube, int level) { return std::min(kMaxRegatherHemicube, hemicube << level); }
+
 // A form-factor engine for a refined mesh whose finest elements are `level` splits deep (a
-// hemicube engine can raise its resolution to match).
+// hemicube engine raises its resolution to regather_hemicube).
 using EngineFactory = std::function<std::unique_ptr<formfactor::Engine>(const mesh::Mesh&, int level)>;
 
 // Refines `mesh` level by level. `irradiance` is the solved incident light per element (with any
