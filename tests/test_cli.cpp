@@ -1173,4 +1173,55 @@ TEST_CASE("effects and solver options that cannot go together exit 2 with one li
     expect_bad_input(dir, bake({"--solver", "progressive", "--effects", "interreflection=off"}), out, "interreflection");
     expect_bad_input(dir, bake({"--verify", "--device", "ref", "--effects", "occlusion=off"}), out, "--verify");
     expect_bad_input(dir, bake({"--solver", "gauss"}), out, "--solver");
+    expect_bad_input(dir, bake({"--solver", "matrix", "--checkpoint", (dir / "ck").string()}), out, "--checkpoint");
+}
+
+TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the same numbers", "[cli]") {
+    TempDir dir;
+    const std::vector<std::string> settings = {"--hemicube", "32", "--patch-size", "0.5", "--element-size", "0.25",
+                                               "--threshold", "1e-6", "--max-passes", "2000", "--solver",
+                                               "progressive", "--image-width", "32", "--quiet"};
+    const json full = bake_ok(dir, kClosedRoom, dir / "full", settings);
+    REQUIRE(full.at("passes").get<long>() == 2000);
+    const std::string full_bin = read_text(dir / "full" / "baked.bin");
+
+    // SIGKILL (nothing can be cleaned up) a while after the first checkpoint is on disk, then
+    // resume into a fresh directory; twice, killed at two different moments.
+    for (const std::string delay : {"0.1", "0.5"}) {
+        INFO("killed " << delay << " s after the first checkpoint");
+        const std::string ck = (dir / ("ck" + delay)).string();
+        std::string script = shell_quote(HEMIRAD_EXE);
+        for (const std::string& a : concat({"bake", kClosedRoom.string(), "-o", (dir / ("killed" + delay)).string(),
+                                            "--checkpoint", ck, "--checkpoint-every", "100"},
+                                           settings))
+            script += " " + shell_quote(a);
+        script += " & pid=$!; i=0; while [ ! -e " + shell_quote(ck) +
+                  " ] && [ $i -lt 400 ]; do sleep 0.02; i=$((i+1)); done; sleep " + delay +
+                  "; kill -KILL $pid; wait $pid";
+        const RunResult killed = run_shell(dir, script);
+        REQUIRE(fs::exists(ck));
+        CHECK_FALSE(fs::exists(dir / ("killed" + delay) / "report.json"));
+        const json resumed = bake_ok(dir, kClosedRoom, dir / ("resumed" + delay),
+                                     concat({"--resume", ck, "--checkpoint", ck, "--checkpoint-every", "100"}, settings));
+        CAPTURE(killed.code, resumed.at("resumed_from_pass").get<long>());
+        CHECK(resumed.at("resumed_from_pass").get<long>() % 100 == 0);
+        CHECK(resumed.at("resumed_from_pass").get<long>() < 2000);
+        CHECK(resumed.at("passes") == full.at("passes"));
+        CHECK(resumed.at("meshes") == full.at("meshes"));
+        CHECK(resumed.at("energy") == full.at("energy"));
+        CHECK(read_text(dir / ("resumed" + delay) / "baked.bin") == full_bin);
+    }
+
+    // A checkpoint resumes only its own bake; anything else is refused, naming the file.
+    const fs::path ck = dir / "ck0.1";
+    const fs::path out = dir / "refused";
+    const auto bake = [&](std::vector<std::string> extra) {
+        return concat(concat({"bake", kClosedRoom.string(), "-o", out.string()}, settings), extra);
+    };
+    expect_bad_input(dir, bake({"--resume", ck.string(), "--seed", "7"}), out, "another bake");
+    expect_bad_input(dir, bake({"--resume", (dir / "full" / "report.json").string()}), out, "not a hemirad checkpoint");
+    expect_bad_input(dir, bake({"--resume", (dir / "missing").string()}), out, "missing");
+    const std::string whole = read_text(ck);
+    write_text(dir / "cut", whole.substr(0, whole.size() / 2));
+    expect_bad_input(dir, bake({"--resume", (dir / "cut").string()}), out, "damaged");
 }

@@ -80,6 +80,14 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "adaptive refinement: split neighbours whose irradiance differs by more than this share")
         ->check(CLI::Range(0.01, 1.0))
         ->capture_default_str();
+    bake.add_option("--checkpoint", o.checkpoint,
+                    "progressive solver: write its state to this file every --checkpoint-every passes (atomically)");
+    bake.add_option("--checkpoint-every", o.checkpoint_every, "passes between checkpoints")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    bake.add_option("--resume", o.resume,
+                    "progressive solver: go on from this checkpoint of the same scene and settings; the bake ends "
+                    "with exactly the numbers of an uninterrupted one");
     bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")->capture_default_str();
     bake.add_flag("--verify", o.verify, "check shots of the OpenCL engine against the scalar reference");
     bake.add_option("--verify-every", o.verify_every, "with --verify, check every K-th shot")

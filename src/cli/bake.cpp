@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cl/runtime.h"
+#include "cli/checkpoint.h"
 #include "cli/engine_select.h"
 #include "core/error.h"
 #include "core/timing.h"
@@ -302,6 +303,10 @@ void run_bake(const BakeOptions& options) {
         else if (o.preview_every > 0) solver_name = "progressive";
         else solver_name = direct_only || solve::Matrix::suits(mesh) ? "matrix" : "progressive";
     }
+    const bool checkpoints = !o.checkpoint.empty() || !o.resume.empty();
+    if (checkpoints && o.solver == "matrix")
+        throw InputError("--checkpoint and --resume go with the progressive solver, not --solver matrix");
+    if (checkpoints && solver_name == "matrix") solver_name = "progressive";
     if (o.preview_every > 0 && solver_name == "matrix")
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");
 
@@ -329,6 +334,15 @@ void run_bake(const BakeOptions& options) {
         return std::make_unique<formfactor::NearFieldEngine>(m, engine_like(choice, m, s));
     };
 
+    // A checkpoint resumes only the bake it was made by: the same mesh and the settings that
+    // decide its numbers (not the device: every engine gives the reference's bits).
+    const std::string fingerprint =
+        checkpoints ? bake_fingerprint(mesh, fmt::format("{} form factors, N {}, seed {}, batch {}, threshold {:.17g}",
+                                                         plan.occlusion.on ? "hemicube" : "exact", o.hemicube, o.seed,
+                                                         o.batch, plan.convergence.on ? o.threshold : kUnconvergedThreshold))
+                    : std::string();
+    const std::string resume_state = o.resume.empty() ? std::string() : read_checkpoint(o.resume, fingerprint);
+
     OutputTransaction out(o.output);
     // Only now, so that bad input is always exactly one line on stderr.
     for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
@@ -342,6 +356,7 @@ void run_bake(const BakeOptions& options) {
 
     t0 = Clock::now();
     Solution solution;
+    long resumed_from = -1;  // the passes a --resume started from
     ProgressLine progress(o.progress);
     if (solver_name == "matrix") {
         solve::MatrixSettings ms;
@@ -370,10 +385,20 @@ void run_bake(const BakeOptions& options) {
         solve_settings.max_passes = o.max_passes;
         solve_settings.batch = o.batch;
         solve::Progressive solver(mesh, engine, solve_settings);
-        long previews = 0;  // preview frames written: one each time the passes cross a multiple of K
+        if (!o.resume.empty()) {
+            restore(solver, resume_state, o.resume);
+            resumed_from = solver.passes();
+        }
+        // Preview frames and checkpoints: one each time the passes cross a multiple of K.
+        long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
+        long checkpoints_written = solver.passes() / o.checkpoint_every;
         while (solver.step()) {
             if (o.interrupted && *o.interrupted) throw Interrupted();
             progress.update(solver, threshold);
+            if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpoints_written) {
+                checkpoints_written = solver.passes() / o.checkpoint_every;
+                write_checkpoint(o.checkpoint, fingerprint, solver);
+            }
             if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
                 previews = solver.passes() / o.preview_every;
                 write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
@@ -459,6 +484,9 @@ void run_bake(const BakeOptions& options) {
         {"camera", view.name},
         {"image", {width, height}},
         {"preview_every", o.preview_every},
+        {"checkpoint", o.checkpoint},
+        {"checkpoint_every", o.checkpoint_every},
+        {"resume", o.resume},
     };
     report["counts"] = {{"triangles", scene.triangles.size()},
                         {"patches", mesh.patches.size()},
@@ -468,6 +496,7 @@ void run_bake(const BakeOptions& options) {
                         {"dropped_triangles", mesh.dropped_triangles},
                         {"skipped_primitives", scene.skipped_primitives}};
     report["passes"] = solution.passes;
+    if (resumed_from >= 0) report["resumed_from_pass"] = resumed_from;
     report["converged"] = solution.converged;
     report["error"] = solution.error;
     if (solver_name == "matrix") report["iterations"] = solution.iterations;

@@ -27,6 +27,9 @@ struct BakeOptions {
     int refine_levels = 2;        // adaptive refinement: splits of one element at most
     double contrast = 0.25;       // … of neighbours whose irradiance differs by more than this share
     std::uint64_t seed = 1;
+    std::string checkpoint;       // progressive: write the solver's state here every checkpoint_every passes
+    long checkpoint_every = 500;
+    std::string resume;           // progressive: go on from this checkpoint
     bool verify = false;
     long verify_every = 1;        // with --verify: check shots 0, K, 2K, …
     std::string camera;

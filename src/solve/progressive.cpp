@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 namespace hemirad::solve {
 namespace {
@@ -195,6 +196,59 @@ glm::dvec3 Progressive::unshot_total() const {
     glm::dvec3 flux{0.0};
     for (std::size_t p = 0; p < unshot_.size(); ++p) flux += unshot_[p] * mesh_.patches[p].area;
     return flux;
+}
+
+namespace {
+
+template <class T>
+void put(std::ostream& out, const T& value) {
+    out.write(reinterpret_cast<const char*>(&value), sizeof value);
+}
+template <class T>
+void get(std::istream& in, T& value) {
+    if (!in.read(reinterpret_cast<char*>(&value), sizeof value)) throw std::runtime_error("the checkpoint ends early");
+}
+void put_vector(std::ostream& out, const std::vector<glm::dvec3>& v) {
+    put(out, static_cast<std::uint64_t>(v.size()));
+    out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(glm::dvec3)));
+}
+void get_vector(std::istream& in, std::vector<glm::dvec3>& v) {
+    std::uint64_t n = 0;
+    get(in, n);
+    if (n != v.size()) throw std::runtime_error("the checkpoint is for another mesh");
+    if (!in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(glm::dvec3))))
+        throw std::runtime_error("the checkpoint ends early");
+}
+
+}  // namespace
+
+void Progressive::save(std::ostream& out) const {
+    put_vector(out, H_);
+    put_vector(out, unshot_);
+    put_vector(out, shot_);
+    put_vector(out, snapshot_);
+    for (const glm::dvec3& v : {emitted_, absorbed_, escaped_, recent_shot_, recent_reflected_, recent_hit_}) put(out, v);
+    put(out, static_cast<std::int64_t>(passes_));
+    put(out, static_cast<std::int64_t>(snapshot_pass_));
+    put(out, round_change_);
+    put(out, static_cast<std::uint8_t>(converged_ ? 1 : 0));
+}
+
+void Progressive::load(std::istream& in) {
+    get_vector(in, H_);
+    get_vector(in, unshot_);
+    get_vector(in, shot_);
+    get_vector(in, snapshot_);
+    for (glm::dvec3* v : {&emitted_, &absorbed_, &escaped_, &recent_shot_, &recent_reflected_, &recent_hit_}) get(in, *v);
+    std::int64_t passes = 0, snapshot_pass = 0;
+    get(in, passes);
+    get(in, snapshot_pass);
+    get(in, round_change_);
+    std::uint8_t converged = 0;
+    get(in, converged);
+    passes_ = static_cast<long>(passes);
+    snapshot_pass_ = static_cast<long>(snapshot_pass);
+    converged_ = converged != 0;
 }
 
 Energy Progressive::energy() const {

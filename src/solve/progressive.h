@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <istream>
+#include <ostream>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -66,6 +68,13 @@ public:
     // Per patch, the radiosity it has shot in all (the sum of its passes' unshot radiosity):
     // what a re-gather shoots again onto a refined mesh.
     const std::vector<glm::dvec3>& shot() const { return shot_; }
+
+    // The solver's whole state, raw (doubles bit for bit), so that a solver of the same mesh,
+    // engine and settings that load()s it goes on exactly as this one would have.
+    void save(std::ostream& out) const;
+    // Restores what save() wrote for this mesh; throws std::runtime_error when the stream ends
+    // early or its counts are not this mesh's.
+    void load(std::istream& in);
 
 private:
     const mesh::Mesh& mesh_;

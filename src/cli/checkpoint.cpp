@@ -1,0 +1,146 @@
+// Checkpoints of a progressive bake (see checkpoint.h). Layout: a magic line, the format version,
+// the fingerprint (hash and settings), then Progressive::save's bytes and an end marker.
+#include "cli/checkpoint.h"
+
+#include <fmt/core.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <system_error>
+
+#include "core/error.h"
+
+namespace hemirad::cli {
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr char kMagic[] = "hemirad checkpoint\n";
+constexpr std::uint32_t kFormat = 1;
+constexpr std::uint64_t kEndMarker = 0x444e452d4b504b43ull;  // "CKPK-END"
+
+// FNV-1a, 64 bits, over raw bytes.
+class Hash {
+public:
+    template <class T>
+    void add(const T& value) {
+        const auto* bytes = reinterpret_cast<const unsigned char*>(&value);
+        for (std::size_t i = 0; i < sizeof value; ++i) h_ = (h_ ^ bytes[i]) * 0x100000001b3ull;
+    }
+    std::uint64_t value() const { return h_; }
+
+private:
+    std::uint64_t h_ = 0xcbf29ce484222325ull;
+};
+
+void add_polygon(Hash& h, const mesh::Polygon& p) {
+    h.add(p.n);
+    for (int i = 0; i < p.n; ++i) h.add(p.v[std::size_t(i)]);
+}
+
+void write_string(std::ostream& out, const std::string& s) {
+    const auto n = static_cast<std::uint32_t>(s.size());
+    out.write(reinterpret_cast<const char*>(&n), sizeof n);
+    out.write(s.data(), static_cast<std::streamsize>(s.size()));
+}
+
+bool read_string(std::istream& in, std::string& s) {
+    std::uint32_t n = 0;
+    if (!in.read(reinterpret_cast<char*>(&n), sizeof n) || n > (1u << 20)) return false;
+    s.resize(n);
+    return static_cast<bool>(in.read(s.data(), static_cast<std::streamsize>(n)));
+}
+
+}  // namespace
+
+std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings) {
+    Hash h;
+    h.add(static_cast<std::uint64_t>(mesh.patches.size()));
+    h.add(static_cast<std::uint64_t>(mesh.elements.size()));
+    for (const mesh::Patch& p : mesh.patches) {
+        add_polygon(h, p.poly);
+        h.add(p.emission);
+        h.add(p.first_element);
+        h.add(p.element_count);
+    }
+    for (const mesh::Element& e : mesh.elements) {
+        add_polygon(h, e.poly);
+        h.add(e.rho);
+        h.add(e.emission);
+        h.add(e.patch);
+        h.add(static_cast<std::uint8_t>(e.has_twin));
+    }
+    return fmt::format("mesh {:016x}, {}", h.value(), settings);
+}
+
+void write_checkpoint(const fs::path& file, const std::string& fingerprint, const solve::Progressive& solver) {
+    fs::path temp = file;
+    temp += fmt::format(".tmp-{}", static_cast<long>(getpid()));
+    {
+        std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+        if (!out)
+            throw InputError(fmt::format("{}: cannot write the checkpoint (does its directory exist?)", file.string()));
+        out.write(kMagic, sizeof kMagic - 1);
+        out.write(reinterpret_cast<const char*>(&kFormat), sizeof kFormat);
+        write_string(out, fingerprint);
+        solver.save(out);
+        out.write(reinterpret_cast<const char*>(&kEndMarker), sizeof kEndMarker);
+        out.flush();
+        if (!out) {
+            std::error_code ec;
+            fs::remove(temp, ec);
+            throw InputError(fmt::format("{}: cannot write the checkpoint (disk full?)", file.string()));
+        }
+    }
+    std::error_code ec;
+    fs::rename(temp, file, ec);
+    if (ec) {
+        fs::remove(temp, ec);
+        throw InputError(fmt::format("{}: cannot write the checkpoint: {}", file.string(), ec.message()));
+    }
+}
+
+std::string read_checkpoint(const fs::path& file, const std::string& fingerprint) {
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw InputError(fmt::format("{}: cannot read the checkpoint ({})", file.string(), std::strerror(errno)));
+    std::ostringstream whole;
+    whole << in.rdbuf();
+    const std::string bytes = whole.str();
+    std::istringstream s(bytes);
+    char magic[sizeof kMagic - 1] = {};
+    std::uint32_t format = 0;
+    if (!s.read(magic, sizeof magic) || std::memcmp(magic, kMagic, sizeof magic) != 0)
+        throw InputError(fmt::format("{}: not a hemirad checkpoint", file.string()));
+    if (!s.read(reinterpret_cast<char*>(&format), sizeof format) || format != kFormat)
+        throw InputError(
+            fmt::format("{}: checkpoint format {} (this hemirad reads format {})", file.string(), format, kFormat));
+    std::string saved;
+    if (!read_string(s, saved))
+        throw InputError(fmt::format("{}: the checkpoint is damaged (it ends early)", file.string()));
+    if (saved != fingerprint)
+        throw InputError(fmt::format("{}: the checkpoint is of another bake: it was made for [{}], this bake is [{}]",
+                                     file.string(), saved, fingerprint));
+    const auto begin = static_cast<std::size_t>(s.tellg());
+    std::uint64_t end = 0;
+    if (bytes.size() < begin + sizeof end ||
+        (std::memcpy(&end, bytes.data() + bytes.size() - sizeof end, sizeof end), end != kEndMarker))
+        throw InputError(fmt::format("{}: the checkpoint is damaged (no end marker)", file.string()));
+    return bytes.substr(begin, bytes.size() - sizeof end - begin);
+}
+
+void restore(solve::Progressive& solver, const std::string& state, const fs::path& file) {
+    std::istringstream in(state);
+    try {
+        solver.load(in);
+    } catch (const std::runtime_error& e) {
+        throw InputError(fmt::format("{}: the checkpoint is damaged ({})", file.string(), e.what()));
+    }
+    if (in.peek() != std::char_traits<char>::eof())
+        throw InputError(fmt::format("{}: the checkpoint is damaged (bytes left over)", file.string()));
+}
+
+}  // namespace hemirad::cli
