@@ -1200,16 +1200,27 @@ TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the 
                   "; kill -KILL $pid; wait $pid";
         const RunResult killed = run_shell(dir, script);
         REQUIRE(fs::exists(ck));
-        CHECK_FALSE(fs::exists(dir / ("killed" + delay) / "report.json"));
-        const json resumed = bake_ok(dir, kClosedRoom, dir / ("resumed" + delay),
+        const fs::path out = dir / ("killed" + delay);
+        CHECK_FALSE(fs::exists(out / "report.json"));
+        // The killed bake's staging directory is left behind; the resumed bake, into the same
+        // directory as a user would, clears it (its process is gone).
+        const auto staging = [&out] {
+            std::size_t n = 0;
+            for (const auto& e : fs::directory_iterator(out))
+                n += e.path().filename().string().rfind(".hemirad-tmp-", 0) == 0 ? 1 : 0;
+            return n;
+        };
+        CHECK(staging() == 1);
+        const json resumed = bake_ok(dir, kClosedRoom, out,
                                      concat({"--resume", ck, "--checkpoint", ck, "--checkpoint-every", "100"}, settings));
+        CHECK(staging() == 0);
         CAPTURE(killed.code, resumed.at("resumed_from_pass").get<long>());
         CHECK(resumed.at("resumed_from_pass").get<long>() % 100 == 0);
         CHECK(resumed.at("resumed_from_pass").get<long>() < 2000);
         CHECK(resumed.at("passes") == full.at("passes"));
         CHECK(resumed.at("meshes") == full.at("meshes"));
         CHECK(resumed.at("energy") == full.at("energy"));
-        CHECK(read_text(dir / ("resumed" + delay) / "baked.bin") == full_bin);
+        CHECK(read_text(out / "baked.bin") == full_bin);
     }
 
     // A checkpoint resumes only its own bake; anything else is refused, naming the file.

@@ -2,7 +2,10 @@
 // Final files are written to a temporary directory and renamed into place only when all exist.
 #include "cli/bake.h"
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <algorithm>
 #include <chrono>
@@ -59,6 +62,23 @@ private:
     double seconds_ = 0.0;
 };
 
+// A bake stages its files in DIR/.hemirad-tmp-<pid> until all of them exist.
+constexpr char kStagingPrefix[] = ".hemirad-tmp-";
+
+// Staging directories left by bakes that were killed (SIGKILL, power loss): those whose process
+// no longer exists. A live process's, another user's or a reused pid's are left alone.
+void remove_stale_staging(const fs::path& dir) {
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+        const std::string name = entry.path().filename().string();
+        if (name.rfind(kStagingPrefix, 0) != 0 || !entry.is_directory(ec)) continue;
+        const std::string digits = name.substr(sizeof kStagingPrefix - 1);
+        if (digits.empty() || digits.size() > 9 || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+        const auto pid = static_cast<pid_t>(std::stol(digits));
+        if (pid > 0 && pid != getpid() && kill(pid, 0) != 0 && errno == ESRCH) fs::remove_all(entry.path(), ec);
+    }
+}
+
 // Everything this run creates under the output directory; removed unless commit() is reached.
 class OutputTransaction {
 public:
@@ -72,7 +92,8 @@ public:
         fs::create_directories(dir_, ec);
         if (ec || !fs::is_directory(dir_))
             throw InputError(fmt::format("{}: cannot create output directory: {}", dir_.string(), ec ? ec.message() : "not a directory"));
-        staging_ = dir_ / fmt::format(".hemirad-tmp-{}", static_cast<long>(getpid()));
+        remove_stale_staging(dir_);
+        staging_ = dir_ / fmt::format("{}{}", kStagingPrefix, static_cast<long>(getpid()));
         fs::remove_all(staging_, ec);
         fs::create_directories(staging_, ec);
         if (ec) throw InputError(fmt::format("{}: cannot write: {}", dir_.string(), ec.message()));
