@@ -585,8 +585,12 @@ void run_bake(const BakeOptions& options) {
     }
     out.commit({"baked.gltf", "baked.bin", "render.exr", "render.png", "report.json"});
     if (!o.quiet)
-        std::cerr << fmt::format("hemirad: {} passes, error {:.2e}, wrote {}/report.json, baked.gltf, render.exr, render.png\n",
-                                 solution.passes, solution.error, o.output);
+        std::cerr << fmt::format("hemirad: {}, {} elements, wrote {}/report.json, baked.gltf, render.exr, render.png\n",
+                                 solver_name == "matrix"
+                                     ? fmt::format("{} form-factor rows, {} sweeps, residual {:.2e}", solution.passes,
+                                                   solution.iterations, solution.error)
+                                     : fmt::format("{} passes, error {:.2e}", solution.passes, solution.error),
+                                 mesh.elements.size(), o.output);
 }
 
 }  // namespace hemirad::cli
