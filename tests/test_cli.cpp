@@ -1236,3 +1236,22 @@ TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the 
     write_text(dir / "cut", whole.substr(0, whole.size() / 2));
     expect_bad_input(dir, bake({"--resume", (dir / "cut").string()}), out, "damaged");
 }
+
+TEST_CASE("the corpus of malformed scenes: each is exit 2 with one line naming the file and the problem", "[cli]") {
+    // tests/corpus (made by tests/corpus/make_corpus.py): truncated and invalid JSON, an empty
+    // file, glTF 1.0, a missing buffer, a data URI that does not decode, accessors and buffer
+    // views past their ends, an index out of range, NaN and Inf positions, reflectance below 0
+    // and above 1, negative emission, no emitter, no geometry, only lines, counts that would
+    // exhaust memory, a .glb with a bad magic and a truncated one.
+    const fs::path corpus = kSourceDir / "tests" / "corpus";
+    const json manifest = read_json(corpus / "manifest.json");
+    REQUIRE(manifest.size() >= 20);
+    TempDir dir;
+    for (const json& c : manifest) {
+        const std::string file = c.at("file").get<std::string>();
+        INFO("corpus file " << file);
+        const fs::path out = dir / ("out_" + file);
+        const RunResult r = expect_bad_input(dir, bake_args(corpus / file, out, {"--quiet"}), out, file);
+        CHECK(r.err.find(c.at("error_contains").get<std::string>()) != std::string::npos);
+    }
+}

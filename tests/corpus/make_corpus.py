@@ -1,0 +1,148 @@
+#!/usr/bin/env python3
+"""Generate tests/corpus: malformed scenes, each of which `hemirad bake` must answer with exit
+code 2 and one line on stderr naming the file and the problem (tests/test_corpus.cpp).
+
+    python3 tests/corpus/make_corpus.py
+
+Python 3 standard library only; deterministic. Every case starts from one valid scene (a lamp
+triangle over a floor quad, its buffer a base64 data URI) and breaks one thing. manifest.json
+lists each file with a word its error line must contain.
+"""
+
+import base64
+import copy
+import json
+import math
+import os
+import struct
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+# Floor quad (y = 0, facing +y) and a lamp triangle (y = 1, facing -y).
+POSITIONS = [(-1, 0, -1), (-1, 0, 1), (1, 0, 1), (1, 0, -1), (-0.2, 1, -0.2), (0.2, 1, -0.2), (0, 1, 0.2)]
+FLOOR = [0, 1, 2, 0, 2, 3]
+LAMP = [4, 5, 6]
+
+
+def buffer_bytes(positions=POSITIONS):
+    data = b"".join(struct.pack("<3f", *p) for p in positions)
+    data += b"".join(struct.pack("<H", i) for i in FLOOR + LAMP)
+    while len(data) % 4:
+        data += b"\0"
+    return data
+
+
+def base_scene(data=None):
+    data = buffer_bytes() if data is None else data
+    npos = len(POSITIONS)
+    pos_bytes = 12 * npos
+    return {
+        "asset": {"version": "2.0", "generator": "hemirad tests/corpus/make_corpus.py"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"name": "floor", "mesh": 0}, {"name": "lamp", "mesh": 1}],
+        "meshes": [
+            {"name": "floor", "primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]},
+            {"name": "lamp", "primitives": [{"attributes": {"POSITION": 0}, "indices": 2, "material": 1}]},
+        ],
+        "materials": [
+            {"name": "grey", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1.0]}},
+            {"name": "lamp", "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0]},
+             "emissiveFactor": [1.0, 1.0, 1.0]},
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": npos, "type": "VEC3",
+             "min": [-1, 0, -1], "max": [1, 1, 1]},
+            {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"},
+            {"bufferView": 1, "byteOffset": 12, "componentType": 5123, "count": 3, "type": "SCALAR"},
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": pos_bytes},
+            {"buffer": 0, "byteOffset": pos_bytes, "byteLength": 18},
+        ],
+        "buffers": [{"byteLength": len(data),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
+    }
+
+
+def dump(g):
+    return json.dumps(g, indent=1, sort_keys=True) + "\n"
+
+
+def cases():
+    out = []  # (file name, contents (str or bytes), word the error must contain)
+    good = dump(base_scene())
+    out.append(("truncated.gltf", good[: len(good) // 2], "truncated.gltf"))
+    out.append(("not_json.gltf", "this is not a glTF file\n", "not_json.gltf"))
+    out.append(("empty_file.gltf", "", "empty_file.gltf"))
+
+    g = base_scene(); g["asset"]["version"] = "1.0"
+    out.append(("version_1.gltf", dump(g), "version"))
+
+    g = base_scene(); g["buffers"][0]["uri"] = "missing.bin"
+    out.append(("missing_buffer.gltf", dump(g), "missing.bin"))
+
+    g = base_scene(); g["buffers"][0]["uri"] = "data:application/octet-stream;base64,@@@not base64@@@"
+    out.append(("bad_data_uri.gltf", dump(g), "bad_data_uri.gltf"))
+
+    g = base_scene(); g["accessors"][0]["count"] = 1000
+    out.append(("accessor_past_view.gltf", dump(g), "accessor"))
+
+    g = base_scene(); g["bufferViews"][1]["byteLength"] = 4000
+    out.append(("view_past_buffer.gltf", dump(g), "past the end"))
+
+    data = bytearray(buffer_bytes())
+    struct.pack_into("<H", data, 12 * len(POSITIONS) + 2, 99)  # floor index 1 -> 99 (7 vertices)
+    out.append(("index_out_of_range.gltf", dump(base_scene(bytes(data))), "index"))
+
+    nan = list(POSITIONS); nan[2] = (math.nan, 0.0, 1.0)
+    out.append(("nan_position.gltf", dump(base_scene(buffer_bytes(nan))), "nan_position.gltf"))
+    inf = list(POSITIONS); inf[5] = (math.inf, 1.0, -0.2)
+    out.append(("inf_position.gltf", dump(base_scene(buffer_bytes(inf))), "inf_position.gltf"))
+
+    g = base_scene(); g["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [-0.5, 0.5, 0.5, 1.0]
+    out.append(("negative_reflectance.gltf", dump(g), "baseColorFactor"))
+    g = base_scene(); g["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [1.5, 0.5, 0.5, 1.0]
+    out.append(("reflectance_above_1.gltf", dump(g), "baseColorFactor"))
+    g = base_scene(); g["materials"][1]["emissiveFactor"] = [-1.0, 1.0, 1.0]
+    out.append(("negative_emission.gltf", dump(g), "emissive"))
+    g = base_scene(); del g["materials"][1]["emissiveFactor"]
+    out.append(("no_emitters.gltf", dump(g), "emits"))
+
+    g = base_scene(); g["scenes"][0]["nodes"] = []
+    out.append(("no_geometry.gltf", dump(g), "no_geometry.gltf"))
+    g = base_scene()
+    for m in g["meshes"]:
+        for p in m["primitives"]:
+            p["mode"] = 1  # LINES
+    out.append(("only_lines.gltf", dump(g), "only_lines.gltf"))
+
+    g = base_scene(); g["accessors"][0]["count"] = 4000000000
+    out.append(("huge_count.gltf", dump(g), "huge_count.gltf"))
+    g = base_scene(); g["buffers"][0]["byteLength"] = 2 ** 62
+    out.append(("huge_buffer.gltf", dump(g), "huge_buffer.gltf"))
+
+    out.append(("bad_magic.glb", b"glTX" + struct.pack("<II", 2, 12), "bad_magic.glb"))
+    glb_json = dump(base_scene()).encode()
+    while len(glb_json) % 4:
+        glb_json += b" "
+    glb = b"glTF" + struct.pack("<II", 2, 12 + 8 + len(glb_json)) + struct.pack("<I", len(glb_json)) + b"JSON" + glb_json
+    out.append(("truncated.glb", glb[: len(glb) // 2], "truncated.glb"))
+    return out
+
+
+def main():
+    manifest = []
+    for name, contents, word in cases():
+        path = os.path.join(HERE, name)
+        mode = "wb" if isinstance(contents, bytes) else "w"
+        with open(path, mode) as f:
+            f.write(contents)
+        manifest.append({"file": name, "error_contains": word})
+    with open(os.path.join(HERE, "manifest.json"), "w") as f:
+        f.write(json.dumps(manifest, indent=1) + "\n")
+    print("wrote", len(manifest), "cases to", HERE)
+
+
+if __name__ == "__main__":
+    main()
