@@ -12,6 +12,8 @@ packages=(
   catch2 libcli11-dev libfmt-dev
   # The ray-casting peer engine of bench/ (optional in CMake, installed here so CI builds it).
   libembree-dev
+  # tests/fuzz: the loader's libFuzzer target (clang with its fuzzer runtime).
+  clang
   # bench/plot.py: PNG plots from the benchmark's JSON.
   python3 python3-matplotlib
 )
