@@ -126,9 +126,8 @@ std::string read_checkpoint(const fs::path& file, const std::string& fingerprint
                                      file.string(), saved, fingerprint));
     const auto begin = static_cast<std::size_t>(s.tellg());
     std::uint64_t end = 0;
-    if (bytes.size() < begin + sizeof end ||
-        (std::memcpy(&end, bytes.data() + bytes.size() - sizeof end, sizeof end), end != kEndMarker))
-        throw InputError(fmt::format("{}: the checkpoint is damaged (no end marker)", file.string()));
+    if (bytes.size() >= begin + sizeof end) std::memcpy(&end, bytes.data() + bytes.size() - sizeof end, sizeof end);
+    if (end != kEndMarker) throw InputError(fmt::format("{}: the checkpoint is damaged (no end marker)", file.string()));
     return bytes.substr(begin, bytes.size() - sizeof end - begin);
 }
 
