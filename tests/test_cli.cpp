@@ -145,6 +145,8 @@ json bake_ok(const TempDir& dir, const fs::path& scene, const fs::path& out,
     INFO("stderr: " << r.err);
     REQUIRE(r.code == 0);
     REQUIRE(fs::is_regular_file(out / "report.json"));
+    // A NaN or Inf would be written as null: no bake of these tests may have one.
+    CHECK(read_text(out / "report.json").find("null") == std::string::npos);
     return read_json(out / "report.json");
 }
 

@@ -25,6 +25,7 @@
 #include "core/timing.h"
 #include "formfactor/near_field.h"
 #include "mesh/mesh.h"
+#include "output/finite.h"
 #include "output/output.h"
 #include "scene/scene.h"
 #include "scene/effects.h"
@@ -146,12 +147,6 @@ private:
 };
 
 ordered_json vec3(const glm::dvec3& v) { return ordered_json::array({v.x, v.y, v.z}); }
-
-bool all_finite(const std::vector<glm::dvec3>& values) {
-    for (const auto& v : values)
-        if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) return false;
-    return true;
-}
 
 void check_scene(const scene::Scene& scene) {
     if (scene.triangles.empty())
@@ -473,10 +468,11 @@ void run_bake(const BakeOptions& options) {
     t0 = Clock::now();
     const auto& radiosity = solution.radiosity;
     const auto& irradiance = solution.irradiance;
-    if (!all_finite(radiosity) || !all_finite(irradiance))
+    if (!output::all_finite(radiosity) || !output::all_finite(irradiance))
         throw InternalError("the solution has a non-finite value; nothing written");
     output::write_baked_gltf(out.staged("baked.gltf"), scene, mesh, radiosity);
     const output::Image image = output::render(scene, mesh, radiosity, view, width, height);
+    if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
     output::write_exr(image, out.staged("render.exr"));
     output::write_png(image, out.staged("render.png"), output::auto_exposure(image));
     const double t_output_files = seconds_since(t0);
@@ -578,6 +574,9 @@ void run_bake(const BakeOptions& options) {
                            {"refine", t_refine},
                            {"output", t_output_files},
                            {"total", seconds_since(t_total)}};
+    // NaN and Inf would be written as null: refuse the whole bake rather than a report that lies.
+    if (const std::string where = output::first_non_finite(report); !where.empty())
+        throw InternalError(fmt::format("report.json: {} is not finite; nothing written", where));
     {
         std::ofstream f(out.staged("report.json"));
         f << report.dump(2) << "\n";
