@@ -84,6 +84,28 @@ void check_readable(const fs::path& file, const std::string& name) {
     }
 }
 
+// tinygltf's own reader sizes its buffer by seeking to the end, which for a directory (a buffer
+// uri naming one) gives an absurd size and an out-of-memory crash: only regular files are read.
+bool read_regular_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec)) {
+        if (err) *err += "'" + path + "' is not a readable file\n";
+        return false;
+    }
+    const std::uintmax_t size = fs::file_size(path, ec);
+    std::ifstream in(path, std::ios::binary);
+    if (ec || !in) {
+        if (err) *err += "cannot read '" + path + "'\n";
+        return false;
+    }
+    out->resize(static_cast<std::size_t>(size));
+    if (size > 0 && !in.read(reinterpret_cast<char*>(out->data()), static_cast<std::streamsize>(size))) {
+        if (err) *err += "cannot read '" + path + "'\n";
+        return false;
+    }
+    return true;
+}
+
 tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector<std::string>& warnings) {
     const std::string ext = lowercase(file.extension().string());
     if (ext != ".gltf" && ext != ".glb") {
@@ -92,6 +114,8 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     check_readable(file, name);
 
     tinygltf::TinyGLTF gltf;
+    gltf.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_regular_file, &tinygltf::WriteWholeFile,
+                         nullptr});
     tinygltf::Model model;
     std::string err, warn;
     const bool ok = ext == ".glb" ? gltf.LoadBinaryFromFile(&model, &err, &warn, file.string())

@@ -82,6 +82,11 @@ def cases():
     g = base_scene(); g["buffers"][0]["uri"] = "missing.bin"
     out.append(("missing_buffer.gltf", dump(g), "missing.bin"))
 
+    # A buffer that cannot be read: its uri names a directory (unreadable_buffer.bin/, kept in git
+    # by the file inside it), which no permission bit can make readable, even to root.
+    g = base_scene(); g["buffers"][0]["uri"] = "unreadable_buffer.bin"
+    out.append(("unreadable_buffer.gltf", dump(g), "unreadable_buffer"))
+
     g = base_scene(); g["buffers"][0]["uri"] = "data:application/octet-stream;base64,@@@not base64@@@"
     out.append(("bad_data_uri.gltf", dump(g), "bad_data_uri.gltf"))
 
@@ -132,6 +137,9 @@ def cases():
 
 
 def main():
+    os.makedirs(os.path.join(HERE, "unreadable_buffer.bin"), exist_ok=True)
+    with open(os.path.join(HERE, "unreadable_buffer.bin", "README"), "w") as f:
+        f.write("A directory where unreadable_buffer.gltf expects its buffer file.\n")
     manifest = []
     for name, contents, word in cases():
         path = os.path.join(HERE, name)
