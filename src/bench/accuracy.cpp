@@ -190,17 +190,16 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
         return engines.make(mm, {solve::regather_hemicube(r.hemicube, level), 1});
     };
     std::unique_ptr<formfactor::Engine> engine = make_engine(m, 0);
-    std::vector<glm::dvec3> irradiance, shot;  // per element (the ambient term included); per patch
+    std::vector<glm::dvec3> radiosity, irradiance, shot;  // per element (the ambient term included); per patch
     long passes = 0;                           // hemicubes (rows, or passes) the solver shot
     int iterations = 0;                        // Gauss–Seidel sweeps (matrix)
     if (r.solver == "matrix") {
-        solve::MatrixSettings ms;  // as a bake sets them
-        ms.tolerance = std::min(1e-4, r.threshold * 1e-2);
-        ms.batch = std::max(r.batch, 64);
+        solve::MatrixSettings ms = solve::matrix_settings(r.threshold, r.batch);  // as a bake sets them
         ms.grey = false;  // the room has a red wall: a bake plans colour on
         solve::Matrix solver(m, *engine, ms);
         solver.solve();
         if (!solver.converged()) throw InternalError("accuracy: the matrix solve did not converge");
+        radiosity = solver.radiosity();
         irradiance = solver.irradiance();
         shot = solver.patch_radiosity();
         passes = solver.rows();
@@ -212,6 +211,7 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
         solve::Progressive solver(m, *engine, settings);
         while (solver.step()) {
         }
+        radiosity = solver.radiosity(/*ambient=*/true);
         irradiance = solver.irradiance(/*ambient=*/true);
         shot = solver.shot();
         passes = solver.passes();
@@ -220,17 +220,14 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
     long regather_shots = 0;
     if (r.refine_levels > 0) {  // as a bake: split where the irradiance contrasts, re-gather
         solve::RefineSettings rs;
-        rs.contrast = 0.25;  // a bake's default --contrast
         rs.max_levels = r.refine_levels;
         rs.batch = std::max(r.batch, 64);
         solve::RefineResult refined = solve::refine(std::move(m), std::move(irradiance), shot, make_engine, rs);
         m = std::move(refined.mesh);
         irradiance = std::move(refined.irradiance);
+        radiosity = std::move(refined.radiosity);
         for (const solve::RefineLevel& level : refined.levels) regather_shots += level.shots;
     }
-    std::vector<glm::dvec3> radiosity(m.elements.size());
-    for (std::size_t k = 0; k < m.elements.size(); ++k)
-        radiosity[k] = m.elements[k].emission + m.elements[k].rho * irradiance[k];
     const double seconds = seconds_since(t0);
 
     // The error a user sees: radiosity (luminance) at probe points over every surface.

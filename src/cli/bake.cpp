@@ -375,9 +375,8 @@ void run_bake(const BakeOptions& options) {
     long resumed_from = -1;  // the passes a --resume started from
     ProgressLine progress(o.progress);
     if (solver_name == "matrix") {
-        solve::MatrixSettings ms;
-        ms.tolerance = plan.convergence.on ? std::min(1e-4, o.threshold * 1e-2) : kUnconvergedTolerance;
-        ms.batch = std::max(o.batch, 64);
+        solve::MatrixSettings ms = solve::matrix_settings(o.threshold, o.batch);
+        if (!plan.convergence.on) ms.tolerance = kUnconvergedTolerance;
         ms.grey = !plan.colour.on;
         ms.interreflection = !direct_only;
         ms.max_iterations = kMaxSweeps;
@@ -458,9 +457,7 @@ void run_bake(const BakeOptions& options) {
         if (o.interrupted && *o.interrupted) throw Interrupted();
         mesh = std::move(refined.mesh);
         solution.irradiance = std::move(refined.irradiance);
-        solution.radiosity.resize(mesh.elements.size());
-        for (std::size_t k = 0; k < mesh.elements.size(); ++k)
-            solution.radiosity[k] = mesh.elements[k].emission + mesh.elements[k].rho * solution.irradiance[k];
+        solution.radiosity = std::move(refined.radiosity);
         levels = std::move(refined.levels);
     }
     const double t_refine = seconds_since(t0);

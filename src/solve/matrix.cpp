@@ -61,6 +61,13 @@ Matrix::Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixS
     for (const auto& e : mesh.elements) B_.push_back(e.emission);
 }
 
+MatrixSettings matrix_settings(double threshold, int batch) {
+    MatrixSettings s;
+    s.tolerance = std::min(1e-4, threshold * 1e-2);
+    s.batch = std::max(batch, 64);
+    return s;
+}
+
 bool Matrix::suits(const mesh::Mesh& mesh) {
     if (mesh.patches.size() > kDefaultMaxPatches) return false;
     for (const mesh::Element& e : mesh.elements)

@@ -35,6 +35,10 @@ struct MatrixSettings {
     const std::atomic<bool>* cancel = nullptr;
 };
 
+// A bake's settings: iterate to a residual of min(1e-4, threshold / 100) and shoot rows in
+// batches of at least 64 (one launch per kernel stage on OpenCL, what fills a GPU).
+MatrixSettings matrix_settings(double threshold, int batch);
+
 class Matrix {
 public:
     // Throws std::invalid_argument when settings.grey is set and some element's ρ or E is not grey.

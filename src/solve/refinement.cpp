@@ -186,6 +186,9 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
         irradiance = std::move(next);
         level = std::move(next_level);
     }
+    result.radiosity.resize(mesh.elements.size());
+    for (std::size_t k = 0; k < mesh.elements.size(); ++k)
+        result.radiosity[k] = mesh.elements[k].emission + mesh.elements[k].rho * irradiance[k];
     result.mesh = std::move(mesh);
     result.irradiance = std::move(irradiance);
     return result;

@@ -50,6 +50,7 @@ struct RefineLevel {
 struct RefineResult {
     mesh::Mesh mesh;
     std::vector<glm::dvec3> irradiance;  // per element of `mesh`
+    std::vector<glm::dvec3> radiosity;   // per element: E + ρ·irradiance
     std::vector<RefineLevel> levels;     // one per level that split anything
 };
 
