@@ -14,6 +14,7 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <string>
@@ -49,6 +50,27 @@ struct Loader {
         if (warned.insert(key).second) warn(problem);
     }
 };
+
+// tinygltf's messages in plain words: without nlohmann's exception tags and the tail of the text
+// it read off a JSON parse error, or tinygltf's repetition of a path read_regular_file names,
+// and a data URI's payload (it can be megabytes) cut to its first bytes.
+std::string plain_words(std::string text) {
+    static const std::regex json_tag(R"(\[json\.exception\.[a-z_]+\.[0-9]+\] )");
+    static const std::regex last_read(R"(; last read: '[^\n]*)");
+    static const std::regex decode(R"(Failed to decode 'uri' : (.*) in Buffer)");
+    static const std::regex payload(R"((data:[^,\s]*,)([^\s]{24})[^\s]+)");
+    if (std::regex_search(text, json_tag)) {
+        text = std::regex_replace(text, json_tag, "not valid JSON: ");
+        text = std::regex_replace(text, last_read, "");
+    }
+    static const std::regex not_found(R"(File not found : ([^\n]*))");
+    static const std::regex read_error(R"(File read error : [^\n]* : )");
+    text = std::regex_replace(text, not_found, "file not found: $1 (a buffer or image the scene names)");
+    text = std::regex_replace(text, read_error, "");
+    text = std::regex_replace(text, decode,
+                              "a buffer's data URI does not decode to the byteLength the buffer declares ($1)");
+    return std::regex_replace(text, payload, "$1$2...");
+}
 
 // tinygltf reports several '\n'-terminated lines; the CLI prints exactly one.
 std::string one_line(const std::string& text) {
@@ -89,7 +111,7 @@ void check_readable(const fs::path& file, const std::string& name) {
 bool read_regular_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
     std::error_code ec;
     if (!fs::is_regular_file(path, ec)) {
-        if (err) *err += "'" + path + "' is not a readable file\n";
+        if (err) *err += "'" + path + "' (a buffer or image the scene names) is not a readable file\n";
         return false;
     }
     const std::uintmax_t size = fs::file_size(path, ec);
@@ -121,7 +143,7 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     const bool ok = ext == ".glb" ? gltf.LoadBinaryFromFile(&model, &err, &warn, file.string())
                                   : gltf.LoadASCIIFromFile(&model, &err, &warn, file.string());
     if (!ok || !err.empty()) {
-        const std::string why = one_line(err);
+        const std::string why = one_line(plain_words(err));
         throw InputError(name + ": " + (why.empty() ? "cannot parse glTF" : why));
     }
     std::istringstream lines(warn);
