@@ -900,6 +900,178 @@ TEST_CASE("auto falls back to the reference when the OpenCL kernels do not build
     CHECK(!fs::exists(forced));
 }
 
+TEST_CASE("zero-area triangles are dropped and counted in the report with a warning", "[cli]") {
+    // closed_room plus a node of three degenerate triangles (collinear, a repeated vertex, a
+    // point) in a buffer of their own: the bake drops exactly those, says so, and the numbers of
+    // every other node are the plain room's.
+    const TempDir dir;
+    json scene = read_json(kClosedRoom);
+    const float p[27] = {0, 1, 0, 1, 1, 0, 2, 1, 0,  // collinear
+                         0, 1, 1, 0, 1, 1, 1, 1, 1,  // a repeated vertex
+                         1, 2, 1, 1, 2, 1, 1, 2, 1}; // a point
+    write_text(dir / "degenerate.bin", std::string(reinterpret_cast<const char*>(p), sizeof p));
+    const std::size_t buffer = scene["buffers"].size(), view = scene["bufferViews"].size(),
+                      accessor = scene["accessors"].size(), mesh = scene["meshes"].size(), node = scene["nodes"].size();
+    scene["buffers"].push_back({{"uri", "degenerate.bin"}, {"byteLength", sizeof p}});
+    scene["bufferViews"].push_back({{"buffer", buffer}, {"byteLength", sizeof p}});
+    scene["accessors"].push_back({{"bufferView", view}, {"componentType", 5126}, {"count", 9}, {"type", "VEC3"},
+                                  {"min", {0, 1, 0}}, {"max", {2, 2, 1}}});
+    scene["meshes"].push_back({{"name", "slivers"}, {"primitives", {{{"attributes", {{"POSITION", accessor}}}, {"material", 0}}}}});
+    scene["nodes"].push_back({{"name", "slivers"}, {"mesh", mesh}});
+    scene["scenes"][0]["nodes"].push_back(node);
+    write_json(dir / "with_slivers.gltf", scene);
+
+    const json plain = bake_ok(dir, kClosedRoom, dir / "plain");
+    const RunResult r = run_hemirad(dir, bake_args(dir / "with_slivers.gltf", dir / "out"));
+    INFO("stderr: [" << r.err << "]");
+    REQUIRE(r.code == 0);
+    CHECK(r.err.find("3 of ") != std::string::npos);
+    CHECK(r.err.find("were dropped") != std::string::npos);
+    CHECK(read_text(dir / "out" / "report.json").find("null") == std::string::npos);  // no 0 / 0 in any average
+    const json report = read_json(dir / "out" / "report.json");
+    CHECK(report["counts"]["dropped_triangles"] == 3);
+    CHECK(report["counts"]["triangles"] == plain["counts"]["triangles"].get<int>() + 3);
+    CHECK(report["counts"]["elements"] == plain["counts"]["elements"]);
+    CHECK(report["warnings"].dump().find("were dropped") != std::string::npos);
+    const json& meshes = report["meshes"];
+    REQUIRE(meshes.size() == plain["meshes"].size() + 1);
+    for (std::size_t i = 0; i < plain["meshes"].size(); ++i) CHECK(meshes[i] == plain["meshes"][i]);
+    CHECK(meshes.back()["name"] == "slivers");
+    CHECK(meshes.back()["area"] == 0.0);
+    CHECK(meshes.back()["radiosity"] == json::array({0.0, 0.0, 0.0}));
+}
+
+// Faults (issue 6): HEMIRAD_FAULT makes the OpenCL engine fail as a broken device would. A bake on
+// the automatic choice starts again on the reference and ends with exactly the reference bake's
+// numbers; a device asked for by name stops the bake (exit 1) with the reason, writing nothing.
+TEST_CASE("a device that fails part-way: auto starts again on the reference and a named device stops", "[cli][faults]") {
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    const TempDir dir;
+    const std::vector<std::string> args = concat(kFast, {"--solver", "progressive", "--batch", "4"});
+    const fs::path ref = dir / "ref", fell_back = dir / "fell_back", named = dir / "named";
+    bake_ok(dir, kClosedRoom, ref, concat(args, {"--device", "ref"}));
+
+    const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, fell_back, args), "HEMIRAD_FAULT=fail-after:2 ");
+    INFO("stderr: [" << r.err << "]");
+    REQUIRE(r.code == 0);
+    CHECK(r.err.find("failed part-way") != std::string::npos);
+    const json report = read_json(fell_back / "report.json");
+    CHECK(report["device"]["backend"] == "ref");
+    CHECK(report["device"]["fallback"]["from"].get<std::string>().rfind("opencl:", 0) == 0);
+    CHECK(report["device"]["fallback"]["why"].get<std::string>().find("CL_INVALID_COMMAND_QUEUE") != std::string::npos);
+    CHECK(report["warnings"].dump().find("starting again on the reference engine") != std::string::npos);
+    CHECK(read_text(fell_back / "baked.bin") == read_text(ref / "baked.bin"));
+
+    const RunResult stopped =
+        run_hemirad(dir, bake_args(kClosedRoom, named, concat(args, {"--device", "opencl"})), "HEMIRAD_FAULT=fail-after:2 ");
+    INFO("stderr: [" << stopped.err << "]");
+    CHECK(stopped.code == 1);
+    CHECK(stopped.err.find("hemirad: device failed: ") != std::string::npos);
+    CHECK(stopped.err.find("CL_INVALID_COMMAND_QUEUE") != std::string::npos);
+    CHECK(!fs::exists(named));
+}
+
+TEST_CASE("a device that returns wrong numbers: --verify catches it and auto starts again on the reference", "[cli][faults]") {
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    const TempDir dir;
+    const std::vector<std::string> args = concat(kFast, {"--solver", "progressive"});
+    const fs::path ref = dir / "ref";
+    bake_ok(dir, kClosedRoom, ref, concat(args, {"--device", "ref"}));
+
+    // Wrong from the first shot: the automatic choice's probe shot sees it before the bake starts.
+    const fs::path probed = dir / "probed";
+    const RunResult p = run_hemirad(dir, bake_args(kClosedRoom, probed, args), "HEMIRAD_FAULT=wrong-after:0 ");
+    INFO("stderr: [" << p.err << "]");
+    REQUIRE(p.code == 0);
+    CHECK(p.err.find("disagrees with the reference") != std::string::npos);
+    CHECK(read_json(probed / "report.json")["device"]["backend"] == "ref");
+    CHECK(read_text(probed / "baked.bin") == read_text(ref / "baked.bin"));
+
+    // Wrong after the probe: --verify catches it part-way.
+    const fs::path verified = dir / "verified";
+    const RunResult v = run_hemirad(dir, bake_args(kClosedRoom, verified, concat(args, {"--verify"})),
+                                    "HEMIRAD_FAULT=wrong-after:1 ");
+    INFO("stderr: [" << v.err << "]");
+    REQUIRE(v.code == 0);
+    const json report = read_json(verified / "report.json");
+    CHECK(report["device"]["backend"] == "ref");
+    CHECK(report["device"]["fallback"]["why"].get<std::string>().rfind("verification failed: ", 0) == 0);
+    CHECK(!report.contains("verify"));  // the reference engine is not checked against itself
+    CHECK(read_text(verified / "baked.bin") == read_text(ref / "baked.bin"));
+
+    // Asked for by name, the mismatch stops the bake with the numbers.
+    const fs::path named = dir / "named";
+    const RunResult n = run_hemirad(dir, bake_args(kClosedRoom, named, concat(args, {"--verify", "--device", "opencl"})),
+                                    "HEMIRAD_FAULT=wrong-after:1 ");
+    INFO("stderr: [" << n.err << "]");
+    CHECK(n.code == 1);
+    CHECK(n.err.find("hemirad: verification failed: ") != std::string::npos);
+    CHECK(n.err.find("the reference says") != std::string::npos);
+    CHECK(!fs::exists(named));
+}
+
+TEST_CASE("a device out of memory: batches shrink and the numbers do not change", "[cli][faults]") {
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    const TempDir dir;
+    const std::vector<std::string> args = concat(kFast, {"--solver", "progressive", "--batch", "8"});
+    const fs::path ref = dir / "ref", shrunk = dir / "shrunk", none = dir / "none";
+    bake_ok(dir, kClosedRoom, ref, concat(args, {"--device", "ref"}));
+
+    const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, shrunk, concat(args, {"--device", "opencl"})),
+                                    "HEMIRAD_FAULT=oom-above:3 ");
+    INFO("stderr: [" << r.err << "]");
+    REQUIRE(r.code == 0);
+    const json report = read_json(shrunk / "report.json");
+    CHECK(report["device"]["backend"] == "opencl");
+    CHECK(report["warnings"].dump().find("ran out of memory") != std::string::npos);
+    CHECK(report["warnings"].dump().find("as few as 2 shots") != std::string::npos);  // 8 → 4 → 2
+    CHECK(read_text(shrunk / "baked.bin") == read_text(ref / "baked.bin"));
+
+    // Not even one shot fits: a named device stops; auto uses the reference from the start.
+    const RunResult n = run_hemirad(dir, bake_args(kClosedRoom, none, concat(args, {"--device", "opencl"})),
+                                    "HEMIRAD_FAULT=oom-above:0 ");
+    INFO("stderr: [" << n.err << "]");
+    CHECK(n.code == 1);
+    CHECK(n.err.find("cannot hold the mesh") != std::string::npos);
+    CHECK(!fs::exists(none));
+    const RunResult a = run_hemirad(dir, bake_args(kClosedRoom, none, args), "HEMIRAD_FAULT=oom-above:0 ");
+    INFO("stderr: [" << a.err << "]");
+    REQUIRE(a.code == 0);
+    CHECK(read_json(none / "report.json")["device"]["backend"] == "ref");
+    CHECK(read_text(none / "baked.bin") == read_text(ref / "baked.bin"));
+
+    // A malformed HEMIRAD_FAULT is bad usage, never silently no fault.
+    const RunResult bad = run_hemirad(dir, bake_args(kClosedRoom, dir / "bad", args), "HEMIRAD_FAULT=oom-above ");
+    CHECK(bad.code == 2);
+    check_one_line(bad.err);
+    CHECK(bad.err.find("HEMIRAD_FAULT=oom-above") != std::string::npos);
+}
+
+TEST_CASE("no OpenCL platform at all: auto bakes on the reference and opencl or --verify is bad usage", "[cli][faults]") {
+    const TempDir dir;
+    fs::create_directories(dir / "no_icds");
+    const std::string no_platform = "OCL_ICD_VENDORS=" + shell_quote((dir / "no_icds").string()) + " ";
+    const fs::path out = dir / "out";
+    const RunResult a = run_hemirad(dir, bake_args(kClosedRoom, out), no_platform);
+    INFO("stderr: [" << a.err << "]");
+    REQUIRE(a.code == 0);
+    CHECK(read_json(out / "report.json")["device"]["backend"] == "ref");
+    for (const std::vector<std::string>& extra : {std::vector<std::string>{"--device", "opencl"},
+                                                  std::vector<std::string>{"--device", "opencl:0.0"},
+                                                  std::vector<std::string>{"--verify"}}) {
+        const fs::path none = dir / "none";
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, none, concat(kFast, extra)), no_platform);
+        CAPTURE(extra);
+        CHECK(r.code == 2);
+        check_one_line(r.err);
+        CHECK(r.err.find("OpenCL device") != std::string::npos);
+        CHECK(!fs::exists(none));
+    }
+    const RunResult d = run_hemirad(dir, {"devices"}, no_platform);
+    CHECK(d.code == 0);
+    CHECK(d.out.find("no OpenCL platform or device found") != std::string::npos);
+}
+
 namespace {
 
 // `hemirad bench` on a tiny closed procedural scene and a file, quickly (no calibration).
@@ -1183,7 +1355,9 @@ TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the 
     const std::vector<std::string> settings = {"--hemicube", "32", "--patch-size", "0.5", "--element-size", "0.25",
                                                "--threshold", "1e-6", "--max-passes", "2000", "--solver",
                                                "progressive", "--image-width", "32", "--quiet"};
-    const json full = bake_ok(dir, kClosedRoom, dir / "full", settings);
+    const std::string ck_full = (dir / "ck_full").string();
+    const json full = bake_ok(dir, kClosedRoom, dir / "full",
+                              concat({"--checkpoint", ck_full, "--checkpoint-every", "300"}, settings));
     REQUIRE(full.at("passes").get<long>() == 2000);
     const std::string full_bin = read_text(dir / "full" / "baked.bin");
 
@@ -1224,6 +1398,12 @@ TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the 
         CHECK(resumed.at("energy") == full.at("energy"));
         CHECK(read_text(out / "baked.bin") == full_bin);
     }
+
+    // The finished solve is checkpointed too (2000 is no multiple of 300): resumed, it goes
+    // straight to refinement and output.
+    const json finished = bake_ok(dir, kClosedRoom, dir / "finished", concat({"--resume", ck_full}, settings));
+    CHECK(finished.at("resumed_from_pass") == 2000);
+    CHECK(read_text(dir / "finished" / "baked.bin") == full_bin);
 
     // A checkpoint resumes only its own bake; anything else is refused, naming the file.
     const fs::path ck = dir / "ck0.1";

@@ -381,3 +381,91 @@ TEST_CASE("opencl: PoCL's workers are pinned only where every worker's CPU is al
     CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, nullptr, nullptr, 2, 1, 2));  // online 0 and 2, not 1
     CHECK_FALSE(ocl::should_pin_pocl_threads(nullptr, nullptr, nullptr, 0, 0, 0));
 }
+
+TEST_CASE("opencl: out of device memory, a batch runs again in smaller parts with the same results",
+          "[opencl][faults]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const Case c = comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    formfactor::OpenCLEngine whole(m, *ctx, {128, 5});
+    formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+    std::vector<std::pair<std::size_t, std::size_t>> shrinks;  // (shots, limit)
+    tuning.on_shrink = [&](std::size_t shots, std::size_t limit, const std::string& why) {
+        shrinks.emplace_back(shots, limit);
+        CHECK(why.find("CL_MEM_OBJECT_ALLOCATION_FAILURE") != std::string::npos);
+    };
+    formfactor::OpenCLFault fault;
+    fault.oom_above = 2;  // buffers for three shots or more fail as out of memory
+    formfactor::OpenCLEngine tight(m, *ctx, {128, 5}, tuning, fault);
+
+    std::vector<formfactor::ShotRequest> requests;
+    for (std::uint32_t i = 0; i < 7; ++i)
+        requests.push_back({static_cast<std::uint32_t>((3 * i) % m.patches.size()), 10u + i});
+    std::vector<formfactor::ShotResult> want, got;
+    whole.shoot_batch(requests, want);
+    tight.shoot_batch(requests, got);
+    // 7 fails, then 4 (halves, rounded up), and 2 fits: parts [0, 4) → [0, 2) [2, 4), [4, 7) → [4, 6) [6, 7).
+    CHECK(shrinks == std::vector<std::pair<std::size_t, std::size_t>>{{7, 4}, {4, 2}});
+    CHECK(tight.max_batch() == 2);
+    REQUIRE(got.size() == requests.size());
+    for (std::size_t i = 0; i < requests.size(); ++i) {
+        CAPTURE(i);
+        CHECK(got[i].F == want[i].F);
+        CHECK(got[i].blocked == want[i].blocked);
+    }
+    // The id buffers kept are the last launch's: shot 6 alone.
+    CHECK(tight.last_ids(5) == nullptr);
+    REQUIRE(tight.last_ids(6) != nullptr);
+    CHECK(*tight.last_ids(6) == *whole.last_ids(6));
+    // Later batches start at the lowered limit: no new failure.
+    tight.shoot_batch({requests[0], requests[1]}, got);
+    CHECK(shrinks.size() == 2);
+    CHECK(got[1].F == want[1].F);
+}
+
+TEST_CASE("opencl: a device that fails says so as a DeviceError; a wrong one is caught by comparison",
+          "[opencl][faults]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const Case c = comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    const formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+    formfactor::ShotResult got, want;
+    formfactor::ReferenceEngine ref(m, {64, 5});
+    ref.shoot(1, 2, want);
+
+    formfactor::OpenCLFault none_fits;
+    none_fits.oom_above = 0;  // not even the first shot's buffers
+    CHECK_THROWS_WITH(formfactor::OpenCLEngine(m, *ctx, {64, 5}, tuning, none_fits),
+                      Catch::Contains("cannot hold the mesh") && Catch::Contains("CL_MEM_OBJECT_ALLOCATION_FAILURE"));
+
+    formfactor::OpenCLFault lost;
+    lost.fail_after = 1;
+    formfactor::OpenCLEngine failing(m, *ctx, {64, 5}, tuning, lost);
+    failing.shoot(1, 2, got);
+    CHECK(formfactor::compare_shot(got, want).empty());
+    try {
+        failing.shoot(1, 2, got);
+        FAIL("the second launch should have failed");
+    } catch (const ocl::DeviceError& e) {
+        CHECK_THAT(e.what(), Catch::Contains(ctx->info().name) && Catch::Contains("CL_INVALID_COMMAND_QUEUE (-36)"));
+    }
+
+    formfactor::OpenCLFault wrong;
+    wrong.wrong_after = 0;
+    formfactor::OpenCLEngine lying(m, *ctx, {64, 5}, tuning, wrong);
+    lying.shoot(1, 2, got);
+    CHECK_THAT(formfactor::compare_shot(got, want), Catch::Contains("the reference says"));
+}
+
+TEST_CASE("opencl: HEMIRAD_FAULT's grammar", "[opencl][faults]") {
+    const formfactor::OpenCLFault none = formfactor::parse_fault("");
+    CHECK(none.oom_above == formfactor::OpenCLFault::kNever);
+    CHECK(none.fail_after == formfactor::OpenCLFault::kNever);
+    CHECK(none.wrong_after == formfactor::OpenCLFault::kNever);
+    const formfactor::OpenCLFault both = formfactor::parse_fault("oom-above:3,wrong-after:0");
+    CHECK(both.oom_above == 3);
+    CHECK(both.wrong_after == 0);
+    CHECK(both.fail_after == formfactor::OpenCLFault::kNever);
+    for (const char* bad : {"oom-above", "oom-above:", "oom-above:-1", "lost:2", "fail-after:1x", "oom-above:1,"})
+        CHECK_THROWS_AS(formfactor::parse_fault(bad), std::invalid_argument);
+}

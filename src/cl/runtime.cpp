@@ -56,6 +56,39 @@ std::vector<cl::Platform> get_platforms() {
 
 }  // namespace
 
+std::string error_name(cl_int code) {
+    switch (code) {
+#define HEMIRAD_CL_CODE(name) \
+    case name:                \
+        return fmt::format("{} ({})", #name, code);
+        HEMIRAD_CL_CODE(CL_DEVICE_NOT_FOUND)
+        HEMIRAD_CL_CODE(CL_DEVICE_NOT_AVAILABLE)
+        HEMIRAD_CL_CODE(CL_COMPILER_NOT_AVAILABLE)
+        HEMIRAD_CL_CODE(CL_MEM_OBJECT_ALLOCATION_FAILURE)
+        HEMIRAD_CL_CODE(CL_OUT_OF_RESOURCES)
+        HEMIRAD_CL_CODE(CL_OUT_OF_HOST_MEMORY)
+        HEMIRAD_CL_CODE(CL_BUILD_PROGRAM_FAILURE)
+        HEMIRAD_CL_CODE(CL_EXEC_STATUS_ERROR_FOR_EVENTS_IN_WAIT_LIST)
+        HEMIRAD_CL_CODE(CL_INVALID_VALUE)
+        HEMIRAD_CL_CODE(CL_INVALID_BUFFER_SIZE)
+        HEMIRAD_CL_CODE(CL_INVALID_KERNEL_ARGS)
+        HEMIRAD_CL_CODE(CL_INVALID_WORK_GROUP_SIZE)
+        HEMIRAD_CL_CODE(CL_INVALID_WORK_ITEM_SIZE)
+        HEMIRAD_CL_CODE(CL_INVALID_GLOBAL_WORK_SIZE)
+        HEMIRAD_CL_CODE(CL_INVALID_COMMAND_QUEUE)
+        HEMIRAD_CL_CODE(CL_INVALID_CONTEXT)
+        HEMIRAD_CL_CODE(CL_INVALID_MEM_OBJECT)
+#undef HEMIRAD_CL_CODE
+        default:
+            return fmt::format("OpenCL error {}", code);
+    }
+}
+
+bool out_of_memory(cl_int code) {
+    return code == CL_MEM_OBJECT_ALLOCATION_FAILURE || code == CL_OUT_OF_RESOURCES || code == CL_OUT_OF_HOST_MEMORY ||
+           code == CL_INVALID_BUFFER_SIZE;
+}
+
 bool should_pin_pocl_threads(const char* affinity, const char* max_threads, const char* min_threads, int allowed,
                              int allowed_prefix, int online) {
     if (affinity != nullptr || min_threads != nullptr) return false;  // the user's choice

@@ -50,6 +50,19 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+// The device failed at run time: out of memory even for one shot, lost, or an OpenCL call that
+// returned an error. what() names the device and the failed call with its CL_ error code.
+class DeviceError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+// "CL_MEM_OBJECT_ALLOCATION_FAILURE (-4)" and the like; "OpenCL error -N" for codes it does not know.
+std::string error_name(cl_int code);
+
+// Whether `code` says the device (or the host driving it) had not the memory for a request.
+bool out_of_memory(cl_int code);
+
 // One device, its context and an in-order queue with profiling. Programs are built once per
 // (source, options) and kept for the life of the context: the cache belongs to the context,
 // never to a global, so tests and engines cannot interfere.

@@ -18,6 +18,7 @@
 #include "cl/runtime.h"
 #include "cli/bake.h"
 #include "cli/bench.h"
+#include "cli/engine_select.h"
 #include "core/error.h"
 #include "formfactor/verify.h"
 
@@ -202,6 +203,12 @@ int run(int argc, char** argv) {
         return 1;
     } catch (const ocl::BuildError& e) {
         std::cerr << "hemirad: " << e.what() << "\n";
+        return 1;
+    } catch (const ocl::DeviceError& e) {
+        std::cerr << "hemirad: device failed: " << e.what() << " (--device auto would start again on the reference)\n";
+        return 1;
+    } catch (const cl::Error& e) {
+        std::cerr << "hemirad: device failed: " << device_failure(e) << "\n";
         return 1;
     } catch (const std::bad_alloc&) {
         std::cerr << "hemirad: out of memory\n";

@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <system_error>
 
 #include <fmt/core.h>
@@ -309,6 +310,10 @@ void run_bake(const BakeOptions& options) {
     const double t_mesh = seconds_since(t0);
     if (mesh.patches.empty())
         throw InputError(fmt::format("{}: every triangle has zero area; nothing to bake", o.scene));
+    if (mesh.dropped_triangles > 0)
+        scene.warnings.push_back(fmt::format("{}: {} of {} triangles have no area (under 1e-12 of their longest edge "
+                                             "squared) and were dropped; report.json counts them",
+                                             o.scene, mesh.dropped_triangles, scene.triangles.size()));
 
     const bool direct_only = !plan.interreflection.on;
     std::string solver_name = o.solver;
@@ -339,7 +344,6 @@ void run_bake(const BakeOptions& options) {
         choice.name = "exact unoccluded form factors (Lambert, point to polygon)";
         choice.id = "analytic";
     }
-    formfactor::VerifyingEngine* const verifier = choice.verifier;
     // A form-factor engine of the chosen kind for a mesh: the hemicube ones get the near-field correction.
     // A refined mesh's engine raises the hemicube's resolution with the level, so that children
     // cover as many cells as their parents did.
@@ -362,105 +366,154 @@ void run_bake(const BakeOptions& options) {
     OutputTransaction out(o.output);
     // Only now, so that bad input is always exactly one line on stderr.
     for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
-    if (!choice.warning.empty()) std::cerr << "hemirad: warning: " << choice.warning << "\n";
-    if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({}), {} solver\n", choice.id, choice.name, solver_name);
-    std::unique_ptr<formfactor::Engine> base_engine =
-        plan.occlusion.on ? std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice.engine))
-                          : make_engine(mesh, 0);
-    TimedEngine engine(*base_engine);
+    std::vector<std::string> warnings = scene.warnings;  // for report.json
+    if (!choice.warning.empty()) {
+        std::cerr << "hemirad: warning: " << choice.warning << "\n";
+        warnings.push_back(choice.warning);
+    }
     const double threshold = plan.convergence.on ? o.threshold : kUnconvergedThreshold;
-
-    t0 = Clock::now();
-    Solution solution;
-    long resumed_from = -1;  // the passes a --resume started from
-    ProgressLine progress(o.progress);
-    if (solver_name == "matrix") {
-        solve::MatrixSettings ms = solve::matrix_settings(o.threshold, o.batch);
-        if (!plan.convergence.on) ms.tolerance = kUnconvergedTolerance;
-        ms.grey = !plan.colour.on;
-        ms.interreflection = !direct_only;
-        ms.max_iterations = kMaxSweeps;
-        solve::Matrix solver(mesh, engine, ms);
-        solver.solve([&](long done, long total) {
-            if (o.interrupted && *o.interrupted) throw Interrupted();
-            progress.rows(done, total);
-        });
-        solution.radiosity = solver.radiosity();
-        solution.irradiance = solver.irradiance();
-        solution.shot = solver.patch_radiosity();
-        solution.energy = solver.energy();
-        solution.passes = solver.rows();
-        solution.converged = solver.converged();
-        solution.error = solver.residual();
-        solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
-        solution.iterations = solver.iterations();
-    } else {
-        solve::Settings solve_settings;
-        solve_settings.threshold = threshold;
-        solve_settings.max_passes = o.max_passes;
-        solve_settings.batch = o.batch;
-        solve::Progressive solver(mesh, engine, solve_settings);
-        if (!o.resume.empty()) {
-            restore(solver, resume_state, o.resume);
-            resumed_from = solver.passes();
-        }
-        // Preview frames and checkpoints: one each time the passes cross a multiple of K.
-        long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
-        long checkpoints_written = solver.passes() / o.checkpoint_every;
-        while (solver.step()) {
-            if (o.interrupted && *o.interrupted) throw Interrupted();
-            progress.update(solver, threshold);
-            if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpoints_written) {
-                checkpoints_written = solver.passes() / o.checkpoint_every;
-                write_checkpoint(o.checkpoint, fingerprint, solver);
-            }
-            if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
-                previews = solver.passes() / o.preview_every;
-                write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
-            }
-        }
-        progress.update(solver, threshold);
-        solution.radiosity = solver.radiosity(/*ambient=*/true);
-        solution.irradiance = solver.irradiance(/*ambient=*/true);
-        solution.ambient = solver.ambient();
-        solution.shot = solver.shot();
-        solution.energy = solver.energy();
-        solution.passes = solver.passes();
-        solution.converged = solver.converged();
-        solution.error = solver.error();
-        solution.unshot_fraction = solver.unshot_fraction();
-    }
-    progress.finish();
-    if (!solution.converged && !o.quiet) {
-        if (solver_name == "matrix")
-            std::cerr << fmt::format("hemirad: warning: Gauss-Seidel stopped after {} sweeps at residual {:.3g}\n",
-                                     solution.iterations, solution.error);
-        else
-            std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
-                                     o.max_passes, threshold, solution.error);
-    }
-
-    const double t_solve = seconds_since(t0) - engine.seconds();
-
-    // Adaptive refinement: split where the irradiance contrasts, re-gather onto the children.
-    t0 = Clock::now();
     const std::size_t elements_before = mesh.elements.size();
+    // Should the automatically chosen device fail part-way, the bake starts again on the
+    // reference engine from the mesh as built (refinement replaces it).
+    const mesh::Mesh built = choice.automatic ? mesh : mesh::Mesh{};
+    ordered_json fallback;  // that device and why it failed, when it did
+    Solution solution;
     std::vector<solve::RefineLevel> levels;
-    if (plan.refinement.on && o.refine_levels > 0) {
-        solve::RefineSettings rs;
-        rs.contrast = o.contrast;
-        rs.max_levels = o.refine_levels;
-        rs.batch = std::max(o.batch, 64);
-        rs.cancelled = [&] { return o.interrupted && *o.interrupted; };
-        solve::RefineResult refined =
-            solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
-        if (o.interrupted && *o.interrupted) throw Interrupted();
-        mesh = std::move(refined.mesh);
-        solution.irradiance = std::move(refined.irradiance);
-        solution.radiosity = std::move(refined.radiosity);
-        levels = std::move(refined.levels);
+    long resumed_from = -1;  // the passes a --resume started from
+    double t_formfactors = 0.0, t_solve = 0.0, t_refine = 0.0;
+    std::optional<formfactor::VerifySummary> verified;  // what --verify compared
+
+    // The solve, then adaptive refinement, on the engines `choice` makes.
+    const auto solve_and_refine = [&] {
+        if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({}), {} solver\n", choice.id, choice.name, solver_name);
+        std::unique_ptr<formfactor::Engine> base_engine =
+            plan.occlusion.on ? std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice.engine))
+                              : make_engine(mesh, 0);
+        TimedEngine engine(*base_engine);
+
+        t0 = Clock::now();
+        solution = Solution{};
+        levels.clear();
+        resumed_from = -1;
+        ProgressLine progress(o.progress);
+        if (solver_name == "matrix") {
+            solve::MatrixSettings ms = solve::matrix_settings(o.threshold, o.batch);
+            if (!plan.convergence.on) ms.tolerance = kUnconvergedTolerance;
+            ms.grey = !plan.colour.on;
+            ms.interreflection = !direct_only;
+            ms.max_iterations = kMaxSweeps;
+            solve::Matrix solver(mesh, engine, ms);
+            solver.solve([&](long done, long total) {
+                if (o.interrupted && *o.interrupted) throw Interrupted();
+                progress.rows(done, total);
+            });
+            solution.radiosity = solver.radiosity();
+            solution.irradiance = solver.irradiance();
+            solution.shot = solver.patch_radiosity();
+            solution.energy = solver.energy();
+            solution.passes = solver.rows();
+            solution.converged = solver.converged();
+            solution.error = solver.residual();
+            solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
+            solution.iterations = solver.iterations();
+        } else {
+            solve::Settings solve_settings;
+            solve_settings.threshold = threshold;
+            solve_settings.max_passes = o.max_passes;
+            solve_settings.batch = o.batch;
+            solve::Progressive solver(mesh, engine, solve_settings);
+            if (!o.resume.empty()) {
+                restore(solver, resume_state, o.resume);
+                resumed_from = solver.passes();
+            }
+            // Preview frames and checkpoints: one each time the passes cross a multiple of K.
+            long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
+            long checkpointed = solver.passes();  // the passes of the last checkpoint written or resumed
+            while (solver.step()) {
+                if (o.interrupted && *o.interrupted) throw Interrupted();
+                progress.update(solver, threshold);
+                if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpointed / o.checkpoint_every) {
+                    checkpointed = solver.passes();
+                    write_checkpoint(o.checkpoint, fingerprint, solver);
+                }
+                if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
+                    previews = solver.passes() / o.preview_every;
+                    write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
+                }
+            }
+            // The finished solve too: a bake killed while refining resumes straight to refinement.
+            if (!o.checkpoint.empty() && solver.passes() != checkpointed)
+                write_checkpoint(o.checkpoint, fingerprint, solver);
+            progress.update(solver, threshold);
+            solution.radiosity = solver.radiosity(/*ambient=*/true);
+            solution.irradiance = solver.irradiance(/*ambient=*/true);
+            solution.ambient = solver.ambient();
+            solution.shot = solver.shot();
+            solution.energy = solver.energy();
+            solution.passes = solver.passes();
+            solution.converged = solver.converged();
+            solution.error = solver.error();
+            solution.unshot_fraction = solver.unshot_fraction();
+        }
+        progress.finish();
+        if (!solution.converged && !o.quiet) {
+            if (solver_name == "matrix")
+                std::cerr << fmt::format("hemirad: warning: Gauss-Seidel stopped after {} sweeps at residual {:.3g}\n",
+                                         solution.iterations, solution.error);
+            else
+                std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
+                                         o.max_passes, threshold, solution.error);
+        }
+
+        t_formfactors = engine.seconds();
+        if (choice.verifier) verified = choice.verifier->summary();  // the engine ends with this call
+        t_solve = seconds_since(t0) - engine.seconds();
+
+        // Adaptive refinement: split where the irradiance contrasts, re-gather onto the children.
+        t0 = Clock::now();
+        if (plan.refinement.on && o.refine_levels > 0) {
+            solve::RefineSettings rs;
+            rs.contrast = o.contrast;
+            rs.max_levels = o.refine_levels;
+            rs.batch = std::max(o.batch, 64);
+            rs.cancelled = [&] { return o.interrupted && *o.interrupted; };
+            solve::RefineResult refined =
+                solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
+            if (o.interrupted && *o.interrupted) throw Interrupted();
+            mesh = std::move(refined.mesh);
+            solution.irradiance = std::move(refined.irradiance);
+            solution.radiosity = std::move(refined.radiosity);
+            levels = std::move(refined.levels);
+        }
+        t_refine = seconds_since(t0);
+    };
+
+    for (;;) {
+        try {
+            solve_and_refine();
+            break;
+        } catch (const std::exception& e) {
+            const std::string why = device_failure(e);
+            if (why.empty() || !choice.automatic) throw;
+            // What was solved on the failed device is dropped, not mixed with the reference's:
+            // the bake is then exactly a reference bake.
+            fallback = {{"from", choice.id}, {"name", choice.name}, {"why", why}};
+            const std::string warning =
+                fmt::format("{} failed part-way: {}; starting again on the reference engine", choice.id, why);
+            std::cerr << (o.progress ? "\n" : "") << "hemirad: warning: " << warning << "\n";
+            warnings.push_back(warning);
+            verified.reset();
+            mesh = built;
+            choice = choose_engine("ref", false, o.verify_every, mesh, ff_settings);
+        }
     }
-    const double t_refine = seconds_since(t0);
+    if (const EngineChoice::Shrinks& shrinks = *choice.shrinks; shrinks.count > 0) {
+        const std::string warning = fmt::format(
+            "{} ran out of memory {} times ({}): its batches were cut to as few as {} shots, with the same results",
+            choice.id, shrinks.count, shrinks.why, shrinks.smallest);
+        if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
+        warnings.push_back(warning);
+    }
 
     t0 = Clock::now();
     const auto& radiosity = solution.radiosity;
@@ -479,6 +532,7 @@ void run_bake(const BakeOptions& options) {
     report["version"] = HEMIRAD_VERSION;
     report["scene"] = o.scene;
     report["device"] = {{"backend", choice.backend}, {"platform", choice.platform}, {"name", choice.name}, {"id", choice.id}};
+    if (!fallback.is_null()) report["device"]["fallback"] = fallback;
     report["settings"] = {
         {"quality", o.quality},
         {"hemicube", o.hemicube},
@@ -552,8 +606,8 @@ void run_bake(const BakeOptions& options) {
     for (const auto& s : output::summarize(scene, mesh, radiosity, irradiance))
         meshes.push_back({{"name", s.name}, {"area", s.area}, {"radiosity", vec3(s.radiosity)}, {"irradiance", vec3(s.irradiance)}});
     report["meshes"] = meshes;
-    if (verifier) {
-        const formfactor::VerifySummary& v = verifier->summary();
+    if (verified) {
+        const formfactor::VerifySummary& v = *verified;
         report["verify"] = {{"shots_checked", v.shots_checked},
                             {"cells_compared", v.cells_compared},
                             {"cells_mismatched", v.cells_mismatched},
@@ -562,11 +616,10 @@ void run_bake(const BakeOptions& options) {
                             {"tolerance", {{"absolute", formfactor::VerifyingEngine::kAbsoluteTolerance},
                                            {"relative", formfactor::VerifyingEngine::kRelativeTolerance}}}};
     }
-    report["warnings"] = scene.warnings;
-    if (!choice.warning.empty()) report["warnings"].push_back(choice.warning);
+    report["warnings"] = warnings;
     report["timings_s"] = {{"load", t_load},
                            {"mesh", t_mesh},
-                           {"formfactors", engine.seconds()},
+                           {"formfactors", t_formfactors},
                            {"solve", t_solve},
                            {"refine", t_refine},
                            {"output", t_output_files},

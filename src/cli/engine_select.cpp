@@ -1,9 +1,10 @@
 // Device selection for `hemirad bake` (see engine_select.h).
 #include "cli/engine_select.h"
 
-#include <cstdlib>
-
 #include <fmt/core.h>
+
+#include <algorithm>
+#include <cstdlib>
 
 #include "core/error.h"
 #include "formfactor/opencl_engine.h"
@@ -25,10 +26,14 @@ std::string probe(formfactor::Engine& engine, const mesh::Mesh& mesh, const form
 
 std::string first_line(const std::string& text) { return text.substr(0, text.find('\n')); }
 
-std::unique_ptr<formfactor::OpenCLEngine> make_opencl_engine(const mesh::Mesh& mesh, ocl::Context& context,
+std::unique_ptr<formfactor::OpenCLEngine> make_opencl_engine(const mesh::Mesh& mesh, const EngineChoice& choice,
                                                              const formfactor::Settings& settings) {
-    return std::make_unique<formfactor::OpenCLEngine>(mesh, context, settings,
-                                                      formfactor::tuning_from_environment(context.info()));
+    formfactor::OpenCLTuning tuning = formfactor::tuning_from_environment(choice.context->info());
+    tuning.on_shrink = [shrinks = choice.shrinks](std::size_t, std::size_t limit, const std::string& why) {
+        if (shrinks->count++ == 0) shrinks->why = why;
+        shrinks->smallest = shrinks->count == 1 ? limit : std::min(shrinks->smallest, limit);
+    };
+    return std::make_unique<formfactor::OpenCLEngine>(mesh, *choice.context, settings, tuning, choice.fault);
 }
 
 }  // namespace
@@ -48,8 +53,13 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
     const ocl::DeviceInfo* chosen = ocl::resolve_device(spec, label, devices);
 
     EngineChoice out;
+    if (chosen) out.fault = formfactor::fault_from_environment();  // malformed: exit 2, never a fallback
     if (!chosen) {
-        if (verify) throw InputError("--verify checks an OpenCL engine against the reference; choose --device opencl");
+        if (verify)
+            throw InputError(devices.empty() && wants_opencl
+                                 ? "--verify checks an OpenCL engine against the reference, and no OpenCL device was "
+                                   "found (see hemirad devices)"
+                                 : "--verify checks an OpenCL engine against the reference; choose --device opencl");
         out.engine = std::make_unique<formfactor::ReferenceEngine>(mesh, settings);
         out.backend = "ref";
         out.platform = "host";
@@ -61,7 +71,7 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
         // Any failure of the automatic choice falls back to the reference, with a warning.
         try {
             out.context = std::make_unique<ocl::Context>(*chosen);
-            out.engine = make_opencl_engine(mesh, *out.context, settings);
+            out.engine = make_opencl_engine(mesh, out, settings);
             if (const std::string problem = probe(*out.engine, mesh, settings); !problem.empty())
                 throw std::runtime_error("its first shot disagrees with the reference: " + problem);
         } catch (const std::exception& e) {
@@ -72,8 +82,9 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
         }
     } else {
         out.context = std::make_unique<ocl::Context>(*chosen);
-        out.engine = make_opencl_engine(mesh, *out.context, settings);
+        out.engine = make_opencl_engine(mesh, out, settings);
     }
+    out.automatic = spec == "auto";
     if (verify) {
         auto verifying = std::make_unique<formfactor::VerifyingEngine>(
             std::move(out.engine), std::make_unique<formfactor::ReferenceEngine>(mesh, settings), verify_every);
@@ -87,9 +98,18 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
     return out;
 }
 
+std::string device_failure(const std::exception& e) {
+    if (const auto* cl_error = dynamic_cast<const cl::Error*>(&e))
+        return fmt::format("{} failed: {}", cl_error->what(), ocl::error_name(cl_error->err()));
+    if (dynamic_cast<const ocl::DeviceError*>(&e) || dynamic_cast<const ocl::BuildError*>(&e))
+        return first_line(e.what());
+    if (dynamic_cast<const formfactor::VerifyError*>(&e)) return "verification failed: " + first_line(e.what());
+    return {};
+}
+
 std::unique_ptr<formfactor::Engine> engine_like(const EngineChoice& choice, const mesh::Mesh& mesh,
                                                 const formfactor::Settings& settings) {
-    if (choice.context) return make_opencl_engine(mesh, *choice.context, settings);
+    if (choice.context) return make_opencl_engine(mesh, choice, settings);
     return std::make_unique<formfactor::ReferenceEngine>(mesh, settings);
 }
 

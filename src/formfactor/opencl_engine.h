@@ -4,6 +4,8 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -27,7 +29,23 @@ struct OpenCLTuning {
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
     std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: 1 GiB or device memory / 4
     bool cull = true;                 // lanes setup skips clusters and groups behind the shooter (off: to measure)
+    // Told each time the device had not the memory for a batch of `shots` and the engine retried
+    // it in parts of at most `limit` (the results do not change); `why`: the OpenCL error.
+    std::function<void(std::size_t shots, std::size_t limit, const std::string& why)> on_shrink;
 };
+
+// Faults the engine can be told to simulate (HEMIRAD_FAULT), so that what a bake does about a
+// failing device can be tested on any device. Launches count from the engine's construction.
+struct OpenCLFault {
+    static constexpr std::size_t kNever = std::numeric_limits<std::size_t>::max();
+    std::size_t oom_above = kNever;    // buffers for more shots than this fail as out of memory
+    std::size_t fail_after = kNever;   // launches after this many fail as the device lost
+    std::size_t wrong_after = kNever;  // launches after this many return a wrong form factor
+};
+
+// HEMIRAD_FAULT's value: comma-separated oom-above:K, fail-after:K, wrong-after:K (K >= 0).
+// Throws std::invalid_argument for anything else; an empty text is no fault.
+OpenCLFault parse_fault(const std::string& text);
 
 // The knobs for a device, from a small hand-edited table.
 OpenCLTuning default_tuning(const ocl::DeviceInfo& device);
@@ -35,6 +53,8 @@ OpenCLTuning default_tuning(const ocl::DeviceInfo& device);
 // overrides of the kernels' knobs), and culling off where HEMIRAD_CULL=0: what bakes and
 // benchmarks use.
 OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device);
+// HEMIRAD_FAULT parsed (no fault where unset). Throws InputError naming it when malformed.
+OpenCLFault fault_from_environment();
 
 class OpenCLEngine final : public Engine {
 public:
@@ -42,7 +62,8 @@ public:
     // table. Throws InternalError when the device lacks cl_khr_fp64 or
     // cl_khr_int64_base_atomics, ocl::BuildError when the kernels do not build.
     OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings);
-    OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings, const OpenCLTuning& tuning);
+    OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings, const OpenCLTuning& tuning,
+                 const OpenCLFault& fault = {});
 
     std::string name() const override { return "opencl"; }
     void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
@@ -50,7 +71,10 @@ public:
     // Runs a batch's shots together: each stage is one launch over every shot (dimension 1 of
     // the NDRange), so a GPU has enough work. The buffers grow to the largest batch seen; a
     // batch beyond the memory budget (1 GiB or a quarter of the device's memory) runs in parts,
-    // and then only the last part's id buffers are kept.
+    // and then only the last part's id buffers are kept. Should the device run out of memory
+    // all the same, the batch runs again in halves, and every later batch in parts no larger
+    // (tuning's on_shrink is told): the results are the same. Throws ocl::DeviceError when
+    // one shot does not fit, or an OpenCL call fails otherwise.
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
 
     // The id buffer of shot i of the last batch with the reference's conventions: face by
@@ -62,6 +86,8 @@ public:
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
     const DeltaFormFactors& delta() const { return delta_; }
     const std::string& build_options() const { return options_; }
+    // The most shots one launch runs: from the memory budget, lowered where the device ran out.
+    std::size_t max_batch() const;
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
     static constexpr int kStages = 5;
@@ -79,6 +105,9 @@ private:
     std::array<int, 6> tile_base_{};  // first tile of each face, then the tile count
     int tiles_x_ = 0;
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
+    OpenCLFault fault_;
+    std::size_t launches_ = 0;                                           // run_batch calls so far
+    std::size_t batch_limit_ = std::numeric_limits<std::size_t>::max();  // lowered when the device ran out
 
     cl::Kernel setup_, scan_, scatter_, raster_;  // raster_: raster or raster_records
     cl::Buffer shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_,
@@ -107,8 +136,10 @@ private:
     std::size_t cluster_elements() const;  // elements per cluster (a setup work-group's, lanes setup)
     std::size_t counter_entries() const;   // per shot: tile counters of every copy
     std::size_t sum_stride() const;
-    std::size_t max_batch() const;  // shots per launch within the memory budget
+    std::size_t memory_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
+    void release_batch();  // frees the per-shot buffers (to allocate fewer)
+    void shoot_fitting(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out);
     std::uint32_t run_batch(const std::vector<ShotRequest>& shots);  // returns the list entries needed
 };
 
