@@ -7,6 +7,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "formfactor/analytic.h"
@@ -72,6 +73,20 @@ void check_books(const solve::Energy& e) {
     CHECK_THAT(e.absorbed + e.escaped + e.unshot, WithinRel(e.emitted, 1e-9));
 }
 
+// A closed box of grey walls (ρ = `rho`, material 0) lit by its face 3 (ρ 0.5, E = 1, material 1).
+struct LitBox {
+    scene::Scene scene;
+    std::uint32_t wall = 0, light = 0;
+};
+LitBox lit_box(const glm::dvec3& size, double rho) {
+    LitBox box;
+    box.wall = scene::add_material(box.scene, glm::dvec3(rho), glm::dvec3(0.0));
+    box.light = scene::add_material(box.scene, glm::dvec3(0.5), glm::dvec3(1.0));
+    box.scene = test::closed_box(
+        size, [&](int face) { return face == 3 ? box.light : box.wall; }, box.scene);
+    return box;
+}
+
 // Σ_k A_k B_k (red): the radiosity flux leaving every element.
 double total_flux(const mesh::Mesh& m, const std::vector<glm::dvec3>& B) {
     double sum = 0.0;
@@ -101,6 +116,22 @@ double node_mean(const mesh::Mesh& m, const std::vector<glm::dvec3>& B, std::uin
         area += m.elements[k].area;
     }
     return sum / area;
+}
+
+// The matrix solver on the bake's engine stack (N = 64, grey) to a residual of 1e-9, which must
+// converge within 30000 Gauss–Seidel sweeps: the radiosity and the books.
+std::pair<std::vector<glm::dvec3>, solve::Energy> gauss_seidel_in_bounded_sweeps(const mesh::Mesh& m) {
+    auto engine = bake_engine(m, 64);
+    solve::MatrixSettings settings;
+    settings.tolerance = 1e-9;
+    settings.grey = true;
+    settings.max_iterations = 30000;
+    solve::Matrix solver(m, *engine, settings);
+    solver.solve();
+    CAPTURE(solver.iterations(), solver.residual());
+    CHECK(solver.converged());
+    CHECK(solver.iterations() < settings.max_iterations);
+    return {solver.radiosity(), solver.energy()};
 }
 
 // What every pass of a progressive run in a closed box of uniform reflectance ρ must keep:
@@ -174,12 +205,7 @@ TEST_CASE("hard cases: scenes scaled from 1e-4 to 1e4 give the same radiosity wi
     // meshes by the diagonal): every wall's radiosity must not depend on the unit.
     std::vector<std::vector<double>> per_scale;
     for (double scale : {1e-4, 1.0, 1e4}) {
-        scene::Scene s;
-        const std::uint32_t wall = scene::add_material(s, glm::dvec3(0.6), glm::dvec3(0.0));
-        const std::uint32_t light = scene::add_material(s, glm::dvec3(0.5), glm::dvec3(1.0));
-        s = test::closed_box(
-            glm::dvec3(1.0, 0.8, 1.2) * scale, [&](int face) { return face == 3 ? light : wall; }, s);
-        const Result r = solve_scene(s, 0.2 * scale);
+        const Result r = solve_scene(lit_box(glm::dvec3(1.0, 0.8, 1.2) * scale, 0.6).scene, 0.2 * scale);
         check_books(r.energy);
         std::vector<double> walls;
         for (std::uint32_t node = 0; node < 6; ++node) walls.push_back(node_average(r, node));
@@ -197,11 +223,7 @@ TEST_CASE("hard cases: a coplanar duplicate of a face changes nothing and fights
     // test gives each cell to one copy (ties to the lower element), so what the floor receives
     // is split, not doubled: every other wall and the books are as without the duplicate.
     const auto box = [](bool duplicate) {
-        scene::Scene s;
-        const std::uint32_t wall = scene::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-        const std::uint32_t light = scene::add_material(s, glm::dvec3(0.5), glm::dvec3(1.0));
-        s = test::closed_box(
-            {1.0, 1.0, 1.0}, [&](int face) { return face == 3 ? light : wall; }, s);
+        auto [s, wall, light] = lit_box({1.0, 1.0, 1.0}, 0.5);
         if (duplicate) {
             test::add_quad(s, {0, 0, 0}, {0, 0, 1}, {1, 0, 1}, {1, 0, 0}, wall, "floor copy");  // normal +y
             test::finish(s);
@@ -298,21 +320,10 @@ TEST_CASE("hard cases: rho = 0.999 in a closed room converges in bounded time an
         // Gauss–Seidel's slowest mode is the uniform one, shrinking by about ρ per sweep: from
         // B = E (relative residual ≈ ρ / 1) to 1e-9 × B_max ≈ 1e-6 takes about ln(1e-6) / ln(ρ)
         // ≈ 13800 sweeps at worst (measured: 7254); 30000 is the stated bound.
-        auto engine = bake_engine(m, 64);
-        solve::MatrixSettings settings;
-        settings.tolerance = 1e-9;
-        settings.grey = true;
-        settings.max_iterations = 30000;
-        solve::Matrix solver(m, *engine, settings);
-        solver.solve();
-        CAPTURE(solver.iterations(), solver.residual());
-        CHECK(solver.converged());
-        CHECK(solver.iterations() < settings.max_iterations);
-        const auto B = solver.radiosity();
+        const auto [B, e] = gauss_seidel_in_bounded_sweeps(m);
         walls_at_1000(B);
         // Σ A B = Φ_E / (1 − ρ) up to the residual's flux: Σ_p A_p r_p ≤ A · 1e-9 · B_max, which
         // relative to Φ_E = A · E is 1e-9 × 1000 ≈ 1e-6 (B_max ≈ 1000 E).
-        const solve::Energy e = solver.energy();
         CHECK(std::abs(e.unshot) <= 1.1e-6 * e.emitted);
         CHECK_THAT(total_flux(m, B), WithinRel(6000.0, 1.1e-6));
     }
@@ -352,19 +363,8 @@ TEST_CASE("hard cases: a closed room at rho = 0.999 lit by one wall holds sum(A 
         // Tolerance 1e-9 on the residual: Σ A B within 1e-9 × B_max × A / Φ_E ≈ 1e-9 × 204 × 5.92
         // / 1.2 ≈ 1e-6 of the answer (B_max ≈ E + the mean 1200 / 5.92); 2e-6 allows B_max to
         // be twice the mean. At most 30000 sweeps (see above).
-        auto engine = bake_engine(m, 64);
-        solve::MatrixSettings settings;
-        settings.tolerance = 1e-9;
-        settings.grey = true;
-        settings.max_iterations = 30000;
-        solve::Matrix solver(m, *engine, settings);
-        solver.solve();
-        CAPTURE(solver.iterations(), solver.residual());
-        CHECK(solver.converged());
-        CHECK(solver.iterations() < settings.max_iterations);
-        const auto B = solver.radiosity();
+        const auto [B, e] = gauss_seidel_in_bounded_sweeps(m);
         REQUIRE(finite(B));
-        const solve::Energy e = solver.energy();
         check_books(e);
         CHECK(std::abs(e.unshot) <= 2e-6 * e.emitted);
         CHECK_THAT(total_flux(m, B), WithinRel(want, 2e-6));
@@ -476,11 +476,7 @@ TEST_CASE("hard cases: zero-area triangles are dropped, counted, and change noth
     // solve is the plain box's to the bit (1e-12 allows for nothing but rounding), and no area,
     // normal or radiosity anywhere is zero, NaN or infinite.
     const auto box = [](bool degenerate) {
-        scene::Scene s;
-        const std::uint32_t wall = scene::add_material(s, glm::dvec3(0.6), glm::dvec3(0.0));
-        const std::uint32_t light = scene::add_material(s, glm::dvec3(0.5), glm::dvec3(1.0));
-        s = test::closed_box(
-            {1.0, 1.0, 1.0}, [&](int face) { return face == 3 ? light : wall; }, s);
+        auto [s, wall, light] = lit_box({1.0, 1.0, 1.0}, 0.6);
         if (degenerate) {
             const glm::dvec3 rho(0.6);
             scene::Triangle sliver{{glm::dvec3(0, 0, 0), glm::dvec3(1, 0, 0), glm::dvec3(1, 0, 0)}, {rho, rho, rho}};
