@@ -1347,36 +1347,33 @@ TEST_CASE("effects and solver options that cannot go together exit 2 with one li
     expect_bad_input(dir, bake({"--solver", "progressive", "--effects", "interreflection=off"}), out, "interreflection");
     expect_bad_input(dir, bake({"--verify", "--device", "ref", "--effects", "occlusion=off"}), out, "--verify");
     expect_bad_input(dir, bake({"--solver", "gauss"}), out, "--solver");
-    expect_bad_input(dir, bake({"--solver", "matrix", "--checkpoint", (dir / "ck").string()}), out, "--checkpoint");
 }
 
-TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the same numbers", "[cli]") {
-    TempDir dir;
-    const std::vector<std::string> settings = {"--hemicube", "32", "--patch-size", "0.5", "--element-size", "0.25",
-                                               "--threshold", "1e-6", "--max-passes", "2000", "--solver",
-                                               "progressive", "--image-width", "32", "--quiet"};
-    const std::string ck_full = (dir / "ck_full").string();
-    const json full = bake_ok(dir, kClosedRoom, dir / "full",
-                              concat({"--checkpoint", ck_full, "--checkpoint-every", "300"}, settings));
-    REQUIRE(full.at("passes").get<long>() == 2000);
-    const std::string full_bin = read_text(dir / "full" / "baked.bin");
+namespace {
 
-    // SIGKILL (nothing can be cleaned up) a while after the first checkpoint is on disk, then
-    // resume into a fresh directory; twice, killed at two different moments.
-    for (const std::string delay : {"0.1", "0.5"}) {
-        INFO("killed " << delay << " s after the first checkpoint");
-        const std::string ck = (dir / ("ck" + delay)).string();
+// Bakes `settings` whole, then twice again killed with SIGKILL (nothing can be cleaned up) at
+// `delays` after the first checkpoint (every K = `every`) is on disk, each resumed into the
+// killed bake's directory: every resumed bake ends with exactly the whole bake's numbers (killed
+// after the solve, while refining or writing, it resumes from the finished solve). Returns the
+// whole bake's report; the first resume must have started part-way through the solve.
+json check_kill_and_resume(const TempDir& dir, const std::string& name, const std::vector<std::string>& settings,
+                           const std::string& every, const std::vector<std::string>& delays) {
+    const json full = bake_ok(dir, kClosedRoom, dir / (name + "_full"), settings);
+    const std::string full_bin = read_text(dir / (name + "_full") / "baked.bin");
+    for (const std::string& delay : delays) {
+        INFO(name << ", killed " << delay << " s after the first checkpoint");
+        const std::string ck = (dir / (name + "_ck" + delay)).string();
+        const fs::path out = dir / (name + "_killed" + delay);
         std::string script = shell_quote(HEMIRAD_EXE);
-        for (const std::string& a : concat({"bake", kClosedRoom.string(), "-o", (dir / ("killed" + delay)).string(),
-                                            "--checkpoint", ck, "--checkpoint-every", "100"},
-                                           settings))
+        for (const std::string& a :
+             concat({"bake", kClosedRoom.string(), "-o", out.string(), "--checkpoint", ck, "--checkpoint-every", every},
+                    settings))
             script += " " + shell_quote(a);
         script += " & pid=$!; i=0; while [ ! -e " + shell_quote(ck) +
                   " ] && [ $i -lt 400 ]; do sleep 0.02; i=$((i+1)); done; sleep " + delay +
                   "; kill -KILL $pid; wait $pid";
         const RunResult killed = run_shell(dir, script);
         REQUIRE(fs::exists(ck));
-        const fs::path out = dir / ("killed" + delay);
         CHECK_FALSE(fs::exists(out / "report.json"));
         // The killed bake's staging directory is left behind; the resumed bake, into the same
         // directory as a user would, clears it (its process is gone).
@@ -1387,32 +1384,62 @@ TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the 
             return n;
         };
         CHECK(staging() == 1);
-        const json resumed = bake_ok(dir, kClosedRoom, out,
-                                     concat({"--resume", ck, "--checkpoint", ck, "--checkpoint-every", "100"}, settings));
+        const json resumed =
+            bake_ok(dir, kClosedRoom, out, concat({"--resume", ck, "--checkpoint", ck, "--checkpoint-every", every}, settings));
         CHECK(staging() == 0);
-        CAPTURE(killed.code, resumed.at("resumed_from_pass").get<long>());
-        CHECK(resumed.at("resumed_from_pass").get<long>() % 100 == 0);
-        CHECK(resumed.at("resumed_from_pass").get<long>() < 2000);
+        const long from = resumed.at("resumed_from_pass").get<long>();
+        CAPTURE(killed.code, from);
+        CHECK(from > 0);
+        CHECK(from <= full.at("passes").get<long>());
+        if (delay == delays.front()) CHECK(from < full.at("passes").get<long>());
         CHECK(resumed.at("passes") == full.at("passes"));
         CHECK(resumed.at("meshes") == full.at("meshes"));
         CHECK(resumed.at("energy") == full.at("energy"));
         CHECK(read_text(out / "baked.bin") == full_bin);
     }
+    return full;
+}
+
+}  // namespace
+
+TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the same numbers", "[cli]") {
+    TempDir dir;
+    const std::vector<std::string> settings = {"--hemicube", "32", "--patch-size", "0.5", "--element-size", "0.25",
+                                               "--threshold", "1e-6", "--max-passes", "2000", "--solver",
+                                               "progressive", "--image-width", "32", "--quiet"};
+    const json full = check_kill_and_resume(dir, "progressive", settings, "100", {"0.1", "0.5"});
+    REQUIRE(full.at("passes").get<long>() == 2000);
+    const std::string full_bin = read_text(dir / "progressive_full" / "baked.bin");
 
     // The finished solve is checkpointed too (2000 is no multiple of 300): resumed, it goes
     // straight to refinement and output.
+    const std::string ck_full = (dir / "ck_full").string();
+    bake_ok(dir, kClosedRoom, dir / "checkpointed", concat({"--checkpoint", ck_full, "--checkpoint-every", "300"}, settings));
     const json finished = bake_ok(dir, kClosedRoom, dir / "finished", concat({"--resume", ck_full}, settings));
     CHECK(finished.at("resumed_from_pass") == 2000);
     CHECK(read_text(dir / "finished" / "baked.bin") == full_bin);
 
+    // The matrix solver's checkpoints hold the rows shot so far (the reference engine, slower,
+    // leaves time to kill it between its batches of 64 rows).
+    const std::vector<std::string> matrix = {"--hemicube", "96", "--patch-size", "0.5", "--element-size", "0.25",
+                                             "--solver", "matrix", "--device", "ref", "--image-width", "32", "--quiet"};
+    const json rows = check_kill_and_resume(dir, "matrix", matrix, "50", {"0.05", "0.5"});
+    CHECK(rows.at("passes").get<long>() > 128);  // rows: more than two batches
+    // A checkpoint of the one solver is refused by the other.
+    expect_bad_input(dir, concat({"bake", kClosedRoom.string(), "-o", (dir / "crossed").string(), "--resume",
+                                  (dir / "matrix_ck0.05").string()},
+                                 settings),
+                     dir / "crossed", "another bake");
+
     // A checkpoint resumes only its own bake; anything else is refused, naming the file.
-    const fs::path ck = dir / "ck0.1";
+    const fs::path ck = dir / "progressive_ck0.1";
     const fs::path out = dir / "refused";
     const auto bake = [&](std::vector<std::string> extra) {
         return concat(concat({"bake", kClosedRoom.string(), "-o", out.string()}, settings), extra);
     };
     expect_bad_input(dir, bake({"--resume", ck.string(), "--seed", "7"}), out, "another bake");
-    expect_bad_input(dir, bake({"--resume", (dir / "full" / "report.json").string()}), out, "not a hemirad checkpoint");
+    expect_bad_input(dir, bake({"--resume", (dir / "progressive_full" / "report.json").string()}), out,
+                     "not a hemirad checkpoint");
     expect_bad_input(dir, bake({"--resume", (dir / "missing").string()}), out, "missing");
     const std::string whole = read_text(ck);
     write_text(dir / "cut", whole.substr(0, whole.size() / 2));

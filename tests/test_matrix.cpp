@@ -4,7 +4,9 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
+#include <string>
 
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
@@ -311,4 +313,51 @@ TEST_CASE("matrix suits scenes up to the default patch count and reflectance", "
     CHECK(solve::Matrix::suits(m));
     m.elements[3].rho = glm::dvec3(0.5, 0.96, 0.5);
     CHECK_FALSE(solve::Matrix::suits(m));
+}
+
+TEST_CASE("matrix saved part-way and loaded into a new solver ends exactly as one uninterrupted", "[matrix]") {
+    // The rows a checkpoint holds: a solver that loads them shoots only the others, and its
+    // radiosity, incident light and books are the uninterrupted solver's bit for bit.
+    const scene::Scene s = coloured_box();
+    const mesh::Mesh m = mesh::build(s, {0.5, 0.25});
+    auto engine = make_engine(m, 64);
+    solve::MatrixSettings settings;
+    settings.batch = 4;
+    solve::Matrix whole(m, *engine, settings);
+    whole.solve();
+
+    std::string saved;
+    solve::Matrix first(m, *engine, settings);
+    first.solve([&](long done, long) {
+        if (done == 12) {
+            std::ostringstream out;
+            first.save(out);
+            saved = out.str();
+        }
+    });
+    REQUIRE(!saved.empty());
+    solve::Matrix resumed(m, *engine, settings);
+    std::istringstream in(saved);
+    resumed.load(in);
+    CHECK(in.peek() == std::char_traits<char>::eof());
+    CHECK(resumed.rows() == 12);
+    long calls = 0;
+    resumed.solve([&](long, long) { ++calls; });
+    const long rows = static_cast<long>(m.patches.size());
+    CHECK(calls == (rows - 12 + 3) / 4);  // only the rows it lacked
+    CHECK(resumed.rows() == rows);
+    CHECK(resumed.radiosity() == whole.radiosity());
+    CHECK(resumed.irradiance() == whole.irradiance());
+    CHECK(resumed.iterations() == whole.iterations());
+    CHECK(resumed.energy().absorbed == whole.energy().absorbed);
+
+    // Another mesh's rows, or cut bytes, are refused.
+    const mesh::Mesh other = mesh::build(s, {0.25, 0.125});
+    auto other_engine = make_engine(other, 64);
+    solve::Matrix stranger(other, *other_engine, settings);
+    std::istringstream again(saved);
+    CHECK_THROWS_AS(stranger.load(again), std::runtime_error);
+    solve::Matrix cut(m, *engine, settings);
+    std::istringstream half(saved.substr(0, saved.size() / 2));
+    CHECK_THROWS_AS(cut.load(half), std::runtime_error);
 }

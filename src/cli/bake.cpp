@@ -325,9 +325,6 @@ void run_bake(const BakeOptions& options) {
         else solver_name = direct_only || solve::Matrix::suits(mesh) ? "matrix" : "progressive";
     }
     const bool checkpoints = !o.checkpoint.empty() || !o.resume.empty();
-    if (checkpoints && o.solver == "matrix")
-        throw InputError("--checkpoint and --resume go with the progressive solver, not --solver matrix");
-    if (checkpoints && solver_name == "matrix") solver_name = "progressive";
     if (o.preview_every > 0 && solver_name == "matrix")
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");
 
@@ -355,12 +352,17 @@ void run_bake(const BakeOptions& options) {
     };
 
     // A checkpoint resumes only the bake it was made by: the same mesh and the settings that
-    // decide its numbers (not the device: every engine gives the reference's bits).
+    // decide its numbers (not the device: every engine gives the reference's bits). The matrix
+    // solver's holds its rows, which depend on neither the batch nor the threshold.
+    const std::string form_factors =
+        fmt::format("{} form factors, N {}, seed {}", plan.occlusion.on ? "hemicube" : "exact", o.hemicube, o.seed);
     const std::string fingerprint =
-        checkpoints ? bake_fingerprint(mesh, fmt::format("{} form factors, N {}, seed {}, batch {}, threshold {:.17g}",
-                                                         plan.occlusion.on ? "hemicube" : "exact", o.hemicube, o.seed,
-                                                         o.batch, plan.convergence.on ? o.threshold : kUnconvergedThreshold))
-                    : std::string();
+        !checkpoints ? std::string()
+        : solver_name == "matrix"
+            ? bake_fingerprint(mesh, fmt::format("{}, matrix rows of {}", form_factors,
+                                                 direct_only ? "the emitters" : "every patch that holds light"))
+            : bake_fingerprint(mesh, fmt::format("{}, batch {}, threshold {:.17g}", form_factors, o.batch,
+                                                 plan.convergence.on ? o.threshold : kUnconvergedThreshold));
     const std::string resume_state = o.resume.empty() ? std::string() : read_checkpoint(o.resume, fingerprint);
 
     OutputTransaction out(o.output);
@@ -403,9 +405,21 @@ void run_bake(const BakeOptions& options) {
             ms.interreflection = !direct_only;
             ms.max_iterations = kMaxSweeps;
             solve::Matrix solver(mesh, engine, ms);
+            if (!o.resume.empty()) {
+                restore(solver, resume_state, o.resume);
+                resumed_from = solver.rows();
+            }
+            long checkpointed = solver.rows();  // the rows of the last checkpoint written or resumed
             solver.solve([&](long done, long total) {
                 if (o.interrupted && *o.interrupted) throw Interrupted();
                 progress.rows(done, total);
+                // Every K rows, and all of them: a bake killed while solving or refining then
+                // resumes without shooting a row again.
+                if (!o.checkpoint.empty() && done != checkpointed &&
+                    (done / o.checkpoint_every > checkpointed / o.checkpoint_every || done == total)) {
+                    checkpointed = done;
+                    write_checkpoint(o.checkpoint, fingerprint, solver);
+                }
             });
             solution.radiosity = solver.radiosity();
             solution.irradiance = solver.irradiance();

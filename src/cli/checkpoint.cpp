@@ -1,5 +1,5 @@
-// Checkpoints of a progressive bake (see checkpoint.h). Layout: a magic line, the format version,
-// the fingerprint (hash and settings), then Progressive::save's bytes and an end marker.
+// Checkpoints of a bake (see checkpoint.h). Layout: a magic line, the format version, the
+// fingerprint (hash and settings), then the solver's save() bytes and an end marker.
 #include "cli/checkpoint.h"
 
 #include <fmt/core.h>
@@ -77,7 +77,7 @@ std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings
     return fmt::format("mesh {:016x}, {}", h.value(), settings);
 }
 
-void write_checkpoint(const fs::path& file, const std::string& fingerprint, const solve::Progressive& solver) {
+void write_checkpoint(const fs::path& file, const std::string& fingerprint, const solve::Resumable& solver) {
     fs::path temp = file;
     temp += fmt::format(".tmp-{}", static_cast<long>(getpid()));
     {
@@ -131,7 +131,7 @@ std::string read_checkpoint(const fs::path& file, const std::string& fingerprint
     return bytes.substr(begin, bytes.size() - sizeof end - begin);
 }
 
-void restore(solve::Progressive& solver, const std::string& state, const fs::path& file) {
+void restore(solve::Resumable& solver, const std::string& state, const fs::path& file) {
     std::istringstream in(state);
     try {
         solver.load(in);

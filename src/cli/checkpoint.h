@@ -1,17 +1,17 @@
-// `hemirad bake --checkpoint FILE` / `--resume FILE`: the progressive solver's state on disk, so
-// that a bake killed at any moment goes on from its last checkpoint and ends with exactly the
-// numbers of an uninterrupted bake.
+// `hemirad bake --checkpoint FILE` / `--resume FILE`: the solver's state on disk (the
+// progressive solver's, or the matrix solver's rows), so that a bake killed at any moment goes on
+// from its last checkpoint and ends with exactly the numbers of an uninterrupted bake.
 #pragma once
 
 #include <filesystem>
 #include <string>
 
 #include "mesh/mesh.h"
-#include "solve/progressive.h"
+#include "solve/resumable.h"
 
 namespace hemirad::cli {
 
-// What decides a progressive bake's numbers: the mesh (every patch's and element's geometry,
+// What decides a bake's numbers: the mesh (every patch's and element's geometry,
 // reflectance and emission, so the scene file, its buffers and the effects applied to it) and
 // `settings`, the solver and engine settings as text. A checkpoint resumes only the same bake.
 std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings);
@@ -20,7 +20,7 @@ std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings
 // a bake killed while writing leaves the previous checkpoint whole. Throws InputError when the
 // file cannot be written.
 void write_checkpoint(const std::filesystem::path& file, const std::string& fingerprint,
-                      const solve::Progressive& solver);
+                      const solve::Resumable& solver);
 
 // Reads `file` and returns the solver state it holds, before the bake writes anything. Throws
 // InputError (exit 2, naming the file) when it cannot be read, is not a hemirad checkpoint, is
@@ -28,6 +28,6 @@ void write_checkpoint(const std::filesystem::path& file, const std::string& fing
 std::string read_checkpoint(const std::filesystem::path& file, const std::string& fingerprint);
 
 // Loads a state from read_checkpoint into the solver; InputError naming `file` if it is damaged.
-void restore(solve::Progressive& solver, const std::string& state, const std::filesystem::path& file);
+void restore(solve::Resumable& solver, const std::string& state, const std::filesystem::path& file);
 
 }  // namespace hemirad::cli

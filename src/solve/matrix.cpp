@@ -115,15 +115,18 @@ void Matrix::solve(const std::function<void(long, long)>& progress) {
 bool Matrix::shoot_rows(const std::function<void(long, long)>& progress) {
     const std::size_t batch = static_cast<std::size_t>(std::max(1, settings_.batch));
     const long total = static_cast<long>(active_.size());
+    std::vector<std::uint32_t> pending;  // all active patches, or those a loaded state lacks
+    for (std::uint32_t p : active_)
+        if (!rows_[p].shot) pending.push_back(p);
     std::vector<formfactor::ShotRequest> requests;
     std::vector<formfactor::ShotResult> results;
-    for (std::size_t first = 0; first < active_.size(); first += batch) {
+    for (std::size_t first = 0; first < pending.size(); first += batch) {
         if (cancelled()) return false;
         requests.clear();
         // Shot counter = patch index: a row does not depend on the batching or on which other
         // patches are active.
-        for (std::size_t k = first; k < std::min(first + batch, active_.size()); ++k)
-            requests.push_back({active_[k], static_cast<std::uint64_t>(active_[k])});
+        for (std::size_t k = first; k < std::min(first + batch, pending.size()); ++k)
+            requests.push_back({pending[k], static_cast<std::uint64_t>(pending[k])});
         engine_.shoot_batch(requests, results);
         for (std::size_t k = 0; k < requests.size(); ++k) {
             const formfactor::ShotResult& shot = results[k];
@@ -145,6 +148,48 @@ bool Matrix::shoot_rows(const std::function<void(long, long)>& progress) {
         if (progress) progress(rows_done_, total);
     }
     return true;
+}
+
+void Matrix::save(std::ostream& out) const {
+    using namespace state_io;
+    put(out, static_cast<std::uint64_t>(active_.size()));
+    put(out, static_cast<std::int64_t>(rows_done_));
+    for (std::uint32_t p : active_) {
+        const Row& row = rows_[p];
+        put(out, static_cast<std::uint8_t>(row.shot ? 1 : 0));
+        if (!row.shot) continue;
+        put_vector(out, row.element);
+        put_vector(out, row.F);
+        put(out, row.f_sum);
+        put(out, row.blocked);
+    }
+}
+
+void Matrix::load(std::istream& in) {
+    using namespace state_io;
+    std::uint64_t active = 0;
+    std::int64_t done = 0;
+    get(in, active);
+    get(in, done);
+    if (active != active_.size() || solved_) throw std::runtime_error("the checkpoint is for another mesh");
+    long shot = 0;
+    for (std::uint32_t p : active_) {
+        Row& row = rows_[p];
+        std::uint8_t flag = 0;
+        get(in, flag);
+        row = Row{};
+        if (flag == 0) continue;
+        get_vector(in, row.element, kAny, mesh_.elements.size());
+        get_vector(in, row.F, row.element.size());
+        for (std::uint32_t j : row.element)
+            if (j >= mesh_.elements.size()) throw std::runtime_error("a row names an element the mesh does not have");
+        get(in, row.f_sum);
+        get(in, row.blocked);
+        row.shot = true;
+        ++shot;
+    }
+    if (shot != done) throw std::runtime_error("its row count does not match its rows");
+    rows_done_ = shot;
 }
 
 void Matrix::gauss_seidel() {

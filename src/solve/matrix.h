@@ -14,6 +14,7 @@
 #include "formfactor/engine.h"
 #include "mesh/mesh.h"
 #include "solve/progressive.h"
+#include "solve/resumable.h"
 
 namespace hemirad::solve {
 
@@ -39,7 +40,7 @@ struct MatrixSettings {
 // batches of at least 64 (one launch per kernel stage on OpenCL, what fills a GPU).
 MatrixSettings matrix_settings(double threshold, int batch);
 
-class Matrix {
+class Matrix final : public Resumable {
 public:
     // Throws std::invalid_argument when settings.grey is set and some element's ρ or E is not grey.
     Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixSettings& settings);
@@ -62,9 +63,14 @@ public:
     // batch (batch·E doubles).
     static std::size_t estimate_bytes(const mesh::Mesh& mesh, const MatrixSettings& settings);
 
-    // Computes the rows (calling `progress(rows_done, rows_total)` after each batch if set) and
-    // solves. Does its work once: later calls return at once.
+    // Computes the rows not yet computed (calling `progress(rows_done, rows_total)` after each
+    // batch if set) and solves. Does its work once: later calls return at once.
     void solve(const std::function<void(long, long)>& progress = {});
+
+    // Resumable: the rows computed so far (a checkpoint written from `progress`); a loaded
+    // solver computes the others and then solves exactly as the saved one would have.
+    void save(std::ostream& out) const override;
+    void load(std::istream& in) override;
 
     long rows() const { return rows_done_; }        // rows computed (hemicubes shot)
     int iterations() const { return iterations_; }  // Gauss–Seidel sweeps

@@ -198,31 +198,8 @@ glm::dvec3 Progressive::unshot_total() const {
     return flux;
 }
 
-namespace {
-
-template <class T>
-void put(std::ostream& out, const T& value) {
-    out.write(reinterpret_cast<const char*>(&value), sizeof value);
-}
-template <class T>
-void get(std::istream& in, T& value) {
-    if (!in.read(reinterpret_cast<char*>(&value), sizeof value)) throw std::runtime_error("the checkpoint ends early");
-}
-void put_vector(std::ostream& out, const std::vector<glm::dvec3>& v) {
-    put(out, static_cast<std::uint64_t>(v.size()));
-    out.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(glm::dvec3)));
-}
-void get_vector(std::istream& in, std::vector<glm::dvec3>& v) {
-    std::uint64_t n = 0;
-    get(in, n);
-    if (n != v.size()) throw std::runtime_error("the checkpoint is for another mesh");
-    if (!in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(glm::dvec3))))
-        throw std::runtime_error("the checkpoint ends early");
-}
-
-}  // namespace
-
 void Progressive::save(std::ostream& out) const {
+    using namespace state_io;
     put_vector(out, H_);
     put_vector(out, unshot_);
     put_vector(out, shot_);
@@ -235,10 +212,11 @@ void Progressive::save(std::ostream& out) const {
 }
 
 void Progressive::load(std::istream& in) {
-    get_vector(in, H_);
-    get_vector(in, unshot_);
-    get_vector(in, shot_);
-    get_vector(in, snapshot_);
+    using namespace state_io;
+    get_vector(in, H_, H_.size());
+    get_vector(in, unshot_, unshot_.size());
+    get_vector(in, shot_, shot_.size());
+    get_vector(in, snapshot_, snapshot_.size());
     for (glm::dvec3* v : {&emitted_, &absorbed_, &escaped_, &recent_shot_, &recent_reflected_, &recent_hit_}) get(in, *v);
     std::int64_t passes = 0, snapshot_pass = 0;
     get(in, passes);

@@ -13,6 +13,7 @@
 
 #include "formfactor/engine.h"
 #include "mesh/mesh.h"
+#include "solve/resumable.h"
 
 namespace hemirad::solve {
 
@@ -36,7 +37,7 @@ struct Energy {
     double unshot = 0.0;
 };
 
-class Progressive {
+class Progressive final : public Resumable {
 public:
     Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings);
 
@@ -69,12 +70,9 @@ public:
     // what a re-gather shoots again onto a refined mesh.
     const std::vector<glm::dvec3>& shot() const { return shot_; }
 
-    // The solver's whole state, raw (doubles bit for bit), so that a solver of the same mesh,
-    // engine and settings that load()s it goes on exactly as this one would have.
-    void save(std::ostream& out) const;
-    // Restores what save() wrote for this mesh; throws std::runtime_error when the stream ends
-    // early or its counts are not this mesh's.
-    void load(std::istream& in);
+    // Resumable: the whole state (every per-patch and per-element vector, the books, the passes).
+    void save(std::ostream& out) const override;
+    void load(std::istream& in) override;
 
 private:
     const mesh::Mesh& mesh_;
