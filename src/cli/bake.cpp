@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <optional>
 #include <system_error>
@@ -243,6 +244,8 @@ void list_devices(std::ostream& out, bool json) {
     if (devices.empty()) out << "(no OpenCL platform or device found)\n";
 }
 
+namespace {
+
 // What either solver leaves for the output and the report.
 struct Solution {
     std::vector<glm::dvec3> radiosity, irradiance;  // per element, the ambient term included
@@ -254,11 +257,99 @@ struct Solution {
     double error = 0.0;
     double unshot_fraction = 0.0;
     int iterations = 0;  // Gauss–Seidel sweeps (matrix)
+    long resumed_from = -1;  // the passes or rows a --resume started from
 };
 
 ordered_json effect_json(const scene::EffectDecision& d) {
     return {{"on", d.on}, {"forced", d.forced}, {"why", d.why}};
 }
+
+// What either solver needs of a bake besides the mesh and the engine.
+struct SolveContext {
+    const BakeOptions& o;                  // the effective options
+    double threshold;                      // progressive: stop below it
+    const solve::MatrixSettings& matrix;   // the matrix solver's settings
+    const std::string& fingerprint;        // of the checkpoints written
+    const std::string& resume_state;       // what --resume read, or empty
+    ProgressLine& progress;
+    std::function<void(const solve::Progressive&)> preview;  // writes a preview frame of the passes so far
+};
+
+Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c) {
+    const BakeOptions& o = c.o;
+    solve::Matrix solver(mesh, engine, c.matrix);
+    Solution solution;
+    if (!o.resume.empty()) {
+        restore(solver, c.resume_state, o.resume);
+        solution.resumed_from = solver.rows();
+    }
+    long checkpointed = solver.rows();  // the rows of the last checkpoint written or resumed
+    solver.solve([&](long done, long total) {
+        if (o.interrupted && *o.interrupted) throw Interrupted();
+        c.progress.rows(done, total);
+        // Every K rows, and all of them: a bake killed while solving or refining then resumes
+        // without shooting a row again.
+        if (!o.checkpoint.empty() && done != checkpointed &&
+            (done / o.checkpoint_every > checkpointed / o.checkpoint_every || done == total)) {
+            checkpointed = done;
+            write_checkpoint(o.checkpoint, c.fingerprint, solver);
+        }
+    });
+    solution.radiosity = solver.radiosity();
+    solution.irradiance = solver.irradiance();
+    solution.shot = solver.patch_radiosity();
+    solution.energy = solver.energy();
+    solution.passes = solver.rows();
+    solution.converged = solver.converged();
+    solution.error = solver.residual();
+    solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
+    solution.iterations = solver.iterations();
+    return solution;
+}
+
+Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c) {
+    const BakeOptions& o = c.o;
+    solve::Settings settings;
+    settings.threshold = c.threshold;
+    settings.max_passes = o.max_passes;
+    settings.batch = o.batch;
+    solve::Progressive solver(mesh, engine, settings);
+    Solution solution;
+    if (!o.resume.empty()) {
+        restore(solver, c.resume_state, o.resume);
+        solution.resumed_from = solver.passes();
+    }
+    // Preview frames and checkpoints: one each time the passes cross a multiple of K.
+    long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
+    long checkpointed = solver.passes();  // the passes of the last checkpoint written or resumed
+    while (solver.step()) {
+        if (o.interrupted && *o.interrupted) throw Interrupted();
+        c.progress.update(solver, c.threshold);
+        if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpointed / o.checkpoint_every) {
+            checkpointed = solver.passes();
+            write_checkpoint(o.checkpoint, c.fingerprint, solver);
+        }
+        if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
+            previews = solver.passes() / o.preview_every;
+            c.preview(solver);
+        }
+    }
+    // The finished solve too: a bake killed while refining resumes straight to refinement.
+    if (!o.checkpoint.empty() && solver.passes() != checkpointed) write_checkpoint(o.checkpoint, c.fingerprint, solver);
+    c.progress.update(solver, c.threshold);
+    solution.radiosity = solver.radiosity(/*ambient=*/true);
+    solution.irradiance = solver.irradiance(/*ambient=*/true);
+    solution.ambient = solver.ambient();
+    solution.shot = solver.shot();
+    solution.energy = solver.energy();
+    solution.passes = solver.passes();
+    solution.converged = solver.converged();
+    solution.error = solver.error();
+    solution.unshot_fraction = solver.unshot_fraction();
+    return solution;
+}
+
+}  // namespace
 
 void run_bake(const BakeOptions& options) {
     const auto t_total = Clock::now();
@@ -374,6 +465,11 @@ void run_bake(const BakeOptions& options) {
         warnings.push_back(choice.warning);
     }
     const double threshold = plan.convergence.on ? o.threshold : kUnconvergedThreshold;
+    solve::MatrixSettings matrix_settings = solve::matrix_settings(o.threshold, o.batch);
+    if (!plan.convergence.on) matrix_settings.tolerance = kUnconvergedTolerance;
+    matrix_settings.grey = !plan.colour.on;
+    matrix_settings.interreflection = !direct_only;
+    matrix_settings.max_iterations = kMaxSweeps;
     const std::size_t elements_before = mesh.elements.size();
     // Should the automatically chosen device fail part-way, the bake starts again on the
     // reference engine from the mesh as built (refinement replaces it).
@@ -381,7 +477,6 @@ void run_bake(const BakeOptions& options) {
     ordered_json fallback;  // that device and why it failed, when it did
     Solution solution;
     std::vector<solve::RefineLevel> levels;
-    long resumed_from = -1;  // the passes a --resume started from
     double t_formfactors = 0.0, t_solve = 0.0, t_refine = 0.0;
     std::optional<formfactor::VerifySummary> verified;  // what --verify compared
 
@@ -394,81 +489,15 @@ void run_bake(const BakeOptions& options) {
         TimedEngine engine(*base_engine);
 
         t0 = Clock::now();
-        solution = Solution{};
         levels.clear();
-        resumed_from = -1;
         ProgressLine progress(o.progress);
-        if (solver_name == "matrix") {
-            solve::MatrixSettings ms = solve::matrix_settings(o.threshold, o.batch);
-            if (!plan.convergence.on) ms.tolerance = kUnconvergedTolerance;
-            ms.grey = !plan.colour.on;
-            ms.interreflection = !direct_only;
-            ms.max_iterations = kMaxSweeps;
-            solve::Matrix solver(mesh, engine, ms);
-            if (!o.resume.empty()) {
-                restore(solver, resume_state, o.resume);
-                resumed_from = solver.rows();
-            }
-            long checkpointed = solver.rows();  // the rows of the last checkpoint written or resumed
-            solver.solve([&](long done, long total) {
-                if (o.interrupted && *o.interrupted) throw Interrupted();
-                progress.rows(done, total);
-                // Every K rows, and all of them: a bake killed while solving or refining then
-                // resumes without shooting a row again.
-                if (!o.checkpoint.empty() && done != checkpointed &&
-                    (done / o.checkpoint_every > checkpointed / o.checkpoint_every || done == total)) {
-                    checkpointed = done;
-                    write_checkpoint(o.checkpoint, fingerprint, solver);
-                }
-            });
-            solution.radiosity = solver.radiosity();
-            solution.irradiance = solver.irradiance();
-            solution.shot = solver.patch_radiosity();
-            solution.energy = solver.energy();
-            solution.passes = solver.rows();
-            solution.converged = solver.converged();
-            solution.error = solver.residual();
-            solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
-            solution.iterations = solver.iterations();
-        } else {
-            solve::Settings solve_settings;
-            solve_settings.threshold = threshold;
-            solve_settings.max_passes = o.max_passes;
-            solve_settings.batch = o.batch;
-            solve::Progressive solver(mesh, engine, solve_settings);
-            if (!o.resume.empty()) {
-                restore(solver, resume_state, o.resume);
-                resumed_from = solver.passes();
-            }
-            // Preview frames and checkpoints: one each time the passes cross a multiple of K.
-            long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
-            long checkpointed = solver.passes();  // the passes of the last checkpoint written or resumed
-            while (solver.step()) {
-                if (o.interrupted && *o.interrupted) throw Interrupted();
-                progress.update(solver, threshold);
-                if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpointed / o.checkpoint_every) {
-                    checkpointed = solver.passes();
-                    write_checkpoint(o.checkpoint, fingerprint, solver);
-                }
-                if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
-                    previews = solver.passes() / o.preview_every;
-                    write_png_preview(scene, mesh, solver, view, width, height, out.preview_path(solver.passes()));
-                }
-            }
-            // The finished solve too: a bake killed while refining resumes straight to refinement.
-            if (!o.checkpoint.empty() && solver.passes() != checkpointed)
-                write_checkpoint(o.checkpoint, fingerprint, solver);
-            progress.update(solver, threshold);
-            solution.radiosity = solver.radiosity(/*ambient=*/true);
-            solution.irradiance = solver.irradiance(/*ambient=*/true);
-            solution.ambient = solver.ambient();
-            solution.shot = solver.shot();
-            solution.energy = solver.energy();
-            solution.passes = solver.passes();
-            solution.converged = solver.converged();
-            solution.error = solver.error();
-            solution.unshot_fraction = solver.unshot_fraction();
-        }
+        const SolveContext context{o, threshold, matrix_settings, fingerprint, resume_state, progress,
+                                   [&](const solve::Progressive& solver) {
+                                       write_png_preview(scene, mesh, solver, view, width, height,
+                                                         out.preview_path(solver.passes()));
+                                   }};
+        solution = solver_name == "matrix" ? solve_with_matrix(mesh, engine, context)
+                                           : solve_progressively(mesh, engine, context);
         progress.finish();
         if (!solution.converged && !o.quiet) {
             if (solver_name == "matrix")
@@ -578,7 +607,7 @@ void run_bake(const BakeOptions& options) {
                         {"dropped_triangles", mesh.dropped_triangles},
                         {"skipped_primitives", scene.skipped_primitives}};
     report["passes"] = solution.passes;
-    if (resumed_from >= 0) report["resumed_from_pass"] = resumed_from;
+    if (solution.resumed_from >= 0) report["resumed_from_pass"] = solution.resumed_from;
     report["converged"] = solution.converged;
     report["error"] = solution.error;
     if (solver_name == "matrix") report["iterations"] = solution.iterations;
