@@ -1444,6 +1444,11 @@ TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the 
     const std::string whole = read_text(ck);
     write_text(dir / "cut", whole.substr(0, whole.size() / 2));
     expect_bad_input(dir, bake({"--resume", (dir / "cut").string()}), out, "damaged");
+    // One bit flipped in the state (a disk's error): whole in length and end marker, refused all the same.
+    std::string flipped = whole;
+    flipped[flipped.size() / 2] = static_cast<char>(flipped[flipped.size() / 2] ^ 0x10);
+    write_text(dir / "flipped", flipped);
+    expect_bad_input(dir, bake({"--resume", (dir / "flipped").string()}), out, "checksum");
 }
 
 TEST_CASE("the corpus of malformed scenes: each is exit 2 with one line naming the file and the problem", "[cli]") {

@@ -23,6 +23,7 @@
 #include "cl/runtime.h"
 #include "cli/checkpoint.h"
 #include "cli/engine_select.h"
+#include "core/durable.h"
 #include "core/error.h"
 #include "core/timing.h"
 #include "formfactor/near_field.h"
@@ -125,8 +126,13 @@ public:
     }
 
     // Renames the staged files into place; report.json last, so its presence means complete.
-    // Should a rename fail part-way, the files already moved are taken out again.
+    // Should a rename fail part-way, the files already moved are taken out again. The files are
+    // flushed to the disk first (a disk that fills up may say so only then) and the directory
+    // after, so that a power cut leaves the old files or the new, never a new name on no data.
     void commit(const std::vector<std::string>& names) {
+        for (const auto& name : names)
+            if (!sync_to_disk(staging_ / name))
+                throw InternalError(fmt::format("{}: cannot flush {} to the disk", dir_.string(), name));
         std::vector<fs::path> moved;
         for (const auto& name : names) {
             std::error_code ec;
@@ -139,6 +145,7 @@ public:
         }
         std::error_code ec;
         fs::remove_all(staging_, ec);
+        sync_to_disk(dir_);
         committed_ = true;
     }
 

@@ -1,5 +1,6 @@
 // Checkpoints of a bake (see checkpoint.h). Layout: a magic line, the format version, the
-// fingerprint (hash and settings), then the solver's save() bytes and an end marker.
+// fingerprint (hash and settings), then the solver's save() bytes, their FNV-1a hash and an end
+// marker.
 #include "cli/checkpoint.h"
 
 #include <fmt/core.h>
@@ -12,6 +13,7 @@
 #include <sstream>
 #include <system_error>
 
+#include "core/durable.h"
 #include "core/error.h"
 
 namespace hemirad::cli {
@@ -20,7 +22,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[] = "hemirad checkpoint\n";
-constexpr std::uint32_t kFormat = 1;
+constexpr std::uint32_t kFormat = 2;  // 2: the state's hash before the end marker
 constexpr std::uint64_t kEndMarker = 0x444e452d4b504b43ull;  // "CKPK-END"
 
 // FNV-1a, 64 bits, over raw bytes.
@@ -28,8 +30,11 @@ class Hash {
 public:
     template <class T>
     void add(const T& value) {
-        const auto* bytes = reinterpret_cast<const unsigned char*>(&value);
-        for (std::size_t i = 0; i < sizeof value; ++i) h_ = (h_ ^ bytes[i]) * 0x100000001b3ull;
+        add_bytes(&value, sizeof value);
+    }
+    void add_bytes(const void* data, std::size_t size) {
+        const auto* bytes = static_cast<const unsigned char*>(data);
+        for (std::size_t i = 0; i < size; ++i) h_ = (h_ ^ bytes[i]) * 0x100000001b3ull;
     }
     std::uint64_t value() const { return h_; }
 
@@ -87,10 +92,17 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
         out.write(kMagic, sizeof kMagic - 1);
         out.write(reinterpret_cast<const char*>(&kFormat), sizeof kFormat);
         write_string(out, fingerprint);
-        solver.save(out);
+        std::ostringstream state;
+        solver.save(state);
+        const std::string bytes = state.str();
+        Hash hash;
+        hash.add_bytes(bytes.data(), bytes.size());
+        const std::uint64_t sum = hash.value();
+        out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+        out.write(reinterpret_cast<const char*>(&sum), sizeof sum);
         out.write(reinterpret_cast<const char*>(&kEndMarker), sizeof kEndMarker);
-        out.flush();
-        if (!out) {
+        out.close();
+        if (!out || !sync_to_disk(temp)) {
             std::error_code ec;
             fs::remove(temp, ec);
             throw InputError(fmt::format("{}: cannot write the checkpoint (disk full?)", file.string()));
@@ -102,6 +114,8 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
         fs::remove(temp, ec);
         throw InputError(fmt::format("{}: cannot write the checkpoint: {}", file.string(), ec.message()));
     }
+    // The rename too, so that after a power cut the file is this checkpoint or the one before.
+    sync_to_disk(fs::absolute(file, ec).parent_path());
 }
 
 std::string read_checkpoint(const fs::path& file, const std::string& fingerprint) {
@@ -125,10 +139,18 @@ std::string read_checkpoint(const fs::path& file, const std::string& fingerprint
         throw InputError(fmt::format("{}: the checkpoint is of another bake: it was made for [{}], this bake is [{}]",
                                      file.string(), saved, fingerprint));
     const auto begin = static_cast<std::size_t>(s.tellg());
-    std::uint64_t end = 0;
-    if (bytes.size() >= begin + sizeof end) std::memcpy(&end, bytes.data() + bytes.size() - sizeof end, sizeof end);
+    std::uint64_t end = 0, sum = 0;
+    if (bytes.size() >= begin + sizeof sum + sizeof end) {
+        std::memcpy(&end, bytes.data() + bytes.size() - sizeof end, sizeof end);
+        std::memcpy(&sum, bytes.data() + bytes.size() - sizeof end - sizeof sum, sizeof sum);
+    }
     if (end != kEndMarker) throw InputError(fmt::format("{}: the checkpoint is damaged (no end marker)", file.string()));
-    return bytes.substr(begin, bytes.size() - sizeof end - begin);
+    const std::size_t length = bytes.size() - sizeof end - sizeof sum - begin;
+    Hash hash;
+    hash.add_bytes(bytes.data() + begin, length);
+    if (hash.value() != sum)
+        throw InputError(fmt::format("{}: the checkpoint is damaged (its checksum does not match)", file.string()));
+    return bytes.substr(begin, length);
 }
 
 void restore(solve::Resumable& solver, const std::string& state, const fs::path& file) {
