@@ -31,6 +31,23 @@ bool finite(const std::vector<glm::dvec3>& values) {
     return true;
 }
 
+// The bake's engine stack: the near-field correction over the reference hemicube.
+std::unique_ptr<formfactor::Engine> bake_engine(const mesh::Mesh& m, int hemicube, std::uint64_t seed = 1) {
+    return std::make_unique<formfactor::NearFieldEngine>(
+        m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{hemicube, seed}));
+}
+
+// Area-weighted radiosity (red) of node `node` for any per-element B.
+double node_mean(const mesh::Mesh& m, const std::vector<glm::dvec3>& B, std::uint32_t node) {
+    double sum = 0.0, area = 0.0;
+    for (std::size_t k = 0; k < m.elements.size(); ++k) {
+        if (m.elements[k].node != node) continue;
+        sum += B[k].x * m.elements[k].area;
+        area += m.elements[k].area;
+    }
+    return sum / area;
+}
+
 struct Result {
     mesh::Mesh mesh;
     std::vector<glm::dvec3> B;
@@ -42,12 +59,11 @@ struct Result {
 Result solve_scene(const scene::Scene& s, double patch, int hemicube = 64) {
     Result r;
     r.mesh = mesh::build(s, {patch, patch / 2});
-    formfactor::NearFieldEngine engine(
-        r.mesh, std::make_unique<formfactor::ReferenceEngine>(r.mesh, formfactor::Settings{hemicube, 1}));
+    const auto engine = bake_engine(r.mesh, hemicube);
     solve::MatrixSettings settings;
     settings.tolerance = 1e-9;
     settings.max_iterations = 100000;
-    solve::Matrix solver(r.mesh, engine, settings);
+    solve::Matrix solver(r.mesh, *engine, settings);
     solver.solve();
     r.B = solver.radiosity();
     r.energy = solver.energy();
@@ -59,13 +75,7 @@ Result solve_scene(const scene::Scene& s, double patch, int hemicube = 64) {
 
 // Area-weighted radiosity (red) of node `node`.
 double node_average(const Result& r, std::uint32_t node) {
-    double sum = 0.0, area = 0.0;
-    for (std::size_t k = 0; k < r.mesh.elements.size(); ++k) {
-        if (r.mesh.elements[k].node != node) continue;
-        sum += r.B[k].x * r.mesh.elements[k].area;
-        area += r.mesh.elements[k].area;
-    }
-    return sum / area;
+    return node_mean(r.mesh, r.B, node);
 }
 
 void check_books(const solve::Energy& e) {
@@ -99,23 +109,6 @@ double emitted_flux(const mesh::Mesh& m) {
     double sum = 0.0;
     for (const mesh::Element& e : m.elements) sum += e.emission.x * e.area;
     return sum;
-}
-
-// The bake's engine stack: the near-field correction over the reference hemicube.
-std::unique_ptr<formfactor::Engine> bake_engine(const mesh::Mesh& m, int hemicube, std::uint64_t seed = 1) {
-    return std::make_unique<formfactor::NearFieldEngine>(
-        m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{hemicube, seed}));
-}
-
-// Area-weighted radiosity (red) of node `node` for any per-element B.
-double node_mean(const mesh::Mesh& m, const std::vector<glm::dvec3>& B, std::uint32_t node) {
-    double sum = 0.0, area = 0.0;
-    for (std::size_t k = 0; k < m.elements.size(); ++k) {
-        if (m.elements[k].node != node) continue;
-        sum += B[k].x * m.elements[k].area;
-        area += m.elements[k].area;
-    }
-    return sum / area;
 }
 
 // The matrix solver on the bake's engine stack (N = 64, grey) to a residual of 1e-9, which must

@@ -31,7 +31,7 @@ std::unique_ptr<formfactor::OpenCLEngine> make_opencl_engine(const mesh::Mesh& m
     formfactor::OpenCLTuning tuning = formfactor::tuning_from_environment(choice.context->info());
     tuning.on_shrink = [shrinks = choice.shrinks](std::size_t, std::size_t limit, const std::string& why) {
         if (shrinks->count++ == 0) shrinks->why = why;
-        shrinks->smallest = shrinks->count == 1 ? limit : std::min(shrinks->smallest, limit);
+        shrinks->smallest = std::min(shrinks->smallest, limit);
     };
     return std::make_unique<formfactor::OpenCLEngine>(mesh, *choice.context, settings, tuning, choice.fault);
 }
@@ -53,7 +53,6 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
     const ocl::DeviceInfo* chosen = ocl::resolve_device(spec, label, devices);
 
     EngineChoice out;
-    if (chosen) out.fault = formfactor::fault_from_environment();  // malformed: exit 2, never a fallback
     if (!chosen) {
         if (verify)
             throw InputError(devices.empty() && wants_opencl
@@ -67,6 +66,7 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
         out.id = "ref";
         return out;
     }
+    out.fault = formfactor::fault_from_environment();  // malformed: exit 2, never a fallback
     if (spec == "auto") {
         // Any failure of the automatic choice falls back to the reference, with a warning.
         try {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <exception>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -25,7 +26,7 @@ struct EngineChoice {
     // How often the device's engines ran out of memory and cut their batches, and to how few.
     struct Shrinks {
         long count = 0;
-        std::size_t smallest = 0;
+        std::size_t smallest = std::numeric_limits<std::size_t>::max();
         std::string why;  // the first OpenCL error
     };
     std::shared_ptr<Shrinks> shrinks = std::make_shared<Shrinks>();

@@ -156,17 +156,13 @@ OpenCLFault parse_fault(const std::string& text) {
         const std::size_t colon = item.find(':');
         const std::string name = item.substr(0, colon),
                           count = colon == std::string::npos ? "" : item.substr(colon + 1);
-        if (count.empty() || count.size() > 9 || count.find_first_not_of("0123456789") != std::string::npos)
+        std::size_t* const field = name == "oom-above"     ? &fault.oom_above
+                                   : name == "fail-after"  ? &fault.fail_after
+                                   : name == "wrong-after" ? &fault.wrong_after
+                                                           : nullptr;
+        if (!field || count.empty() || count.size() > 9 || count.find_first_not_of("0123456789") != std::string::npos)
             throw std::invalid_argument(fmt::format("'{}': expected oom-above:K, fail-after:K or wrong-after:K", item));
-        const std::size_t k = std::stoul(count);
-        if (name == "oom-above")
-            fault.oom_above = k;
-        else if (name == "fail-after")
-            fault.fail_after = k;
-        else if (name == "wrong-after")
-            fault.wrong_after = k;
-        else
-            throw std::invalid_argument(fmt::format("'{}': expected oom-above:K, fail-after:K or wrong-after:K", item));
+        *field = std::stoul(count);
     }
     return fault;
 }
