@@ -6,6 +6,7 @@
 #include <fmt/core.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -53,12 +54,30 @@ void write_string(std::ostream& out, const std::string& s) {
     out.write(s.data(), static_cast<std::streamsize>(s.size()));
 }
 
-bool read_string(std::istream& in, std::string& s) {
-    std::uint32_t n = 0;
-    if (!in.read(reinterpret_cast<char*>(&n), sizeof n) || n > (1u << 20)) return false;
-    s.resize(n);
-    return static_cast<bool>(in.read(s.data(), static_cast<std::streamsize>(n)));
-}
+// Reads a file's bytes from `at` on, as written by the functions above: false where they end.
+class Cursor {
+public:
+    Cursor(const std::string& bytes, std::size_t at) : bytes_(bytes), at_(std::min(at, bytes.size())) {}
+    template <class T>
+    bool read(T& value) {
+        if (bytes_.size() - at_ < sizeof value) return false;
+        std::memcpy(&value, bytes_.data() + at_, sizeof value);
+        at_ += sizeof value;
+        return true;
+    }
+    bool read_string(std::string& s) {
+        std::uint32_t n = 0;
+        if (!read(n) || n > (1u << 20) || bytes_.size() - at_ < n) return false;
+        s.assign(bytes_, at_, n);
+        at_ += n;
+        return true;
+    }
+    std::size_t at() const { return at_; }
+
+private:
+    const std::string& bytes_;
+    std::size_t at_;
+};
 
 }  // namespace
 
@@ -119,26 +138,27 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
 }
 
 std::string read_checkpoint(const fs::path& file, const std::string& fingerprint) {
-    std::ifstream in(file, std::ios::binary);
+    std::ifstream in(file, std::ios::binary | std::ios::ate);
     if (!in) throw InputError(fmt::format("{}: cannot read the checkpoint ({})", file.string(), std::strerror(errno)));
-    std::ostringstream whole;
-    whole << in.rdbuf();
-    const std::string bytes = whole.str();
-    std::istringstream s(bytes);
-    char magic[sizeof kMagic - 1] = {};
-    std::uint32_t format = 0;
-    if (!s.read(magic, sizeof magic) || std::memcmp(magic, kMagic, sizeof magic) != 0)
+    // Read once into the string that is returned: a matrix bake's checkpoint can be large.
+    std::string bytes(static_cast<std::size_t>(std::max<std::streamoff>(0, in.tellg())), '\0');
+    in.seekg(0);
+    if (!in.read(bytes.data(), static_cast<std::streamsize>(bytes.size())))
+        throw InputError(fmt::format("{}: cannot read the checkpoint ({})", file.string(), std::strerror(errno)));
+    if (bytes.compare(0, sizeof kMagic - 1, kMagic) != 0)
         throw InputError(fmt::format("{}: not a hemirad checkpoint", file.string()));
-    if (!s.read(reinterpret_cast<char*>(&format), sizeof format) || format != kFormat)
+    Cursor s(bytes, sizeof kMagic - 1);
+    std::uint32_t format = 0;
+    if (!s.read(format) || format != kFormat)
         throw InputError(
             fmt::format("{}: checkpoint format {} (this hemirad reads format {})", file.string(), format, kFormat));
     std::string saved;
-    if (!read_string(s, saved))
+    if (!s.read_string(saved))
         throw InputError(fmt::format("{}: the checkpoint is damaged (it ends early)", file.string()));
     if (saved != fingerprint)
         throw InputError(fmt::format("{}: the checkpoint is of another bake: it was made for [{}], this bake is [{}]",
                                      file.string(), saved, fingerprint));
-    const auto begin = static_cast<std::size_t>(s.tellg());
+    const std::size_t begin = s.at();
     std::uint64_t end = 0, sum = 0;
     if (bytes.size() >= begin + sizeof sum + sizeof end) {
         std::memcpy(&end, bytes.data() + bytes.size() - sizeof end, sizeof end);
@@ -150,7 +170,9 @@ std::string read_checkpoint(const fs::path& file, const std::string& fingerprint
     hash.add_bytes(bytes.data() + begin, length);
     if (hash.value() != sum)
         throw InputError(fmt::format("{}: the checkpoint is damaged (its checksum does not match)", file.string()));
-    return bytes.substr(begin, length);
+    bytes.resize(begin + length);  // in place: the state alone
+    bytes.erase(0, begin);
+    return bytes;
 }
 
 void restore(solve::Resumable& solver, const std::string& state, const fs::path& file) {
