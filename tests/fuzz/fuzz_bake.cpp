@@ -29,6 +29,19 @@ using namespace hemirad;
 
 bool g_opencl = false;
 
+// What the run did, printed at exit.
+struct Tally {
+    long inputs = 0, baked = 0, refused = 0, on_opencl = 0, matrix = 0, progressive = 0, shots = 0;
+} g_tally;
+
+void print_tally() {
+    std::fprintf(stderr,
+                 "fuzz_bake: %ld inputs: %ld baked (%ld by the matrix solver, %ld progressively; %ld also on "
+                 "OpenCL, identical), %ld refused with an InputError by design; %ld shots checked\n",
+                 g_tally.inputs, g_tally.baked, g_tally.matrix, g_tally.progressive, g_tally.on_opencl, g_tally.refused,
+                 g_tally.shots);
+}
+
 // Swallows std::cerr: a bake warns there even when quiet (the scene's warnings), thousands of
 // times in a run. Findings go to stderr through stdio, and sanitizer reports straight to fd 2.
 class NullBuffer : public std::streambuf {
@@ -66,6 +79,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     static NullBuffer null;
     std::cerr.rdbuf(&null);
     g_opencl = !ocl::list_devices().empty();
+    std::atexit(print_tally);
     std::fprintf(stderr, "fuzz_bake: %s\n",
                  g_opencl ? "an OpenCL device is present: inputs that ask are baked on OpenCL too"
                           : "no OpenCL device: the reference engine only");
@@ -89,11 +103,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     cli::BakeOptions options = bake.options;
     options.on_shot = std::ref(shots);
     std::string refusal;
+    ++g_tally.inputs;
     if (!bake_or_refuse(bake, options, refusal)) {
         // Generated scenes are valid glTF with an emitter: only the settings may be refused.
         if (!test::refused_by_design(options)) finding(bake, "a generated scene was refused: " + refusal);
+        ++g_tally.refused;
         return 0;
     }
+    ++g_tally.baked;
+    g_tally.shots += shots.shots();
+    const std::string solver =
+        nlohmann::json::parse(test::read_file_text(std::filesystem::path(options.output) / "report.json")).at("settings").at("solver");
+    ++(solver == "matrix" ? g_tally.matrix : g_tally.progressive);
     if (!shots.problems().empty()) finding(bake, "a shot breaks the form-factor invariants", shots.problems());
     if (const auto problems = test::check_bake_output(options.output); !problems.empty())
         finding(bake, "the outputs break an invariant", problems);
@@ -109,6 +130,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         if (!cl_shots.problems().empty()) finding(bake, "an OpenCL shot breaks the invariants", cl_shots.problems());
         if (const auto d = test::compare_bakes(options.output, cl.output); !d.empty())
             finding(bake, "the OpenCL bake differs from the reference bake", d);
+        ++g_tally.on_opencl;
     }
     return 0;
 }
