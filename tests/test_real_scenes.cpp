@@ -2,30 +2,26 @@
 // executable at the default settings (curved_objects at draft) and checked against facts computed here from the scene's
 // published geometry: flux balances, exact direct light, and fronts that face out through
 // mirrored nodes.
-#include <sys/wait.h>
-
 #include <catch2/catch.hpp>
 
 #include <cmath>
-#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
+#include "cli_support.h"
 #include "random_bake.h"
 
 using namespace hemirad;
+using test::json;
 
 namespace {
 
 namespace fs = std::filesystem;
-using json = nlohmann::json;
 using Catch::Matchers::WithinRel;
 
-const fs::path kScenes = fs::path(HEMIRAD_SOURCE_DIR) / "scenes";
+const fs::path kScenes = test::kSourceDir / "scenes";
 
 std::string joined(const std::vector<std::string>& lines) {
     std::string s;
@@ -35,18 +31,13 @@ std::string joined(const std::vector<std::string>& lines) {
 
 // `hemirad bake SCENE -o DIR --quiet EXTRA…` must exit 0 with outputs that keep every invariant
 // of random_bake.h (books balanced, finite, a baked glTF that loads); returns report.json.
-json bake(const fs::path& scene, const fs::path& out, const std::string& extra = "") {
-    const fs::path err = out.string() + ".stderr";
-    const std::string command = std::string("'") + HEMIRAD_EXE + "' bake '" + scene.string() + "' -o '" +
-                                out.string() + "' --quiet " + extra + " 2> '" + err.string() + "'";
-    const int status = std::system(command.c_str());
-    INFO(command << "\nstderr: " << test::read_file_text(err));
-    REQUIRE(WIFEXITED(status));
-    REQUIRE(WEXITSTATUS(status) == 0);
-    const std::vector<std::string> problems = test::check_bake_output(out);
+json bake(const test::TempDir& dir, const fs::path& scene, const std::string& out,
+          const std::vector<std::string>& extra = {}) {
+    const json report = test::bake_ok(dir, scene, dir / out, test::concat({"--quiet"}, extra));
+    const std::vector<std::string> problems = test::check_bake_output(dir / out);
     INFO("outputs: " << joined(problems));
     CHECK(problems.empty());
-    return json::parse(test::read_file_text(out / "report.json"));
+    return report;
 }
 
 std::map<std::string, json> meshes(const json& report) {
@@ -90,8 +81,8 @@ TEST_CASE("real scenes: the 168-triangle double-sided cylinder lamp bakes and it
     // the room is closed and so is the cylinder: the light of its outer side stays in the room and
     // every watt of it is absorbed, Σ (1 − ρ) H A = E A_outer over the fronts, so Σ H A = 2 E A_outer;
     // the light of its inner side stays inside it. Both sides emit: emitted = 2 E A_outer.
-    test::ScratchDir dir("hemirad-real-scenes");
-    const json report = bake(kScenes / "double_sided_cylinder.gltf", dir.path() / "out");
+    test::TempDir dir;
+    const json report = bake(dir, kScenes / "double_sided_cylinder.gltf", "out");
     constexpr double kE = 5.0, kRho = 0.5, kRadius = 0.15, kLength = 0.7;
     constexpr int kSegments = 28;
     const double outer = kSegments * 2.0 * kRadius * std::sin(M_PI / kSegments) * kLength +
@@ -127,9 +118,9 @@ TEST_CASE("real scenes: a lamp whose brighter side faces the sky lights the floo
     const double want = kDim * mean_f;
     const double lamp_area = 4.0 * kLampHalf * kLampHalf;
 
-    test::ScratchDir dir("hemirad-real-scenes");
+    test::TempDir dir;
     for (const std::string solver : {"auto", "progressive"}) {
-        const json report = bake(kScenes / "lamp_facing_sky.gltf", dir.path() / ("out_" + solver), "--solver " + solver);
+        const json report = bake(dir, kScenes / "lamp_facing_sky.gltf", "out_" + solver, {"--solver", solver});
         CAPTURE(solver, report.at("settings").at("solver"), want);
         check_convergence_is_honest(report);
         const std::map<std::string, json> m = meshes(report);
@@ -151,8 +142,8 @@ TEST_CASE("real scenes: a mirrored double-sided torus and a mirrored sphere keep
     // only each other, in the dark). The torus's ρ is 0.8 × a vertex colour: bounded per channel.
     // At --quality draft: the default bake takes 26 s on 2 cores (1377 patches, most of it in the
     // form factors and refinement's re-gather), draft 4 s, and both balance to 1%.
-    test::ScratchDir dir("hemirad-real-scenes");
-    const json report = bake(kScenes / "curved_objects.gltf", dir.path() / "out", "--quality draft");
+    test::TempDir dir;
+    const json report = bake(dir, kScenes / "curved_objects.gltf", "out", {"--quality", "draft"});
     const std::map<std::string, json> m = meshes(report);
     CHECK(report.at("counts").at("triangles") == 12 + 2 + 24 * 12 * 2 + (2 * 24 + 24 * 10 * 2));
     const json& e = report.at("energy");
