@@ -66,7 +66,7 @@ struct RandomSceneInfo {
     std::string summary;              // one line: every object's shape, material and transform chain
     std::vector<RandomObject> objects;  // per mesh node, in the order written
     std::size_t triangles = 0;        // triangles written, once per node that holds them
-    std::size_t degenerate = 0;       // of them written deliberately degenerate or duplicated
+    std::size_t degenerate = 0;       // triangles of the meshes written deliberately degenerate or duplicated
     bool mirrored = false;            // some mesh node's world transform has a negative determinant
     bool double_sided = false;        // some material is doubleSided
 };
