@@ -1770,3 +1770,35 @@ TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same b
         CHECK(r.err.find(knob) != std::string::npos);
     }
 }
+
+TEST_CASE("hostile input: a name with a newline or a terminal escape still gives one line", "[cli][hostile]") {
+    TempDir dir;
+    const fs::path out = dir / "never";
+    json g = read_json(kClosedRoom);
+    g["materials"][0]["name"] = "evil\nsecond line\x1b[31m";
+    g["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1.5, 0.5, 0.5, 1.0};
+    write_json(dir / "names.gltf", g);
+    const RunResult r = expect_bad_input(dir, bake_args(dir / "names.gltf", out), out, "evil\\x0asecond line\\x1b[31m");
+    CHECK(r.err.find('\x1b') == std::string::npos);
+    // An option's value as well.
+    expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--camera", "a\nb"})), out, "a\\x0ab");
+}
+
+TEST_CASE("hostile input: a directory where an output file goes, or a file where previews go, is exit 2 before any work", "[cli][hostile]") {
+    TempDir dir;
+    const fs::path out = dir / "mine";
+    fs::create_directories(out / "report.json");
+    write_text(out / "preview", "my file\n");
+    for (const auto& [extra, obstacle] : std::vector<std::pair<std::vector<std::string>, std::string>>{
+             {kFast, "report.json"}, {concat(kFast, {"--preview-every", "50"}), "preview"}}) {
+        INFO(obstacle);
+        if (obstacle == "preview") fs::remove(out / "report.json");
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, extra));
+        INFO("stderr: " << r.err);
+        CHECK(r.code == 2);  // was exit 1, "cannot move report.json into place", at the very end
+        check_one_line(r.err);
+        CHECK(r.err.find(obstacle) != std::string::npos);
+    }
+    CHECK(listing(out) == std::set<std::string>{"preview"});
+    CHECK(read_text(out / "preview") == "my file\n");
+}

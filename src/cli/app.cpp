@@ -246,7 +246,7 @@ int run(int argc, char** argv) {
     } catch (const CLI::CallForVersion& e) {
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
-        std::cerr << "hemirad: " << e.what() << " (see hemirad --help)\n";
+        std::cerr << "hemirad: " << printable(e.what()) << " (see hemirad --help)\n";
         return 2;
     }
 
@@ -266,28 +266,29 @@ int run(int argc, char** argv) {
         run_bake(bake_options);
         return 0;
     } catch (const InputError& e) {
-        std::cerr << "hemirad: " << e.what() << "\n";
+        std::cerr << "hemirad: " << printable(e.what()) << "\n";
         return 2;
     } catch (const Interrupted&) {
         std::cerr << (bake_options.progress ? "\n" : "") << "hemirad: interrupted; no output written\n";
         return 130;
     } catch (const formfactor::VerifyError& e) {
-        std::cerr << "hemirad: verification failed: " << e.what() << "\n";
+        std::cerr << "hemirad: verification failed: " << printable(e.what()) << "\n";
         return 1;
     } catch (const ocl::BuildError& e) {
         std::cerr << "hemirad: " << e.what() << "\n";
         return 1;
     } catch (const ocl::DeviceError& e) {
-        std::cerr << "hemirad: device failed: " << e.what() << " (--device auto would start again on the reference)\n";
+        std::cerr << "hemirad: device failed: " << printable(e.what())
+                  << " (--device auto would start again on the reference)\n";
         return 1;
     } catch (const cl::Error& e) {
-        std::cerr << "hemirad: device failed: " << device_failure(e) << "\n";
+        std::cerr << "hemirad: device failed: " << printable(device_failure(e)) << "\n";
         return 1;
     } catch (const std::bad_alloc&) {
         std::cerr << "hemirad: out of memory\n";
         return 1;
     } catch (const std::exception& e) {
-        std::cerr << "hemirad: internal error: " << e.what() << "\n";
+        std::cerr << "hemirad: internal error: " << printable(e.what()) << "\n";
         return 1;
     }
 }
