@@ -45,7 +45,7 @@ typedef struct {
 } Vec;
 
 typedef struct {
-    Vec v[HR_MAX_CLIPPED + 1];
+    Vec v[HR_MAX_CLIPPED];
     int n;
 } ClipPolygon;
 
@@ -99,21 +99,40 @@ bool lexicographically_less(Vec a, Vec b) {
     return a.z < b.z;
 }
 
-// Sutherland-Hodgman against one plane, crossing points computed from the lexicographically
-// smaller endpoint, so an edge two elements share is cut at bit-identical points.
+// Sutherland-Hodgman against one plane, keeping only the run of vertices at or above it that
+// holds the largest value (the first on ties), with the crossings that bound it: formfactor::
+// clip_convex (src/formfactor/clip.h), which says why. At most n + 1 vertices for any input, so a
+// triangle or quad through 5 planes fits HR_MAX_CLIPPED. Crossing points are computed from the
+// lexicographically smaller endpoint, so an edge two elements share is cut at bit-identical points.
 void clip(ClipPolygon* poly, int plane, int face, double eps) {
+    const int n = poly->n;
+    double f[HR_MAX_CLIPPED];
+    int top = 0;
+    for (int i = 0; i < n; ++i) {
+        f[i] = plane_value(plane, face, eps, poly->v[i]);
+        if (f[i] > f[top]) top = i;
+    }
+    int first = top, length = 1;
+    while (length < n && f[(first + n - 1) % n] >= 0.0) {
+        first = (first + n - 1) % n;
+        ++length;
+    }
+    while (length < n && f[(first + length) % n] >= 0.0) ++length;
+
     ClipPolygon out;
     out.n = 0;
-    for (int i = 0; i < poly->n; ++i) {
+    for (int i = 0; i < n; ++i) {
+        const int j = (i + 1) % n;
+        const bool kept_i = (i - first + n) % n < length, kept_j = (j - first + n) % n < length;
         const Vec a = poly->v[i];
-        const Vec b = poly->v[(i + 1) % poly->n];
-        const double fa = plane_value(plane, face, eps, a), fb = plane_value(plane, face, eps, b);
-        if (fa >= 0.0 && out.n <= HR_MAX_CLIPPED) out.v[out.n++] = a;
-        if ((fa >= 0.0) != (fb >= 0.0) && out.n <= HR_MAX_CLIPPED) {
+        const Vec b = poly->v[j];
+        // The bounds tests never fail (n + 1 <= HR_MAX_CLIPPED); they keep private memory safe.
+        if (kept_i && out.n < HR_MAX_CLIPPED) out.v[out.n++] = a;
+        if (kept_i != kept_j && out.n < HR_MAX_CLIPPED) {
             const bool a_first = lexicographically_less(a, b);
             const Vec p = a_first ? a : b;
             const Vec q = a_first ? b : a;
-            const double fp = a_first ? fa : fb, fq = a_first ? fb : fa;
+            const double fp = a_first ? f[i] : f[j], fq = a_first ? f[j] : f[i];
             const double t = fp / (fp - fq);
             out.v[out.n++] = vec(p.x + (q.x - p.x) * t, p.y + (q.y - p.y) * t, p.z + (q.z - p.z) * t);
         }
@@ -321,7 +340,7 @@ void setup_element(const HrShot* shot, const Element* e, int k, __global HrRecor
         bool visible = true;
         for (int plane = first_cut; plane < planes && visible; ++plane)
             visible = clip_if_needed(&poly, plane, face, eps);
-        if (!visible || poly.n > HR_MAX_CLIPPED) continue;
+        if (!visible) continue;
 
         // The plane n.p = c in face coordinates gives 1/depth = (n_u s + n_v t + n_d) / c, stored
         // divided through (the reference's `plane`).

@@ -20,7 +20,7 @@ typedef std::int64_t hr_long;
 #endif
 
 #define HR_FACES 5        // top (+z), +x, -x, +y, -y: the order of formfactor::to_face
-#define HR_MAX_CLIPPED 9  // a convex quad clipped by 5 planes has at most 9 vertices
+#define HR_MAX_CLIPPED 9  // a quad clipped by 5 planes: at most one vertex more per plane (clip)
 #define HR_EMPTY (-1)     // id of a cell nothing covers
 #define HR_BLOCKER (-2)   // id of a cell won by the back of a one-sided surface
 // Delta form factors are summed in 64-bit fixed point (integer addition is associative, so

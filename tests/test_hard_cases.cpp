@@ -121,7 +121,7 @@ std::pair<std::vector<glm::dvec3>, solve::Energy> gauss_seidel_in_bounded_sweeps
     settings.max_iterations = 30000;
     solve::Matrix solver(m, *engine, settings);
     solver.solve();
-    CAPTURE(solver.iterations(), solver.residual());
+    CAPTURE(solver.iterations(), solver.error_bound());
     CHECK(solver.converged());
     CHECK(solver.iterations() < settings.max_iterations);
     return {solver.radiosity(), solver.energy()};

@@ -192,6 +192,26 @@ TEST_CASE("a lone right triangle splits into n^2 congruent patches", "[mesh]") {
     CHECK(euler_characteristic(m.elements) == 1);
 }
 
+TEST_CASE("a needle triangle is cut into strips across it, not n^2 slivers", "[mesh]") {
+    // Sides of 1.0000125 and 0.01: n² cells from its longest side would be 121 slivers of its own
+    // shape; strips across it are 11 patches (10 trapezoids and the tip), each within the patch
+    // size and cut in two along the needle, tiling it exactly.
+    const Scene s = scene_of({tri({0, 0.005, 0}, {0, -0.005, 0}, {1, 0, 0})});
+    const Mesh m = build(s, {0.1, 0.05});
+    REQUIRE(m.patches.size() == 11);
+    REQUIRE(m.elements.size() == 22);
+    double area = 0.0;
+    for (const Patch& p : m.patches) {
+        for (double l : edge_lengths(p.poly)) CHECK(l <= 0.1 + 1e-12);
+        CHECK(glm::dot(winding_normal(p.poly), dvec3(0, 0, 1)) > 0.999999);
+        area += p.area;
+    }
+    CHECK(area == Approx(0.005).epsilon(1e-12));
+    CHECK(std::count_if(m.patches.begin(), m.patches.end(), [](const Patch& p) { return p.poly.n == 3; }) == 1);
+    check_ranges(m);
+    CHECK(euler_characteristic(m.elements) == 1);
+}
+
 TEST_CASE("folded or non-convex triangle pairs are not merged into quads", "[mesh]") {
     const Settings big{100.0, 100.0};
     SECTION("flat pair: control, is paired") {

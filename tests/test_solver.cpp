@@ -127,3 +127,44 @@ TEST_CASE("solver: the same scene and seed give identical radiosity", "[solver]"
     CHECK(a.passes == b.passes);
     CHECK(a.B == b.B);
 }
+
+TEST_CASE("progressive: a lamp whose brighter side faces the open sky does not end the bake unlit", "[solver]") {
+    // A lamp 1 above a unit floor, open to the sky: its upper side (E = 2) faces away, its lower
+    // side (E = 1, 1e-3 below it) faces the floor; neither reflects. The upper side holds the
+    // most flux and shoots first, and all of it escapes. Measuring the scene's hit share from that
+    // shot alone said the rest would escape too: converged after one pass, the floor black. The
+    // floor's irradiance is E F(floor → lamp) = 0.1998248957 (REFERENCES.md, unit squares 1
+    // apart); what the floor reflects escapes or is absorbed by the lamp.
+    scene::Scene s;
+    const auto floor = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    const auto upper = test::add_material(s, glm::dvec3(0.0), glm::dvec3(2.0));
+    const auto lower = test::add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
+    test::add_quad(s, {0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, floor, "floor");              // faces +z
+    test::add_quad(s, {0, 0, 1.001}, {1, 0, 1.001}, {1, 1, 1.001}, {0, 1, 1.001}, upper, "up");  // faces +z
+    test::add_quad(s, {0, 0, 1}, {0, 1, 1}, {1, 1, 1}, {1, 0, 1}, lower, "down");                // faces −z
+    test::finish(s);
+    const mesh::Mesh m = mesh::build(s, {0.125, 0.0625});
+    for (const double threshold : {1e-2, 1e-6}) {  // the default, and convergence forced off
+        formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{64, 1}));
+        solve::Progressive solver(m, engine, {threshold, 100000});
+        while (solver.step()) {
+        }
+        const std::vector<glm::dvec3> H = solver.irradiance(true);
+        double floor_flux = 0.0, floor_area = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k) {
+            if (m.elements[k].node != 0) continue;
+            floor_flux += H[k].x * m.elements[k].area;
+            floor_area += m.elements[k].area;
+        }
+        const solve::Energy e = solver.energy();
+        CAPTURE(threshold, solver.passes(), solver.unshot_fraction(), solver.error(), e.emitted, e.escaped);
+        CHECK(solver.converged());
+        CHECK(solver.passes() > 1);
+        CHECK_THAT(floor_flux / floor_area, WithinRel(0.1998248957, 0.02));
+        CHECK_THAT(e.absorbed + e.escaped + e.unshot, WithinRel(e.emitted, 1e-9));
+        // Converged means what is unshot can no longer move the answer by the threshold: the lamp's
+        // lower side has shot (else a third of the emitted flux would be unshot), and of the 0.1
+        // the floor reflects (a thirtieth of the 3 emitted) little is left.
+        CHECK(solver.unshot_fraction() <= 0.01);
+    }
+}

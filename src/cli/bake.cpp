@@ -348,7 +348,7 @@ Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, c
     solution.energy = solver.energy();
     solution.passes = solver.rows();
     solution.converged = solver.converged();
-    solution.error = solver.residual();
+    solution.error = solver.error_bound();
     solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
     solution.iterations = solver.iterations();
     return solution;

@@ -3,6 +3,8 @@
 
 #include <cmath>
 
+#include "formfactor/clip.h"
+
 namespace hemirad::formfactor {
 
 double point_to_polygon(const glm::dvec3& normal, const glm::dvec3* v, int count) {
@@ -21,16 +23,10 @@ double point_to_polygon(const glm::dvec3& normal, const glm::dvec3* v, int count
 }
 
 double point_to_polygon(const glm::dvec3& point, const glm::dvec3& normal, const mesh::Polygon& polygon) {
-    // Sutherland–Hodgman against the tangent plane n·r >= 0; a quad gains at most one vertex.
-    glm::dvec3 clipped[5];
-    int n = 0;
-    for (int i = 0; i < polygon.n; ++i) {
-        const glm::dvec3 a = polygon.v[i] - point;
-        const glm::dvec3 b = polygon.v[(i + 1) % polygon.n] - point;
-        const double da = glm::dot(normal, a), db = glm::dot(normal, b);
-        if (da >= 0.0) clipped[n++] = a;
-        if ((da >= 0.0) != (db >= 0.0)) clipped[n++] = a + (b - a) * (da / (da - db));
-    }
+    // Relative to the point, clipped to its tangent plane n·r >= 0: at most 4 + 1 vertices.
+    glm::dvec3 relative[4], clipped[5];
+    for (int i = 0; i < polygon.n; ++i) relative[i] = polygon.v[i] - point;
+    const int n = clip_convex(relative, polygon.n, [&](const glm::dvec3& r) { return glm::dot(normal, r); }, clipped);
     return n >= 3 ? point_to_polygon(normal, clipped, n) : 0.0;
 }
 

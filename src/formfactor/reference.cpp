@@ -6,46 +6,21 @@
 #include <cmath>
 
 #include "core/error.h"
+#include "formfactor/clip.h"
 
 namespace hemirad::formfactor {
 namespace {
 
-constexpr int kMaxClipped = 4 + 5;  // a convex n-gon clipped by 5 planes gains at most 5 vertices
+// A triangle or quad clipped by the 5 planes of a face: clip_convex adds at most one vertex per
+// plane, whatever the rounding, so 4 + 5.
+constexpr int kMaxClipped = 4 + 5;
 
 struct ClipPolygon {
-    glm::dvec3 v[kMaxClipped + 1];
+    glm::dvec3 v[kMaxClipped];
     int n = 0;
 };
 
-bool lexicographically_less(const glm::dvec3& a, const glm::dvec3& b) {
-    if (a.x != b.x) return a.x < b.x;
-    if (a.y != b.y) return a.y < b.y;
-    return a.z < b.z;
-}
-
-// Keeps the part of `poly` where plane(p) >= 0 (Sutherland–Hodgman). The crossing point is
-// computed from the lexicographically smaller endpoint, so an edge shared by two elements is
-// cut at bit-identical points whichever direction each element walks it.
-template <class Plane>
-void clip(ClipPolygon& poly, Plane plane) {
-    ClipPolygon out;
-    for (int i = 0; i < poly.n; ++i) {
-        const glm::dvec3& a = poly.v[i];
-        const glm::dvec3& b = poly.v[(i + 1) % poly.n];
-        const double fa = plane(a), fb = plane(b);
-        if (fa >= 0.0) out.v[out.n++] = a;
-        if ((fa >= 0.0) != (fb >= 0.0)) {
-            const bool a_first = lexicographically_less(a, b);
-            const glm::dvec3& p = a_first ? a : b;
-            const glm::dvec3& q = a_first ? b : a;
-            const double fp = a_first ? fa : fb, fq = a_first ? fb : fa;
-            out.v[out.n++] = p + (q - p) * (fp / (fp - fq));
-        }
-    }
-    poly = out;
-}
-
-// Clips only where the plane cuts the polygon; false when it is wholly outside.
+// Clips only where the plane cuts the polygon (clip_convex); false when it is wholly outside.
 template <class Plane>
 bool clip_if_needed(ClipPolygon& poly, Plane plane) {
     bool any_in = false, any_out = false;
@@ -54,7 +29,11 @@ bool clip_if_needed(ClipPolygon& poly, Plane plane) {
         any_in = any_in || in;
         any_out = any_out || !in;
     }
-    if (any_out && any_in) clip(poly, plane);
+    if (any_out && any_in) {
+        ClipPolygon out;
+        out.n = clip_convex(poly.v, poly.n, plane, out.v);
+        poly = out;
+    }
     return any_in && poly.n >= 3;
 }
 

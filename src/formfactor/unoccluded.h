@@ -3,8 +3,9 @@
 // element j is taken by reciprocity from the exact point-to-polygon factor,
 //   F_ij = (A_j / A_i) × (area average over element j of F(dA_x → patch i)),
 // Lambert's closed form for the inner integral and a q×q midpoint rule over the element for
-// the outer one, q from the element's distance to the shooter relative to their sizes.
-// Deterministic: the shot counter is ignored. Nothing blocks anything, so on a scene with
+// the outer one, q from the element's distance to the shooter relative to their sizes. Each row
+// is then scaled to its total seen from the shooter's side, exact in a closed scene, so that rows
+// conserve energy as the hemicube's do (see shoot). Deterministic: the shot counter is ignored. Nothing blocks anything, so on a scene with
 // occlusion (or with doubleSided twins, whose backs it does not hide) it lets light through
 // surfaces. Per-element data is taken at construction: build a new engine for a new mesh.
 #pragma once
@@ -27,6 +28,11 @@ public:
     // element's centroid to the shooter's, s the larger of their longest edges. 1 if d > 4s,
     // 2 if d > 2s, 4 if d > s, else 8.
     static int subdivisions(double d, double s);
+
+    // The row's total from the shooter's side (see shoot) is trusted once midpoint rules of q and
+    // 2q points a side agree to this, q up to kMaxShooterRule.
+    static constexpr double kRowTolerance = 1e-7;
+    static constexpr int kMaxShooterRule = 8;
 
 private:
     struct Receiver {

@@ -7,6 +7,7 @@
 #include <cstdint>
 
 #include "core/error.h"
+#include "formfactor/clip.h"
 #include "output/output.h"
 #include "output/welded_mesh.h"
 
@@ -51,17 +52,13 @@ ClipVertex crossing(const ClipVertex& inside, const ClipVertex& outside, double 
     return {inside.pos + t * (outside.pos - inside.pos), inside.colour + t * (outside.colour - inside.colour)};
 }
 
-// Sutherland–Hodgman against one plane; returns the output vertex count (<= n + 1).
+// Clips against one plane (formfactor::clip_convex); returns the output vertex count (<= n + 1).
 int clip_polygon(const ClipVertex* in, int n, ClipVertex* out, const Plane& plane) {
-    int m = 0;
-    for (int i = 0; i < n; ++i) {
-        const ClipVertex& a = in[i];
-        const ClipVertex& b = in[(i + 1) % n];
-        const double da = distance(plane, a), db = distance(plane, b);
-        if (da >= 0.0) out[m++] = a;
-        if ((da >= 0.0) != (db >= 0.0)) out[m++] = da >= 0.0 ? crossing(a, b, da, db) : crossing(b, a, db, da);
-    }
-    return m;
+    const auto value = [&](const ClipVertex& v) { return distance(plane, v); };
+    const auto cross = [](const ClipVertex& a, const ClipVertex& b, double da, double db) {
+        return da >= 0.0 ? crossing(a, b, da, db) : crossing(b, a, db, da);
+    };
+    return formfactor::clip_convex(in, n, value, cross, out);
 }
 
 std::int64_t floor_div(std::int64_t a, std::int64_t b) {
@@ -122,7 +119,7 @@ public:
 
 private:
     void clip_and_emit(const ClipVertex (&tri)[3], std::vector<ScreenTriangle>& out) const {
-        ClipVertex buffers[2][16];
+        ClipVertex buffers[2][3 + 5];  // a triangle through 5 planes, one vertex more per plane
         std::copy(tri, tri + 3, buffers[0]);
         int n = 3, current = 0;
         for (const Plane& plane : planes_) {

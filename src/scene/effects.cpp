@@ -8,6 +8,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -74,6 +75,57 @@ struct Plane {
     std::size_t triangle;   // a triangle on it
 };
 
+// Two of the triangles (all in one plane with unit normal n) whose interiors overlap by more than
+// `tolerance` (a length), if any: the separating axis test on their edge normals, over the pairs
+// whose bounding boxes in the plane overlap (a sweep along the first axis).
+std::optional<std::pair<std::size_t, std::size_t>> overlapping_pair(const Scene& scene,
+                                                                      const std::vector<std::size_t>& triangles,
+                                                                      const glm::dvec3& n, double tolerance) {
+    if (triangles.size() < 2) return std::nullopt;
+    const glm::dvec3 u = glm::normalize(glm::cross(std::abs(n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0), n));
+    const glm::dvec3 v = glm::cross(n, u);
+    struct Flat {
+        std::array<glm::dvec2, 3> p;
+        double lo, hi;  // along u
+        std::size_t triangle;
+    };
+    std::vector<Flat> flat;
+    flat.reserve(triangles.size());
+    for (std::size_t t : triangles) {
+        Flat f;
+        for (int k = 0; k < 3; ++k) f.p[k] = {glm::dot(scene.triangles[t].p[k], u), glm::dot(scene.triangles[t].p[k], v)};
+        f.lo = std::min({f.p[0].x, f.p[1].x, f.p[2].x});
+        f.hi = std::max({f.p[0].x, f.p[1].x, f.p[2].x});
+        f.triangle = t;
+        flat.push_back(f);
+    }
+    std::sort(flat.begin(), flat.end(), [](const Flat& a, const Flat& b) { return a.lo < b.lo; });
+    // Separated along the normal of an edge of a: b lies beyond it, less the tolerance.
+    const auto separated = [tolerance](const Flat& a, const Flat& b) {
+        for (int e = 0; e < 3; ++e) {
+            const glm::dvec2 d = a.p[(e + 1) % 3] - a.p[e];
+            const double len = glm::length(d);
+            if (!(len > 0.0)) continue;
+            const glm::dvec2 axis(d.y / len, -d.x / len);
+            double a_lo = 1e300, a_hi = -1e300, b_lo = 1e300, b_hi = -1e300;
+            for (int k = 0; k < 3; ++k) {
+                a_lo = std::min(a_lo, glm::dot(axis, a.p[k]));
+                a_hi = std::max(a_hi, glm::dot(axis, a.p[k]));
+                b_lo = std::min(b_lo, glm::dot(axis, b.p[k]));
+                b_hi = std::max(b_hi, glm::dot(axis, b.p[k]));
+            }
+            if (b_lo >= a_hi - tolerance || a_lo >= b_hi - tolerance) return true;
+        }
+        return false;
+    };
+    for (std::size_t i = 0; i < flat.size(); ++i)
+        for (std::size_t j = i + 1; j < flat.size() && flat[j].lo < flat[i].hi - tolerance; ++j)
+            if (!separated(flat[i], flat[j]) && !separated(flat[j], flat[i]))
+                return std::make_pair(std::min(flat[i].triangle, flat[j].triangle),
+                                      std::max(flat[i].triangle, flat[j].triangle));
+    return std::nullopt;
+}
+
 EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
     const std::size_t count = scene.triangles.size();
     if (count == 0) return automatic(false, "the scene has no triangles, so nothing can hide anything");
@@ -121,6 +173,9 @@ EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
         planes.push_back({n, glm::dot(n, (t.p[0] + t.p[1] + t.p[2]) / 3.0), i});
     }
     if (planes.empty()) return automatic(false, "every triangle has zero area, so nothing can hide anything");
+    // Triangles grouped by plane: coplanar ones that face the same way and overlap fight for the
+    // same light (a decal, a duplicated face), which only a depth test can share out.
+    std::vector<std::vector<std::size_t>> coplanar;
     {
         const double dq = diagonal > 0.0 ? 1e-9 * diagonal : 1.0;
         using Key = std::array<std::int64_t, 4>;
@@ -133,8 +188,13 @@ EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
         for (std::size_t i = 0; i < planes.size(); ++i) keyed.push_back({key(planes[i]), i});
         std::sort(keyed.begin(), keyed.end());
         std::vector<Plane> distinct;
-        for (std::size_t i = 0; i < keyed.size(); ++i)
-            if (i == 0 || keyed[i].first != keyed[i - 1].first) distinct.push_back(planes[keyed[i].second]);
+        for (std::size_t i = 0; i < keyed.size(); ++i) {
+            if (i == 0 || keyed[i].first != keyed[i - 1].first) {
+                distinct.push_back(planes[keyed[i].second]);
+                coplanar.emplace_back();
+            }
+            coplanar.back().push_back(planes[keyed[i].second].triangle);
+        }
         planes.swap(distinct);
     }
 
@@ -181,6 +241,15 @@ EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
                                            "triangle {} of node '{}', so surfaces can hide one another",
                                            vec(v.p), node_name(scene, v.triangle), v.triangle, depth, plane.triangle,
                                            node_name(scene, plane.triangle)));
+    }
+    for (std::size_t g = 0; g < coplanar.size(); ++g) {
+        const auto overlap = overlapping_pair(scene, coplanar[g], planes[g].n, tolerance);
+        if (!overlap) continue;
+        return automatic(true, fmt::format("triangle {} of node '{}' and triangle {} of node '{}' overlap in one plane, "
+                                           "facing the same way (a duplicated face or a decal), so only one of them can "
+                                           "be lit where they overlap",
+                                           overlap->first, node_name(scene, overlap->first), overlap->second,
+                                           node_name(scene, overlap->second)));
     }
     return automatic(false, fmt::format("all {} vertices lie on or in front of all {} distinct triangle planes ({} "
                                         "triangles): the surfaces bound a convex region seen from inside, so no surface "

@@ -1,7 +1,7 @@
 // Full-matrix gathering (the article's first approach): one hemicube per patch gives its
 // form-factor row, then the linear system B = E + K·B over patch radiosities is solved by
 // Gauss–Seidel. Patches shoot (are the rows), elements receive. No ambient term is needed:
-// once the residual is small the solution is complete, not an estimate of the rest.
+// once the error bound is small the solution is complete, not an estimate of the rest.
 #pragma once
 
 #include <atomic>
@@ -19,8 +19,8 @@
 namespace hemirad::solve {
 
 struct MatrixSettings {
-    // Stop the sweeps when max_p |E_p + Σ_i K_pi B_i − B_p| / max_p B_p (worst channel) is at
-    // most this.
+    // Stop the sweeps once the patch radiosities are provably within this of the solution, by
+    // flux (Σ A |B − B*| / Σ A B, worst channel; see error_bound()).
     double tolerance = 1e-6;
     int max_iterations = 1000;  // Gauss–Seidel sweeps at most
     // Rows shot per engine call: one launch per kernel stage on the OpenCL engine.
@@ -36,7 +36,7 @@ struct MatrixSettings {
     const std::atomic<bool>* cancel = nullptr;
 };
 
-// A bake's settings: iterate to a residual of min(1e-4, threshold / 100) and shoot rows in
+// A bake's settings: iterate to an error bound of min(1e-4, threshold / 100) and shoot rows in
 // batches of at least 64 (one launch per kernel stage on OpenCL, what fills a GPU).
 MatrixSettings matrix_settings(double threshold, int batch);
 
@@ -74,10 +74,14 @@ public:
 
     long rows() const { return rows_done_; }        // rows computed (hemicubes shot)
     int iterations() const { return iterations_; }  // Gauss–Seidel sweeps
-    // Final relative residual, as for `tolerance`; 0 for direct light, infinite when cancelled
-    // before every row was shot.
-    double residual() const { return residual_; }
-    bool converged() const { return converged_; }  // residual <= tolerance; direct light: all rows shot
+    // A bound on the flux-weighted relative error of the final patch radiosities, Σ A |B − B*| /
+    // Σ A B (worst channel): the residual's flux over (1 − q), q = contraction(); as for
+    // `tolerance`. 0 for direct light, infinite when cancelled before every row was shot.
+    double error_bound() const { return error_bound_; }
+    // The norm of K in flux, q = max_i Σ_j ρ_j F_ij ≤ the largest reflectance: each sweep's error
+    // shrinks by at least this (0 before the sweeps).
+    double contraction() const { return contraction_; }
+    bool converged() const { return converged_; }  // error_bound <= tolerance; direct light: all rows shot
 
     std::vector<glm::dvec3> radiosity() const { return B_; }         // per element B_j = E_j + ρ_j H_j
     std::vector<glm::dvec3> irradiance() const { return H_; }        // per element H_j
@@ -107,7 +111,8 @@ private:
     std::vector<Row> rows_;              // per patch; empty where not active
     long rows_done_ = 0;
     int iterations_ = 0;
-    double residual_ = 0.0;
+    double error_bound_ = 0.0;
+    double contraction_ = 0.0;
     bool converged_ = false;
     bool solved_ = false;
 

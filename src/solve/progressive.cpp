@@ -21,7 +21,9 @@ Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, con
       engine_(engine),
       settings_(settings),
       H_(mesh.elements.size(), glm::dvec3(0.0)),
-      shot_(mesh.patches.size(), glm::dvec3(0.0)) {
+      shot_(mesh.patches.size(), glm::dvec3(0.0)),
+      hit_(mesh.patches.size(), 1.0),
+      round_unshot_(mesh.patches.size(), 0.0) {
     unshot_.reserve(mesh.patches.size());
     for (const auto& p : mesh.patches) {
         unshot_.push_back(p.emission);
@@ -33,9 +35,19 @@ Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, con
         rho_area += e.rho * e.area;
     }
     if (total_area_ > 0.0) rho_area_mean_ = rho_area / total_area_;
-    snapshot_ = irradiance(/*ambient=*/true);
+    start_round(irradiance(/*ambient=*/true));
     round_change_ = std::numeric_limits<double>::infinity();
     update_convergence();
+}
+
+void Progressive::start_round(std::vector<glm::dvec3> snapshot) {
+    snapshot_ = std::move(snapshot);
+    snapshot_pass_ = passes_;
+    round_held_ = 0.0;
+    for (std::size_t p = 0; p < unshot_.size(); ++p) {
+        round_unshot_[p] = sum(unshot_[p]) * mesh_.patches[p].area;
+        round_held_ += round_unshot_[p];
+    }
 }
 
 bool Progressive::done() const {
@@ -80,9 +92,10 @@ void Progressive::apply(std::size_t best, const formfactor::ShotResult& shot) {
     const glm::dvec3 flux = u * shooter.area;
     unshot_[best] = glm::dvec3(0.0);
     shot_[best] += u;
+    round_unshot_[best] = 0.0;  // what it held at the round's start has now been shot
 
     // ΔH_j = ΔB_i F_ij A_i / A_j; what element j reflects, ρ_j ΔH_j A_j, joins its patch's pool.
-    glm::dvec3 hit{0.0}, reflected{0.0};
+    glm::dvec3 reflected{0.0};
     double f_sum = 0.0;
     for (std::size_t k = 0; k < shot.F.size(); ++k) {
         const double f = shot.F[k];
@@ -94,19 +107,17 @@ void Progressive::apply(std::size_t best, const formfactor::ShotResult& shot) {
         const mesh::Patch& parent = mesh_.patches[e.patch];
         unshot_[e.patch] += back / parent.area;
         absorbed_ += received - back;
-        hit += received;
         reflected += back;
         f_sum += f;
     }
     absorbed_ += flux * shot.blocked;
     escaped_ += flux * (1.0 - f_sum - shot.blocked);  // may be −1e-16: books stay exact
-    hit += flux * shot.blocked;
+    hit_[best] = std::clamp(f_sum + shot.blocked, 0.0, 1.0);
 
-    // Recent behaviour of the scene, flux-weighted, forgetting over about one round of patches.
+    // Recent reflectance of the scene, flux-weighted, forgetting over about one round of patches.
     const double keep = 1.0 - 1.0 / std::max<double>(16.0, static_cast<double>(mesh_.patches.size()));
     recent_shot_ = recent_shot_ * keep + flux;
     recent_reflected_ = recent_reflected_ * keep + reflected;
-    recent_hit_ = recent_hit_ * keep + hit;
 
     ++passes_;
     update_convergence();
@@ -121,18 +132,17 @@ glm::dvec3 Progressive::effective_reflectance() const {
     return glm::clamp(r, glm::dvec3(0.0), glm::dvec3(scene::kMaxReflectance));
 }
 
-double Progressive::hit_fraction() const {
-    const double shot = sum(recent_shot_);
-    return shot > 0.0 ? std::min(1.0, sum(recent_hit_) / shot) : 1.0;
-}
-
 glm::dvec3 Progressive::ambient() const {
-    // Cohen et al. 1988, with the measured reflectance: the unshot flux, spread evenly, hits
-    // h·ū per unit area and comes back with factor ρ_eff every bounce: H_amb = h·ū/(1 − ρ_eff).
+    // Cohen et al. 1988, with measured reflectance and hit shares: the unshot flux U_p of each
+    // patch will land on the scene in the share h_p its last shot did (1 for a patch that has not
+    // shot yet: nothing is known of where its light goes, so none of it is assumed to escape),
+    // spread evenly, and come back with factor ρ_eff every bounce: H_amb = Σ h_p U_p / A / (1 −
+    // ρ_eff). A share measured on other patches' shots is not used for a patch's own light: a
+    // lamp's side facing the open sky says nothing of its side facing the floor.
     if (total_area_ <= 0.0) return glm::dvec3(0.0);
-    const glm::dvec3 unshot_flux = unshot_total();
-    const glm::dvec3 u_mean = unshot_flux / total_area_;
-    return hit_fraction() * u_mean / (glm::dvec3(1.0) - effective_reflectance());
+    glm::dvec3 landing{0.0};
+    for (std::size_t p = 0; p < unshot_.size(); ++p) landing += hit_[p] * unshot_[p] * mesh_.patches[p].area;
+    return landing / total_area_ / (glm::dvec3(1.0) - effective_reflectance());
 }
 
 void Progressive::update_convergence() {
@@ -148,8 +158,13 @@ void Progressive::update_convergence() {
         round_change_ = 0.0;
         for (int c = 0; c < 3; ++c)
             if (total[c] > 0.0) round_change_ = std::max(round_change_, change[c] / total[c]);
-        snapshot_ = std::move(now);
-        snapshot_pass_ = passes_;
+        // "Nothing changed this round" says the ambient term predicted the round well only if the
+        // round shot the light it was predicting: the patches that held the unshot flux at its
+        // start. Otherwise the change is not evidence, and the measure stays infinite.
+        double left = 0.0;
+        for (const double flux : round_unshot_) left += flux;
+        if (left > settings_.threshold * round_held_) round_change_ = std::numeric_limits<double>::infinity();
+        start_round(std::move(now));
     }
     converged_ = sum(unshot_total()) <= 0.0 || error() <= settings_.threshold;
 }
@@ -204,9 +219,12 @@ void Progressive::save(std::ostream& out) const {
     put_vector(out, unshot_);
     put_vector(out, shot_);
     put_vector(out, snapshot_);
-    for (const glm::dvec3& v : {emitted_, absorbed_, escaped_, recent_shot_, recent_reflected_, recent_hit_}) put(out, v);
+    put_vector(out, hit_);
+    put_vector(out, round_unshot_);
+    for (const glm::dvec3& v : {emitted_, absorbed_, escaped_, recent_shot_, recent_reflected_}) put(out, v);
     put(out, static_cast<std::int64_t>(passes_));
     put(out, static_cast<std::int64_t>(snapshot_pass_));
+    put(out, round_held_);
     put(out, round_change_);
     put(out, static_cast<std::uint8_t>(converged_ ? 1 : 0));
 }
@@ -217,10 +235,13 @@ void Progressive::load(std::istream& in) {
     get_vector(in, unshot_, unshot_.size());
     get_vector(in, shot_, shot_.size());
     get_vector(in, snapshot_, snapshot_.size());
-    for (glm::dvec3* v : {&emitted_, &absorbed_, &escaped_, &recent_shot_, &recent_reflected_, &recent_hit_}) get(in, *v);
+    get_vector(in, hit_, hit_.size());
+    get_vector(in, round_unshot_, round_unshot_.size());
+    for (glm::dvec3* v : {&emitted_, &absorbed_, &escaped_, &recent_shot_, &recent_reflected_}) get(in, *v);
     std::int64_t passes = 0, snapshot_pass = 0;
     get(in, passes);
     get(in, snapshot_pass);
+    get(in, round_held_);
     get(in, round_change_);
     std::uint8_t converged = 0;
     get(in, converged);

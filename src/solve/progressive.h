@@ -19,7 +19,8 @@ namespace hemirad::solve {
 
 struct Settings {
     // Stop when the ambient term's share of the incident light, or the change of the
-    // ambient-corrected incident light over the last round, falls below this (flux-weighted).
+    // ambient-corrected incident light over the last round (a round that shot all but this share
+    // of the unshot flux it started with), falls below this (flux-weighted).
     double threshold = 1e-3;
     long max_passes = 0;       // 0: no limit but the threshold
     // Shooters per step: the `batch` patches with the most unshot flux go to the engine
@@ -54,7 +55,8 @@ public:
     // Share of the incident flux Σ H·A that is still the ambient estimate, not shot light.
     double ambient_share() const;
     // Flux-weighted change Σ|ΔH|·A / Σ H·A of the ambient-corrected incident light over the
-    // last round (one pass per patch); infinite until a round has passed.
+    // last round (one pass per patch); infinite until a round has passed, and after a round that
+    // left more than `threshold` of the unshot flux it started with unshot.
     double round_change() const { return round_change_; }
     double unshot_fraction() const;
 
@@ -90,18 +92,25 @@ private:
     glm::dvec3 escaped_{0.0};
     double total_area_ = 0.0;
     glm::dvec3 rho_area_mean_{0.0};    // prior for the scene's reflectance before any shot
-    // Recent shots: flux shot, flux sent back into the unshot pool, flux hitting any surface.
-    glm::dvec3 recent_shot_{0.0}, recent_reflected_{0.0}, recent_hit_{0.0};
+    // Recent shots: flux shot, flux sent back into the unshot pool.
+    glm::dvec3 recent_shot_{0.0}, recent_reflected_{0.0};
+    // Per patch, the share of its last shot that landed on the scene (ΣF + blocked); 1 until it
+    // has shot. The ambient term lands each patch's unshot flux in this share.
+    std::vector<double> hit_;
     long passes_ = 0;
     bool converged_ = false;
 
     glm::dvec3 effective_reflectance() const;
-    double hit_fraction() const;
     glm::dvec3 unshot_total() const;  // unshot flux per channel
+    void start_round(std::vector<glm::dvec3> snapshot);  // snapshot: ambient-corrected H now
     void update_convergence();
 
     std::vector<glm::dvec3> snapshot_;  // ambient-corrected incident light at the last round's start
     long snapshot_pass_ = 0;
+    // Per patch, the unshot flux (r + g + b) it held at the round's start, zeroed once it shoots,
+    // and their total at the start: what the round has not yet shot of the light it began with.
+    std::vector<double> round_unshot_;
+    double round_held_ = 0.0;
     double round_change_ = 0.0;
 };
 
