@@ -1598,7 +1598,20 @@ TEST_CASE("hostile input: a texture's image that is missing, unreadable or undec
     };
     refused("missing.png", "No such file");
     write_text(dir / "garbage.png", "not an image\n");
-    refused("garbage.png", "decode");
+    refused("garbage.png", "not a PNG, JPEG or WebP image");
+    {  // a PNG cut short: libpng's own complaint must not become a second line
+        auto image = OIIO::ImageOutput::create("png");
+        REQUIRE(image);
+        const OIIO::ImageSpec spec(64, 64, 3, OIIO::TypeDesc::UINT8);
+        std::vector<unsigned char> noise(64 * 64 * 3);
+        for (std::size_t i = 0; i < noise.size(); ++i) noise[i] = static_cast<unsigned char>((i * 2654435761u) >> 13);
+        REQUIRE(image->open((dir / "whole.png").string(), spec));
+        REQUIRE(image->write_image(OIIO::TypeDesc::UINT8, noise.data()));
+        REQUIRE(image->close());
+        const std::string png = read_text(dir / "whole.png");
+        write_text(dir / "cut.png", png.substr(0, png.size() / 2));
+    }
+    refused("cut.png", "does not decode");
     // Unreadable by permission: root reads it all the same, so only where that bit is honoured.
     write_text(dir / "secret.png", "whatever\n");
     fs::permissions(dir / "secret.png", fs::perms::none);
@@ -1606,7 +1619,7 @@ TEST_CASE("hostile input: a texture's image that is missing, unreadable or undec
     else WARN("running as root, which reads a file of mode 000: its case is skipped");
 }
 
-TEST_CASE("textures: a decodable one is used; an image no texture uses does not matter", "[cli][hostile]") {
+TEST_CASE("textures: a decodable one is used and an image no texture uses does not matter", "[cli][hostile]") {
     TempDir dir;
     {
         auto image = OIIO::ImageOutput::create("png");
@@ -1627,7 +1640,7 @@ TEST_CASE("textures: a decodable one is used; an image no texture uses does not 
     CHECK(read_text(dir / "plain" / "baked.bin") != read_text(dir / "dark" / "baked.bin"));  // the walls darkened
 }
 
-TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same bytes); values the kernels cannot take exit 2", "[cli][opencl][hostile]") {
+TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same bytes) and values the kernels cannot take exit 2", "[cli][opencl][hostile]") {
     HEMIRAD_SKIP_WITHOUT_OPENCL();
     TempDir dir;
     const std::vector<std::string> on_opencl = concat(kFast, {"--device", "opencl"});

@@ -471,7 +471,7 @@ TEST_CASE("opencl: HEMIRAD_FAULT's grammar", "[opencl][faults]") {
         CHECK_THROWS_AS(formfactor::parse_fault(bad), std::invalid_argument);
 }
 
-TEST_CASE("opencl: -D overrides of the host's knobs set its tuning, validated; other options pass through", "[opencl]") {
+TEST_CASE("opencl: -D overrides of the host's knobs set its tuning, validated, and other options pass through", "[opencl]") {
     // No device needed: this is the parsing of HEMIRAD_OPENCL_OPTIONS' text.
     formfactor::OpenCLTuning t;
     t.extra_options = "-DKEEP=1";

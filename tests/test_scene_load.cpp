@@ -658,6 +658,39 @@ TEST_CASE("hostile files: deep JSON, an empty .glb, a FIFO, wrong .glb headers",
         REQUIRE(::mkfifo((dir / "fifo.gltf").c_str(), 0600) == 0);
         check_rejected(dir / "fifo.gltf", "is a FIFO, not a regular file");
     }
+    SECTION("a texture's PNG cut short, and one under a JPEG's name") {
+        {
+            auto out = OIIO::ImageOutput::create("png");
+            REQUIRE(out);
+            const OIIO::ImageSpec spec(64, 64, 3, OIIO::TypeDesc::UINT8);
+            std::vector<unsigned char> noise(64 * 64 * 3);
+            std::mt19937 random(5);
+            for (unsigned char& v : noise) v = static_cast<unsigned char>(random());  // incompressible
+            REQUIRE(out->open((dir / "whole.png").string(), spec));
+            REQUIRE(out->write_image(OIIO::TypeDesc::UINT8, noise.data()));
+            REQUIRE(out->close());
+        }
+        std::ifstream in(dir / "whole.png", std::ios::binary);
+        const std::string png((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        std::ofstream(dir / "cut.png", std::ios::binary) << png.substr(0, png.size() / 2);
+        std::ofstream(dir / "named.jpg", std::ios::binary) << png;  // decoded as what it is
+        ModelBuilder b;
+        const int m = b.material("textured", {1.0, 1.0, 1.0, 1.0});
+        b.scene({b.node("n", b.unit_triangle_mesh("tri", m))});
+        for (const std::string uri : {"cut.png", "named.jpg"}) {
+            const fs::path file = write_edited(b.model, dir / "t.gltf", [&](nlohmann::json& g) {
+                g["images"] = {{{"uri", uri}}};
+                g["textures"] = {{{"source", 0}}};
+                g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+            });
+            if (uri == "cut.png") {
+                check_rejected(file, "image 0 'cut.png': the image does not decode past row");
+            } else {
+                const Scene s = hemirad::scene::load(file);
+                CHECK(s.materials.at(0).base_color.x > 0.1);  // the noise's mean, about 0.21 decoded
+            }
+        }
+    }
     SECTION("a .glb cut short, and one whose JSON chunk runs past its end") {
         const fs::path file = write(good.model, dir / "good.glb");
         std::ifstream in(file, std::ios::binary);

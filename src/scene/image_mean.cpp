@@ -3,10 +3,12 @@
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <vector>
 
@@ -22,38 +24,73 @@ double srgb_to_linear(double x) {
     return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
 }
 
+// The first line of a decoder's message, without the made-up file name it was given.
 std::string first_line(std::string text) {
     text = text.substr(0, text.find('\n'));
+    for (const char* ext : {"png", "jpg", "webp"}) {
+        for (const std::string& name : {fmt::format(" (\"image.{}\")", ext), fmt::format("\"image.{}\"", ext)})
+            for (std::size_t at; (at = text.find(name)) != std::string::npos;) text.erase(at, name.size());
+    }
     while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
     return text.empty() ? "no reason given" : text;
 }
 
-// OpenImageIO picks a reader by the file name's extension, and reading from memory there is
-// no file to probe: the extension the bytes' own signature says, else the hint's.
-std::string extension_for(const unsigned char* bytes, std::size_t size, const std::string& hint) {
+// OpenImageIO picks a reader by the file name's extension, and reading from memory there is no
+// file to probe: the bytes' own signature says which, and only glTF's image formats (PNG, JPEG,
+// and WebP from EXT_texture_webp) are given to it, not every format a plugin might read.
+std::string extension_for(const unsigned char* bytes, std::size_t size) {
     static const unsigned char kPng[] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
     static const unsigned char kJpeg[] = {0xff, 0xd8, 0xff};
     if (size >= sizeof kPng && std::memcmp(bytes, kPng, sizeof kPng) == 0) return "png";
     if (size >= sizeof kJpeg && std::memcmp(bytes, kJpeg, sizeof kJpeg) == 0) return "jpg";
-    std::string ext = hint.substr(std::min(hint.size(), hint.find_last_of("./") + 1));
-    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    return ext == "jpeg" ? "jpg" : ext;
+    if (size >= 12 && std::memcmp(bytes, "RIFF", 4) == 0 && std::memcmp(bytes + 8, "WEBP", 4) == 0) return "webp";
+    return {};
 }
+
+// Sends what the image libraries print to stderr (fd 2) to a scratch file while it lives:
+// libpng's default handlers print "libpng error: …" and "libpng warning: …" themselves, which
+// would be a second line beside the CLI's one line, or noise on a good bake.
+class StderrCapture {
+public:
+    StderrCapture() {
+        std::fflush(stderr);
+        file_ = std::tmpfile();
+        saved_ = file_ ? ::dup(2) : -1;
+        if (saved_ >= 0 && ::dup2(::fileno(file_), 2) < 0) {
+            ::close(saved_);
+            saved_ = -1;
+        }
+    }
+    ~StderrCapture() {
+        if (saved_ >= 0) {
+            std::fflush(stderr);
+            ::dup2(saved_, 2);
+            ::close(saved_);
+        }
+        if (file_) std::fclose(file_);
+    }
+    StderrCapture(const StderrCapture&) = delete;
+    StderrCapture& operator=(const StderrCapture&) = delete;
+
+private:
+    std::FILE* file_ = nullptr;
+    int saved_ = -1;
+};
 
 }  // namespace
 
-ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, const std::string& name_hint) {
+ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size) {
     ImageMean out;
     const auto fail = [&out](std::string problem) {
         out.problem = std::move(problem);
         return out;
     };
     if (size == 0) return fail("the image is empty (0 bytes)");
-    const std::string ext = extension_for(bytes, size, name_hint);
-    if (ext.empty() || ext.size() > 8)
-        return fail("not a PNG or JPEG image (its first bytes are neither's signature)");
+    const std::string ext = extension_for(bytes, size);
+    if (ext.empty()) return fail("not a PNG, JPEG or WebP image (its first bytes are none of their signatures)");
     const std::string name = "image." + ext;
 
+    const StderrCapture quiet;  // the decoders' own complaints: the problem below says what went wrong
     OIIO::Filesystem::IOMemReader memory(bytes, size);
     OIIO::ImageSpec config;
     void* proxy = &memory;
@@ -66,11 +103,11 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, const 
         return fail(fmt::format("not a .{} image OpenImageIO can decode ({})", ext, first_line(in->geterror())));
     const std::uint64_t pixels = std::uint64_t(std::max(spec.width, 0)) * std::uint64_t(std::max(spec.height, 0));
     if (spec.width < 1 || spec.height < 1 || spec.depth > 1 || spec.nchannels < 1)
-        return fail(fmt::format("the image has no pixels ({} × {}, {} channels)", spec.width, spec.height,
-                                spec.nchannels));
-    if (pixels > kMaxImagePixels)
-        return fail(fmt::format("{} × {} pixels, above the limit of {} pixels", spec.width, spec.height,
-                                kMaxImagePixels));
+        return fail(fmt::format("not a picture ({} × {} × {} pixels, {} channels)", spec.width, spec.height,
+                                spec.depth, spec.nchannels));
+    if (pixels > kMaxImagePixels || spec.width > kMaxImageEdge || spec.height > kMaxImageEdge)
+        return fail(fmt::format("{} × {} pixels, above the limits of {} pixels and {} a side", spec.width,
+                                spec.height, kMaxImagePixels, kMaxImageEdge));
 
     // 8- and 16-bit values are counted per level, then decoded once per level (a histogram:
     // one pow() per distinct level, not per pixel); anything else is read as linear floats.

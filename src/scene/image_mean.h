@@ -1,5 +1,5 @@
-// The mean linear colour of an encoded texture image (PNG, JPEG, or anything else OpenImageIO
-// reads), decoded a band of rows at a time: the loader needs only the mean, so a 20000 × 20000
+// The mean linear colour of an encoded texture image (PNG, JPEG or WebP), decoded by OpenImageIO
+// a band of rows at a time: the loader needs only the mean, so a 20000 × 20000
 // PNG costs a few megabytes of memory, not gigabytes.
 #pragma once
 
@@ -11,8 +11,10 @@
 
 namespace hemirad::scene {
 
-// Images with more pixels than this are refused (decoding one takes tens of seconds).
+// Images with more pixels than this are refused (decoding one takes tens of seconds), and so
+// are those wider or taller than kMaxImageEdge (a row of them is decoded at once).
 inline constexpr std::uint64_t kMaxImagePixels = std::uint64_t{1} << 30;  // 32768 × 32768
+inline constexpr int kMaxImageEdge = 65536;
 
 struct ImageMean {
     bool ok = false;
@@ -23,7 +25,7 @@ struct ImageMean {
 
 // 8- and 16-bit values are sRGB-encoded and decoded to linear before averaging (averaging the
 // encoded values would darken the result); float images are linear already. Alpha is ignored.
-// `name_hint` (a uri or a mime type's extension) picks the decoder when the bytes do not say.
-ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, const std::string& name_hint);
+// The format is the bytes' own (PNG, JPEG or WebP), whatever the uri or mime type says.
+ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size);
 
 }  // namespace hemirad::scene

@@ -61,6 +61,18 @@ struct Loader {
 // it read off a JSON parse error, or tinygltf's repetition of a path read_file names,
 // and a data URI's payload (it can be megabytes) cut to its first bytes.
 std::string plain_words(std::string text) {
+    // libstdc++'s regex recurses once per character matched: a parse error quoting 20 KB of the
+    // file ("last read: '[[[[…") overflowed the stack. The message is cut to one short line
+    // afterwards anyway, so every line is cut first.
+    constexpr std::size_t kLongestLine = 1024;
+    std::string clipped;
+    for (std::size_t start = 0; start < text.size();) {
+        const std::size_t end = std::min(text.find('\n', start), text.size());
+        clipped.append(text, start, std::min(end - start, kLongestLine));
+        if (end < text.size()) clipped += '\n';
+        start = end + 1;
+    }
+    text = std::move(clipped);
     static const std::regex json_tag(R"(\[json\.exception\.[a-z_]+\.[0-9]+\] )");
     static const std::regex last_read(R"(; last read: '[^\n]*)");
     static const std::regex decode(R"(Failed to decode 'uri' : (.*) in Buffer)");
@@ -240,8 +252,7 @@ bool decode_image(tinygltf::Image* image, const int index, std::string*, std::st
             return true;
         }
     }
-    const std::string hint = !image->uri.empty() ? image->uri : image->mimeType;
-    mean = decode_image_mean(bytes, size > 0 ? std::size_t(size) : 0, hint);
+    mean = decode_image_mean(bytes, size > 0 ? std::size_t(size) : 0);
     image->width = mean.width;
     image->height = mean.height;
     image->component = mean.channels;
@@ -281,10 +292,15 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     images = std::move(decoder.images);
     // tinygltf only warns for an external image it cannot read; texture_average fails for one a
     // material uses, and one no material uses does not matter.
-    static const std::regex image_read(R"(^(File not found|File read error|File is empty) : |^Failed to load external 'uri' for image)");
+    const auto about_an_image = [](const std::string& line) {
+        for (const char* start : {"File not found : ", "File read error : ", "File is empty : ",
+                                  "Failed to load external 'uri' for image"})
+            if (line.rfind(start, 0) == 0) return true;
+        return false;
+    };
     std::istringstream lines(warn);
     for (std::string line; std::getline(lines, line);) {
-        if (std::regex_search(line, image_read)) continue;
+        if (about_an_image(line)) continue;
         if (!one_line(line).empty()) warnings.push_back(name + ": " + one_line(line));
     }
 
