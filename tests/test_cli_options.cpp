@@ -1,6 +1,7 @@
 // The command line's number options, parsed in process by cli::run (the executable's main): every
 // one refuses NaN, Inf and values out of range with exit 2 and one line naming it, before any
-// work. In process because there are many cases and starting the executable takes a second here.
+// work. In process because there are many cases and starting the executable takes a second here
+// (never a bake in process: it installs the CLI's signal handlers).
 #include <unistd.h>
 
 #include <algorithm>
@@ -104,4 +105,18 @@ TEST_CASE("options: every number option refuses NaN, Inf, other spellings and va
         }
     }
     check_refused({"bench", "procedural:100", "--hemicube", "32,nan", "--json", report.string()}, "--hemicube", report);
+    // Finite sizes the mesher cannot take, before anything is measured (they were internal errors).
+    // (The same for bake: "hostile input: a NaN option is refused before any work", test_cli.cpp.)
+    const std::vector<std::string> bench = {"bench", "procedural:100", "--engines", "ref", "--no-calibrate", "--json",
+                                            report.string()};
+    std::vector<std::string> tiny = bench, inverted = bench;
+    tiny.insert(tiny.end(), {"--element-size", "1e-300"});
+    inverted.insert(inverted.end(), {"--patch-size", "0.1", "--element-size", "1"});
+    const Parsed p = run_cli(tiny);
+    CHECK(p.code == 2);
+    CHECK(p.err.find("--element-size 1e-300: elements of 1e-300 would be countless") != std::string::npos);
+    const Parsed q = run_cli(inverted);
+    CHECK(q.code == 2);
+    CHECK(q.err.find("--element-size 1 is larger than the patch size 0.1") != std::string::npos);
+    CHECK(!fs::exists(report));
 }

@@ -196,27 +196,6 @@ void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const 
     fs::rename(tmp, file);
 }
 
-// The most elements a bake may need, as estimated_elements counts them: a tiny --element-size
-// (1e-300, or 1e-4 on a room) would otherwise exhaust the memory, or fail in the mesher, long
-// after the bake began. The estimate can be 4 times the mesher's count (a quad's two triangles),
-// so this allows some 16 million elements.
-constexpr double kMaxElements = double(1 << 26);
-
-// An upper bound on the elements `size` makes of the scene: each triangle cut into (longest edge
-// / size)² (the mesher's count for a lone triangle), twice if double-sided; it stops counting
-// past kMaxElements.
-double estimated_elements(const scene::Scene& scene, double size) {
-    double total = 0.0;
-    for (const scene::Triangle& t : scene.triangles) {
-        const double longest = std::max({glm::length(t.p[1] - t.p[0]), glm::length(t.p[2] - t.p[1]),
-                                         glm::length(t.p[0] - t.p[2])});
-        const double per_edge = std::ceil(longest / size);
-        total += per_edge * per_edge * (scene.materials[t.material].double_sided ? 2.0 : 1.0);
-        if (!(total <= kMaxElements)) break;
-    }
-    return total;
-}
-
 // Convergence forced off: shoot until this little is left (progressive), or solve to rounding (matrix).
 constexpr double kUnconvergedThreshold = 1e-6;
 constexpr double kUnconvergedTolerance = 1e-12;
@@ -446,15 +425,10 @@ void run_bake(const BakeOptions& options) {
     mesh_settings.element_size = o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / quality.elements_per_patch_edge;
     if (mesh_settings.element_size > mesh_settings.patch_size)
         throw InputError(fmt::format("--element-size {} is larger than the patch size {}", mesh_settings.element_size, mesh_settings.patch_size));
-    if (const double elements = estimated_elements(scene, mesh_settings.element_size); !(elements <= kMaxElements))
-        throw InputError(fmt::format("{}: elements of {:g} would be {} for this scene, more than the {:.0f} a bake may "
-                                     "need; choose a larger size",
-                                     o.element_size > 0.0 ? fmt::format("--element-size {:g}", o.element_size)
-                                     : o.patch_size > 0.0 ? fmt::format("--patch-size {:g}", o.patch_size)
-                                                          : fmt::format("--quality {}", o.quality),
-                                     mesh_settings.element_size,
-                                     std::isfinite(elements) ? fmt::format("over {:.2g}", elements) : "countless",
-                                     kMaxElements));
+    mesh::check_element_bound(scene, mesh_settings.element_size,
+                              o.element_size > 0.0 ? fmt::format("--element-size {:g}", o.element_size)
+                              : o.patch_size > 0.0 ? fmt::format("--patch-size {:g}", o.patch_size)
+                                                   : fmt::format("--quality {}", o.quality));
     const output::View view = output::choose_view(scene, o.camera);  // fails early on a bad --camera
     const int width = o.image_width;
     const double rows = std::max(1.0, std::round(width / view.aspect));  // the loader keeps aspects within [1/16, 16]

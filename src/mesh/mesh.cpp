@@ -458,6 +458,26 @@ double longest_edge(const Polygon& poly) {
     return longest;
 }
 
+double element_bound(const scene::Scene& scene, double element_size, double limit) {
+    double total = 0.0;
+    for (const scene::Triangle& t : scene.triangles) {
+        const double per_edge = std::ceil(longest_edge(t.p) / element_size);
+        total += per_edge * per_edge * (scene.materials.at(t.material).double_sided ? 2.0 : 1.0);
+        if (!(total <= limit)) break;
+    }
+    return total;
+}
+
+void check_element_bound(const scene::Scene& scene, double element_size, const std::string& what) {
+    const double elements = element_bound(scene, element_size, kMaxElementBound);
+    if (!(elements <= kMaxElementBound))
+        throw InputError(fmt::format("{}: elements of {:g} would be {} for this scene, more than the {:.0f} allowed; "
+                                     "choose a larger size",
+                                     what, element_size,
+                                     std::isfinite(elements) ? fmt::format("over {:.2g}", elements) : "countless",
+                                     kMaxElementBound));
+}
+
 Mesh build(const scene::Scene& scene, const Settings& settings) {
     check_settings(settings);
     Mesh mesh;

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -60,6 +61,20 @@ struct Mesh {
 };
 
 Mesh build(const scene::Scene& scene, const Settings& settings);
+
+// An upper bound on the elements build makes of `scene` with elements of `element_size`: each
+// triangle cut into (longest edge / size)² (build's count for a lone triangle; up to 4 times its
+// count for a quad's two), twice if double-sided. Counting stops once past `limit`.
+double element_bound(const scene::Scene& scene, double element_size, double limit);
+
+// The largest element_bound a bake or a benchmark builds: some 16 million elements. A tiny size
+// (1e-300, or 1e-4 on a room) would otherwise exhaust the memory, or fail in build, long after the
+// run began.
+inline constexpr double kMaxElementBound = double(1 << 26);
+
+// Throws InputError("<what>: elements of S would be over N for this scene, …") where
+// element_bound passes kMaxElementBound; `what` names the setting ("--element-size 1e-05").
+void check_element_bound(const scene::Scene& scene, double element_size, const std::string& what);
 
 // Normal (unit, front side), area centroid and area of a planar convex polygon.
 struct Shape {

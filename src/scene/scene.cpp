@@ -521,8 +521,9 @@ dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::s
     }
     const tinygltf::Texture& tex = m.textures[std::size_t(info.index)];
     if (tex.source < 0) {
-        L.fail(fmt::format("{}: texture {} has no image in a format hemirad decodes (PNG or JPEG 'source')", what,
-                           info.index));
+        L.fail(fmt::format("{}: texture {} has no 'source' image (one only in an extension, such as "
+                           "KHR_texture_basisu, is not read)",
+                           what, info.index));
     }
     if (std::size_t(tex.source) >= m.images.size()) {
         L.fail(fmt::format("{}: texture {} names image {}, out of range", what, info.index, tex.source));
