@@ -1705,3 +1705,20 @@ TEST_CASE("hostile input: a directory where an output file goes, or a file where
     CHECK(listing(out) == std::set<std::string>{"preview"});
     CHECK(read_text(out / "preview") == "my file\n");
 }
+
+TEST_CASE("hostile input: emission at the loader's limit bakes with every output finite", "[cli][hostile]") {
+    // 1e30 passes the loader (1e100 is in the corpus, exit 2); render.exr was half float, so
+    // anything brighter than 65504 was written as inf while the report said all was finite.
+    TempDir dir;
+    json g = read_json(kClosedRoom);
+    for (auto& material : g["materials"])
+        if (material.contains("emissiveFactor"))
+            material["extensions"] = {{"KHR_materials_emissive_strength", {{"emissiveStrength", 1e30}}}};
+    g["extensionsUsed"] = {"KHR_materials_emissive_strength"};
+    write_json(dir / "bright.gltf", g);
+    const json report = bake_ok(dir, dir / "bright.gltf", dir / "out");
+    CHECK(all_numbers_finite(report));
+    const ImageData exr = read_image(dir / "out" / "render.exr");
+    CHECK(std::all_of(exr.pixels.begin(), exr.pixels.end(), [](float v) { return std::isfinite(v); }));
+    CHECK(*std::max_element(exr.pixels.begin(), exr.pixels.end()) > 1e29f);
+}
