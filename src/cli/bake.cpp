@@ -441,17 +441,22 @@ void run_bake(const BakeOptions& options) {
     // Before any of the mesh is built: how much memory the bake will need with each solver, which
     // solver `auto` takes (by that memory and by expected time), and whether the bake fits at all.
     const bool direct_only = !plan.interreflection.on;
+    solve::MatrixSettings matrix_settings = solve::matrix_settings(o.threshold, o.batch);
+    if (!plan.convergence.on) matrix_settings.tolerance = kUnconvergedTolerance;
+    matrix_settings.grey = !plan.colour.on;
+    matrix_settings.interreflection = !direct_only;
+    matrix_settings.max_iterations = kMaxSweeps;
     BakeShape shape;
     shape.hemicube = o.hemicube;
     shape.batch = o.batch;
-    shape.matrix_batch = solve::matrix_settings(o.threshold, o.batch).batch;
+    shape.matrix_batch = matrix_settings.batch;
     shape.grey = !plan.colour.on;
     shape.direct_only = direct_only;
     shape.opencl = plan.occlusion.on && may_use_opencl(o.device);
     shape.fallback_copy = shape.opencl && o.device == "auto";
     for (const scene::Triangle& t : scene.triangles)
         for (const glm::dvec3& rho : t.rho) shape.max_reflectance = std::max({shape.max_reflectance, rho.x, rho.y, rho.z});
-    shape.tolerance = solve::matrix_settings(o.threshold, o.batch).tolerance;
+    shape.tolerance = matrix_settings.tolerance;
     shape.refine_levels = plan.refinement.on ? o.refine_levels : 0;
     shape.pixels = double(width) * double(height);
     std::string solver_name = o.solver, solver_why = "--solver " + o.solver;
@@ -548,11 +553,6 @@ void run_bake(const BakeOptions& options) {
         warnings.push_back(choice.warning);
     }
     const double threshold = plan.convergence.on ? o.threshold : kUnconvergedThreshold;
-    solve::MatrixSettings matrix_settings = solve::matrix_settings(o.threshold, o.batch);
-    if (!plan.convergence.on) matrix_settings.tolerance = kUnconvergedTolerance;
-    matrix_settings.grey = !plan.colour.on;
-    matrix_settings.interreflection = !direct_only;
-    matrix_settings.max_iterations = kMaxSweeps;
     const std::size_t elements_before = mesh.elements.size();
     // Should the automatically chosen device fail part-way, the bake starts again on the
     // reference engine from the mesh as built (refinement replaces it).
@@ -584,7 +584,7 @@ void run_bake(const BakeOptions& options) {
         progress.finish();
         if (!solution.converged && !o.quiet) {
             if (solver_name == "matrix")
-                std::cerr << fmt::format("hemirad: warning: Gauss-Seidel stopped after {} sweeps at residual {:.3g}\n",
+                std::cerr << fmt::format("hemirad: warning: Gauss-Seidel stopped after {} sweeps with an error bound of {:.3g}\n",
                                          solution.iterations, solution.error);
             else
                 std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
