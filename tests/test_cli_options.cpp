@@ -114,9 +114,9 @@ TEST_CASE("options: every number option refuses NaN, Inf, other spellings and va
     inverted.insert(inverted.end(), {"--patch-size", "0.1", "--element-size", "1"});
     const Parsed p = run_cli(tiny);
     CHECK(p.code == 2);
-    CHECK(p.err.find("--element-size 1e-300: elements of 1e-300 would be countless") != std::string::npos);
+    CHECK(p.err.find("procedural:100 with --element-size 1e-300: inf elements") != std::string::npos);
     const Parsed q = run_cli(inverted);
     CHECK(q.code == 2);
-    CHECK(q.err.find("--element-size 1 is larger than the patch size 0.1") != std::string::npos);
+    CHECK(q.err.find("--element-size 1: elements of 1 are larger than the patches (0.1)") != std::string::npos);
     CHECK(!fs::exists(report));
 }

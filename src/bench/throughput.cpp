@@ -154,15 +154,33 @@ mesh::Settings mesh_settings_for(const ThroughputOptions& o, const scene::Scene&
     return settings;
 }
 
-// Sizes the mesher cannot take, or that would need too many elements: bad input, not a failure.
+// The most elements a benchmark's mesh may have: a tiny --element-size (1e-4 on a room) would
+// exhaust the memory long after the calibration.
+constexpr double kMaxElements = double(1 << 24);
+
+// Sizes the mesher cannot take, or that would need too many elements: bad input, found by
+// counting the mesh (mesh::build stopped once it has counted) before anything is measured.
 void check_mesh_settings(const ThroughputOptions& o, const scene::Scene& s, const std::string& spec) {
     const mesh::Settings settings = mesh_settings_for(o, s);
+    const std::string what = fmt::format("{} with --{}-size {:g}", spec, o.element_size > 0.0 ? "element" : "patch",
+                                         o.element_size > 0.0 ? o.element_size : settings.patch_size);
     if (settings.element_size > settings.patch_size)
-        throw InputError(fmt::format("--element-size {:g} is larger than the patch size {:g} ({})", settings.element_size,
-                                     settings.patch_size, spec));
-    mesh::check_element_bound(s, settings.element_size,
-                              fmt::format("{} with --{}-size {:g}", spec, o.element_size > 0.0 ? "element" : "patch",
-                                          o.element_size > 0.0 ? o.element_size : settings.patch_size));
+        throw InputError(fmt::format("{}: elements of {:g} are larger than the patches ({:g})", what,
+                                     settings.element_size, settings.patch_size));
+    struct Counted {};
+    mesh::Counts counts;
+    try {
+        mesh::build(s, settings, [&counts](const mesh::Counts& c) {
+            counts = c;
+            throw Counted{};
+        });
+    } catch (const Counted&) {
+    } catch (const InputError& e) {
+        throw InputError(fmt::format("{}: {}", what, e.what()));
+    }
+    if (!(counts.elements <= kMaxElements))
+        throw InputError(fmt::format("{}: {:.3g} elements, more than the {:.0f} a benchmark may mesh", what,
+                                     counts.elements, kMaxElements));
 }
 
 }  // namespace

@@ -171,6 +171,10 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--image-width", o.image_width, "width of render.exr/png; height follows the camera's aspect")
         ->transform(integer_in(16, kMaxImageSide))
         ->capture_default_str();
+    bake.add_option("--max-memory", o.max_memory,
+                    "memory the bake may use, e.g. 8G or 512M (default: what the machine has available); a bake "
+                    "estimated to need more is refused before it starts, --solver auto takes the solver that fits, "
+                    "and refinement stops where it would pass it");
     bake.add_flag("--quiet", o.quiet, "no progress line");
 }
 

@@ -38,6 +38,7 @@ struct BakeOptions {
     std::string camera;
     long preview_every = 0;
     int image_width = 640;
+    std::string max_memory;       // --max-memory SIZE; empty: the memory available (core/memory.h)
     bool quiet = false;
     bool progress = false;                       // draw a progress line (a TTY and not --quiet)
     const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT, SIGTERM or SIGHUP

@@ -454,6 +454,20 @@ std::size_t OpenCLEngine::max_batch() const {
     return std::min(batch_limit_, memory_batch());
 }
 
+double OpenCLEngine::mesh_bytes(double elements, double patches) {
+    return elements * (sizeof(HrElement) + double(sizeof(HrElementLanes)) / HR_SETUP_LANES) + patches * sizeof(HrPatch);
+}
+
+double OpenCLEngine::shot_bytes(double elements, int hemicube) {
+    // As allocate_batch sizes them: records and boxes, the initial lists, the ids (device and
+    // host), the sums (device and host).
+    const double records = std::max(1.0, elements * kFaces);
+    const double lists = std::max(double(1u << 16), 4.0 * records);
+    const double cells = 3.0 * double(hemicube) * double(hemicube);
+    return records * double(sizeof(HrRecord) + sizeof(HrBox)) + lists * sizeof(hr_uint) +
+           2.0 * cells * sizeof(hr_int) + 2.0 * (elements + 2.0) * sizeof(hr_long);
+}
+
 std::size_t OpenCLEngine::memory_batch() const {
     const std::size_t per_shot = record_slots() * (sizeof(HrRecord) + sizeof(HrBox)) +
                                  std::size_t{list_capacity_} * sizeof(hr_uint) + delta_.cells() * sizeof(hr_int) +

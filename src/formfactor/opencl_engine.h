@@ -95,6 +95,14 @@ public:
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
 
+    // Memory the engine holds for a mesh of `elements` elements and `patches` patches at
+    // resolution `hemicube`: the uploaded mesh, and each shot of a launch's buffers (on the device,
+    // and the host's copies of its ids and sums). A launch holds as many shots as the batch asks,
+    // up to what fits its budget (tuning's batch_memory: 1 GiB or a quarter of the device's memory)
+    // and at least one. For planning a bake before its mesh is built.
+    static double mesh_bytes(double elements, double patches);
+    static double shot_bytes(double elements, int hemicube);
+
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
     static constexpr int kStages = 5;
     static constexpr std::array<const char*, kStages> kStageNames = {"setup", "scan", "scatter", "raster", "read"};

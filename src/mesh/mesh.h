@@ -4,7 +4,7 @@
 
 #include <array>
 #include <cstdint>
-#include <string>
+#include <functional>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -60,21 +60,17 @@ struct Mesh {
     std::size_t quads = 0;              // triangle pairs meshed as quads
 };
 
-Mesh build(const scene::Scene& scene, const Settings& settings);
+// What a mesh will hold, counted before any of it is built (doubles: any size can be counted).
+struct Counts {
+    double patches = 0.0;
+    double elements = 0.0;
+};
 
-// An upper bound on the elements build makes of `scene` with elements of `element_size`: each
-// triangle cut into (longest edge / size)² (build's count for a lone triangle; up to 4 times its
-// count for a quad's two), twice if double-sided. Counting stops once past `limit`.
-double element_bound(const scene::Scene& scene, double element_size, double limit);
-
-// The largest element_bound a bake or a benchmark builds: some 16 million elements. A tiny size
-// (1e-300, or 1e-4 on a room) would otherwise exhaust the memory, or fail in build, long after the
-// run began.
-inline constexpr double kMaxElementBound = double(1 << 26);
-
-// Throws InputError("<what>: elements of S would be over N for this scene, …") where
-// element_bound passes kMaxElementBound; `what` names the setting ("--element-size 1e-05").
-void check_element_bound(const scene::Scene& scene, double element_size, const std::string& what);
+// Meshes the scene. `before` (if set) is told the counts once the faces are known and before
+// any patch is built, and may throw to stop: a bake checks there that the mesh and the rest of
+// the bake fit in memory.
+Mesh build(const scene::Scene& scene, const Settings& settings,
+           const std::function<void(const Counts&)>& before = {});
 
 // Normal (unit, front side), area centroid and area of a planar convex polygon.
 struct Shape {
