@@ -17,6 +17,7 @@
 #include <iostream>
 #include <optional>
 #include <system_error>
+#include <vector>
 
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
@@ -71,6 +72,24 @@ private:
 
 // A bake stages its files in DIR/.hemirad-tmp-<pid> until all of them exist.
 constexpr char kStagingPrefix[] = ".hemirad-tmp-";
+// What a bake writes into DIR, in the order they are moved into place (report.json last).
+const std::vector<std::string> kOutputNames = {"baked.gltf", "baked.bin", "render.exr", "render.png", "report.json"};
+
+// Before any work: whatever is in the way of the outputs is the user's and stays. A directory
+// (or a FIFO, a device) named like an output would stop the bake only when it is moved into
+// place, at the end; a file named preview, only at the first preview frame.
+void check_output_names(const BakeOptions& o) {
+    std::error_code ec;
+    const fs::path dir = o.output;
+    for (const std::string& name : kOutputNames) {
+        const fs::file_status st = fs::symlink_status(dir / name, ec);
+        if (fs::exists(st) && !fs::is_regular_file(st) && !fs::is_symlink(st))
+            throw InputError(fmt::format("{}: exists and is not a file; the bake would replace it", (dir / name).string()));
+    }
+    if (o.preview_every > 0 && fs::exists(dir / "preview", ec) && !fs::is_directory(dir / "preview", ec))
+        throw InputError(fmt::format("{}: exists and is not a directory (--preview-every writes its frames there)",
+                                     (dir / "preview").string()));
+}
 
 // Staging directories left by bakes that were killed (SIGKILL, power loss): those whose process
 // no longer exists. A live process's, another user's or a reused pid's are left alone.
@@ -407,12 +426,18 @@ void run_bake(const BakeOptions& options) {
         throw InputError(fmt::format("--effects {}: {}", o.effects, e.what()));
     }
 
+    // Files named by options, before any work: a wrong --resume fails at once, and a --checkpoint
+    // naming the scene (or any file not a checkpoint) must not be overwritten.
+    if (!o.checkpoint.empty()) check_checkpoint_target(o.checkpoint);
+    if (!o.resume.empty()) check_resume_source(o.resume);
+    check_output_names(o);
     const MemoryLimit memory_limit = memory_limit_of(o.max_memory);
 
     auto t0 = Clock::now();
     scene::Scene scene = scene::load(o.scene);
     check_scene(scene);
     const double t_load = seconds_since(t0);
+    if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while loading a large scene
 
     // Which effects this scene calls for (report.json `effects` says why).
     scene::EffectsPlan plan = scene::plan_effects(scene, overrides);
@@ -436,7 +461,12 @@ void run_bake(const BakeOptions& options) {
         throw InputError(fmt::format("--element-size {} is larger than the patch size {}", mesh_settings.element_size, mesh_settings.patch_size));
     const output::View view = output::choose_view(scene, o.camera);  // fails early on a bad --camera
     const int width = o.image_width;
-    const int height = std::max(1, static_cast<int>(std::lround(width / view.aspect)));
+    const double rows = std::max(1.0, std::round(width / view.aspect));  // the loader keeps aspects within [1/16, 16]
+    if (!(rows <= kMaxImageSide))
+        throw InputError(fmt::format("--image-width {}: camera '{}' (aspect ratio {:g}) makes the image {:g} pixels "
+                                     "high, above {}; choose a smaller --image-width",
+                                     width, view.name, view.aspect, rows, kMaxImageSide));
+    const int height = static_cast<int>(rows);
 
     // Before any of the mesh is built: how much memory the bake will need with each solver, which
     // solver `auto` takes (by that memory and by expected time), and whether the bake fits at all.
@@ -546,7 +576,7 @@ void run_bake(const BakeOptions& options) {
 
     OutputTransaction out(o.output);
     // Only now, so that bad input is always exactly one line on stderr.
-    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
+    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << printable(w) << "\n";
     std::vector<std::string> warnings = scene.warnings;  // for report.json
     if (!choice.warning.empty()) {
         std::cerr << "hemirad: warning: " << choice.warning << "\n";
@@ -777,7 +807,8 @@ void run_bake(const BakeOptions& options) {
         f << report.dump(2) << "\n";
         if (!f) throw InternalError("cannot write report.json");
     }
-    out.commit({"baked.gltf", "baked.bin", "render.exr", "render.png", "report.json"});
+    if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while writing: nothing is committed
+    out.commit(kOutputNames);
     if (!o.quiet)
         std::cerr << fmt::format("hemirad: {}, {} elements, wrote {}/report.json, baked.gltf, render.exr, render.png\n",
                                  solver_name == "matrix"

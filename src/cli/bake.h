@@ -11,6 +11,9 @@
 
 namespace hemirad::cli {
 
+// The largest render, in pixels a side (--image-width, and the height its camera's aspect gives).
+inline constexpr int kMaxImageSide = 16384;
+
 struct BakeOptions {
     std::string scene;
     std::string output = "out";
@@ -38,7 +41,7 @@ struct BakeOptions {
     std::string max_memory;       // --max-memory SIZE; empty: the memory available (core/memory.h)
     bool quiet = false;
     bool progress = false;                       // draw a progress line (a TTY and not --quiet)
-    const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT/SIGTERM
+    const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT, SIGTERM or SIGHUP
 };
 
 // Thrown when the user interrupts a bake; nothing has been written (or it was removed).
