@@ -53,11 +53,12 @@ std::optional<double> available_memory() {
 }
 
 std::string format_bytes(double bytes) {
+    if (!std::isfinite(bytes)) return "more bytes than can be counted";
     if (bytes < 1e3) return fmt::format("{:.0f} bytes", bytes);
     static const char* units[] = {"KB", "MB", "GB", "TB", "PB"};
     int u = 0;
     double v = bytes / 1e3;
-    while (v >= 999.5 && u < 4) {
+    while (v >= 999.5 && u < 4) {  // beyond PB: 1.2e+03 PB
         v /= 1e3;
         ++u;
     }

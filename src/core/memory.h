@@ -13,7 +13,8 @@ namespace hemirad {
 // of these can be read.
 std::optional<double> available_memory();
 
-// "1.2 GB", "340 MB", "12 KB", "512 bytes" (decimal units, three significant digits).
+// "1.2 GB", "340 MB", "12 KB", "512 bytes" (decimal units, three significant digits); infinity
+// (a count that overflowed) says so.
 std::string format_bytes(double bytes);
 
 // "8G", "512M", "100k", "2.5GB", "1e9", "123456": bytes (K, M, G, T are powers of 1000; KiB,
