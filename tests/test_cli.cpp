@@ -1,6 +1,7 @@
 // End-to-end tests of the hemirad executable: every test runs the real binary through
 // /bin/sh in a fresh temporary directory and checks its files, report and exit code against
 // facts computed here, independently of the library (DESIGN.md "Interface").
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -17,6 +18,7 @@
 #include <map>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <catch2/catch.hpp>
@@ -105,11 +107,12 @@ void check_one_line(const std::string& err) {
     CHECK(err.find_first_not_of(" \t\r\n") != std::string::npos);
 }
 
-// A bad-input run: exit 2, one line on stderr naming `token`, and `out` not created.
+// A bad-input run: exit 2, one line on stderr naming `token`, and `out` not created. `env`:
+// environment assignments (or a command such as kNoHang) in front, as run_hemirad takes them.
 RunResult expect_bad_input(const TempDir& dir, const std::vector<std::string>& args, const fs::path& out,
-                           const std::string& token) {
+                           const std::string& token, const std::string& env = "") {
     REQUIRE(!fs::exists(out));
-    const RunResult r = run_hemirad(dir, args);
+    const RunResult r = run_hemirad(dir, args, env);
     INFO("stderr: [" << r.err << "]");
     CHECK(r.code == 2);
     check_one_line(r.err);
@@ -665,8 +668,9 @@ TEST_CASE("results are scale invariant end to end", "[cli]") {
 namespace {
 
 // Starts a long bake with a preview every pass, waits until the second preview is on disk (so
-// the solver loop is running and files exist), sends SIGINT, and returns hemirad's exit code.
-RunResult interrupted_bake(const TempDir& dir, const std::string& out) {
+// the solver loop is running and files exist), sends `signal` (INT, TERM, HUP), and returns
+// hemirad's exit code.
+RunResult interrupted_bake(const TempDir& dir, const std::string& out, const std::string& signal = "INT") {
     const std::string preview = out + "/preview/pass_000002.png";
     std::string script = shell_quote(HEMIRAD_EXE);
     for (const std::string& a : {std::string("bake"), kClosedRoom.string(), std::string("-o"), out,
@@ -675,7 +679,7 @@ RunResult interrupted_bake(const TempDir& dir, const std::string& out) {
                                  std::string("--image-width"), std::string("32"), std::string("--quiet")})
         script += " " + shell_quote(a);
     script += " & pid=$!; i=0; while [ ! -e " + shell_quote(preview) +
-              " ] && [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; kill -INT $pid; wait $pid";
+              " ] && [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; kill -" + signal + " $pid; wait $pid";
     return run_shell(dir, script);
 }
 
@@ -1346,7 +1350,10 @@ TEST_CASE("the corpus of malformed scenes: each is exit 2 with one line naming t
     // file, glTF 1.0, a missing buffer, a data URI that does not decode, accessors and buffer
     // views past their ends, an index out of range, NaN and Inf positions, reflectance below 0
     // and above 1, negative emission, no emitter, no geometry, only lines, counts that would
-    // exhaust memory, a .glb with a bad magic and a truncated one.
+    // exhaust memory, a .glb with a bad magic and a truncated one; and hostile ones: an empty .glb,
+    // JSON nested 20,000 deep (.gltf and .glb), a .glb header declaring more than the file holds,
+    // binary zeros as a .gltf, emission beyond what the outputs hold, invalid cameras, and
+    // textures whose image is missing, undecodable or absent.
     const fs::path corpus = kSourceDir / "tests" / "corpus";
     const json manifest = read_json(corpus / "manifest.json");
     REQUIRE(manifest.size() >= 20);
@@ -1358,4 +1365,360 @@ TEST_CASE("the corpus of malformed scenes: each is exit 2 with one line naming t
         const RunResult r = expect_bad_input(dir, bake_args(corpus / file, out, {"--quiet"}), out, file);
         CHECK(r.err.find(c.at("error_contains").get<std::string>()) != std::string::npos);
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// Hostile input: files and values made to crash a bake, hang it, or make it destroy or silently
+// misread something. Each is exit 2 with one line naming the file or option, nothing written.
+
+namespace {
+
+// In front of a run that must not hang (a FIFO, a device): a regression then fails the test with
+// exit 137 instead of blocking the suite.
+const std::string kNoHang = "timeout -s KILL 60 ";
+
+// closed_room.gltf with `extras` arrays nested `depth` deep.
+std::string deeply_nested(int depth) {
+    const std::string text = read_text(kClosedRoom);
+    const std::size_t brace = text.find('{');
+    return text.substr(0, brace + 1) + "\"extras\": " + std::string(std::size_t(depth), '[') +
+           std::string(std::size_t(depth), ']') + ", " + text.substr(brace + 1);
+}
+
+void append_u32(std::string& bytes, std::uint32_t value) {
+    for (int i = 0; i < 4; ++i) bytes += static_cast<char>((value >> (8 * i)) & 0xffu);
+}
+
+// A .glb holding `json` as its one chunk.
+std::string glb_of(std::string json) {
+    while (json.size() % 4 != 0) json += ' ';
+    std::string glb = "glTF";
+    append_u32(glb, 2);
+    append_u32(glb, static_cast<std::uint32_t>(20 + json.size()));
+    append_u32(glb, static_cast<std::uint32_t>(json.size()));
+    glb += "JSON";
+    return glb + json;
+}
+
+// closed_room with material 0's base colour texture read from `uri`.
+json with_texture(const std::string& uri) {
+    json g = read_json(kClosedRoom);
+    g["images"] = json::array({{{"uri", uri}}});
+    g["textures"] = json::array({{{"source", 0}}});
+    g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+    return g;
+}
+
+void make_fifo(const fs::path& path) { REQUIRE(::mkfifo(path.c_str(), 0600) == 0); }
+
+}  // namespace
+
+TEST_CASE("hostile input: deep JSON, FIFOs, devices and directories are exit 2 with one line, never a hang", "[cli][hostile]") {
+    TempDir dir;
+    const fs::path out = dir / "never";
+
+    SECTION("extras nested 20,000 deep in a .gltf (a stack overflow in the JSON parser)") {
+        const fs::path file = dir / "deep.gltf";
+        write_text(file, deeply_nested(20000));
+        const RunResult r = expect_bad_input(dir, bake_args(file, out), out, "deep.gltf");
+        CHECK(r.err.find("512 levels") != std::string::npos);
+    }
+    SECTION("JSON nested 20,000 deep in a .glb's JSON chunk") {
+        const fs::path file = dir / "deep.glb";
+        write_text(file, glb_of(deeply_nested(20000)));
+        const RunResult r = expect_bad_input(dir, bake_args(file, out), out, "deep.glb");
+        CHECK(r.err.find("512 levels") != std::string::npos);
+    }
+    SECTION("nesting within the limit, and brackets inside strings, load") {
+        json g = read_json(kClosedRoom);
+        json nested = json::array();
+        for (int i = 0; i < 500; ++i) nested = json::array({nested});
+        g["extras"] = {{"deep", nested}, {"text", std::string(2000, '[') + "\\\"{"}};
+        write_json(dir / "nested_ok.gltf", g);
+        bake_ok(dir, dir / "nested_ok.gltf", dir / "ok");
+    }
+    SECTION("a FIFO as the scene (open() used to wait for a writer, deaf to SIGINT)") {
+        make_fifo(dir / "fifo.gltf");
+        const RunResult r = expect_bad_input(dir, bake_args(dir / "fifo.gltf", out), out, "fifo.gltf", kNoHang);
+        CHECK(r.err.find("FIFO") != std::string::npos);
+    }
+    SECTION("a device as the scene") {
+        fs::create_symlink("/dev/zero", dir / "zero.glb");
+        const RunResult r = expect_bad_input(dir, bake_args(dir / "zero.glb", out), out, "zero.glb", kNoHang);
+        CHECK(r.err.find("not a regular file") != std::string::npos);
+    }
+    SECTION("a FIFO as a buffer's uri") {
+        json g = read_json(kClosedRoom);
+        g["buffers"].push_back({{"uri", "fifo.bin"}, {"byteLength", 4}});
+        write_json(dir / "fifo_buffer.gltf", g);
+        make_fifo(dir / "fifo.bin");
+        const RunResult r = expect_bad_input(dir, bake_args(dir / "fifo_buffer.gltf", out), out, "fifo.bin", kNoHang);
+        CHECK(r.err.find("FIFO") != std::string::npos);
+    }
+    SECTION("a FIFO as an image's uri") {
+        write_json(dir / "fifo_image.gltf", with_texture("fifo.png"));
+        make_fifo(dir / "fifo.png");
+        const RunResult r = expect_bad_input(dir, bake_args(dir / "fifo_image.gltf", out), out, "fifo.png", kNoHang);
+        CHECK(r.err.find("FIFO") != std::string::npos);
+    }
+    SECTION("a FIFO or a directory as --resume (a directory was an internal error)") {
+        make_fifo(dir / "fifo.ck");
+        fs::create_directories(dir / "ck_dir");
+        for (const std::string ck : {"fifo.ck", "ck_dir"}) {
+            INFO(ck);
+            const RunResult r = expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--resume", ck})), out,
+                                                 ck, kNoHang);
+            CHECK(r.err.find("not a regular file") != std::string::npos);
+            CHECK(r.err.find("internal error") == std::string::npos);
+        }
+    }
+    SECTION("a FIFO or a directory as --checkpoint") {
+        make_fifo(dir / "fifo.ck");
+        fs::create_directories(dir / "ck_dir");
+        for (const std::string ck : {"fifo.ck", "ck_dir"}) {
+            INFO(ck);
+            expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--checkpoint", ck})), out, ck, kNoHang);
+        }
+        CHECK(fs::is_fifo(dir / "fifo.ck"));
+        CHECK(fs::is_directory(dir / "ck_dir"));
+    }
+}
+
+TEST_CASE("hostile input: a 2 GiB file that is not glTF is refused from its first bytes", "[cli][hostile]") {
+    // Sparse files: nothing is stored, and a loader that read one whole would take seconds and 2 GiB.
+    TempDir dir;
+    const fs::path out = dir / "never";
+    constexpr std::uintmax_t k2GiB = std::uintmax_t{2} << 30;
+    const auto sparse = [&](const std::string& name, const std::string& head) {
+        write_text(dir / name, head);
+        fs::resize_file(dir / name, k2GiB);
+        return dir / name;
+    };
+    const auto refused = [&](const fs::path& file, const std::string& why) {
+        INFO(file);
+        const RunResult r = expect_bad_input(dir, bake_args(file, out), out, file.filename().string(), kNoHang);
+        CHECK(r.err.find(why) != std::string::npos);
+    };
+    refused(sparse("zeros.glb", ""), "magic");
+    refused(sparse("zeros.gltf", ""), "not JSON");
+    refused(sparse("brace.gltf", "{"), "above the limit");  // JSON by its first byte, but 2 GiB of it
+}
+
+TEST_CASE("hostile input: a NaN option is refused before any work", "[cli][hostile]") {
+    // --threshold nan used to run the whole bake before failing on its report; --patch-size nan
+    // was silently ignored. Every number option, every spelling: test_cli_options.cpp.
+    TempDir dir;
+    const fs::path out = dir / "never";
+    for (const std::string option : {"--threshold", "--patch-size"}) {
+        INFO(option);
+        const RunResult r = expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {option, "nan"})), out, option);
+        CHECK(r.err.find("not a finite number") != std::string::npos);
+    }
+    // Finite but so small the mesh would exhaust the memory (1e-300 was an internal error).
+    for (const std::string option : {"--element-size", "--patch-size"}) {
+        INFO(option);
+        const RunResult r = expect_bad_input(dir, bake_args(kClosedRoom, out, {option, "1e-300", "--quiet"}), out, option);
+        CHECK(r.err.find("needs less") != std::string::npos);
+    }
+}
+
+TEST_CASE("hostile input: --checkpoint replaces only a hemirad checkpoint, never the scene or another file", "[cli][hostile]") {
+    TempDir dir;
+    const fs::path out = dir / "never";
+    const fs::path scene = dir / "scene.gltf";
+    write_text(scene, read_text(kClosedRoom));
+    const std::string before = read_text(scene);
+    const RunResult r =
+        expect_bad_input(dir, bake_args(scene, out, concat(kFast, {"--checkpoint", scene.string()})), out, "scene.gltf");
+    CHECK(r.err.find("not a hemirad checkpoint") != std::string::npos);
+    CHECK(read_text(scene) == before);
+    expect_bad_input(dir, bake_args(scene, out, concat(kFast, {"--checkpoint", (dir / "no_dir" / "ck").string()})), out,
+                     "no_dir");
+    // A checkpoint is replaced by the next bake's.
+    const fs::path ck = dir / "ck";
+    bake_ok(dir, scene, dir / "first", concat(kFast, {"--checkpoint", ck.string()}));
+    const auto written = fs::last_write_time(ck);
+    REQUIRE(read_text(ck).rfind("hemirad checkpoint\n", 0) == 0);
+    bake_ok(dir, scene, dir / "second", concat(kFast, {"--checkpoint", ck.string(), "--seed", "2"}));
+    CHECK(read_text(ck).rfind("hemirad checkpoint\n", 0) == 0);
+    CHECK(fs::last_write_time(ck) >= written);
+}
+
+TEST_CASE("hostile input: SIGHUP interrupts a bake as SIGINT does: exit 130, no output, no staging, no previews", "[cli][hostile]") {
+    TempDir dir;
+    fs::create_directories(dir / "mine");
+    write_text(dir / "mine" / "notes.txt", "keep\n");
+    const RunResult by_hup = interrupted_bake(dir, "out_hup", "HUP");
+    INFO("stderr: " << by_hup.err);
+    CHECK(by_hup.code == 130);  // as SIGINT and SIGTERM (README, exit codes)
+    CHECK(by_hup.err.find("interrupted") != std::string::npos);
+    CHECK(!fs::exists(dir / "out_hup"));
+    // Into a directory of the user's: the staging directory and the preview frames go, the user's file stays.
+    const RunResult into_mine = interrupted_bake(dir, "mine", "HUP");
+    CHECK(into_mine.code == 130);
+    CHECK(listing(dir / "mine") == std::set<std::string>{"notes.txt"});
+}
+
+TEST_CASE("hostile input: a camera's extreme aspect ratio or field of view is clamped with a warning", "[cli][hostile]") {
+    // Legal glTF no image can be made from: clamped with a warning (README); invalid values are
+    // in the corpus (exit 2).
+    TempDir dir;
+    json g = read_json(kClosedRoom);
+    g["cameras"][0]["perspective"]["aspectRatio"] = 1e-9;
+    g["cameras"][0]["perspective"]["yfov"] = 1e-300;
+    write_json(dir / "extreme.gltf", g);
+    const fs::path out = dir / "out";
+    const RunResult r = run_hemirad(dir, bake_args(dir / "extreme.gltf", out));  // kFast: 64 pixels wide
+    INFO("stderr: " << r.err);
+    REQUIRE(r.code == 0);
+    CHECK(r.err.find("aspectRatio 1e-09 is outside [0.0625, 16]; using 0.0625") != std::string::npos);
+    CHECK(r.err.find("yfov 1e-300 is too narrow") != std::string::npos);
+    const json report = read_json(out / "report.json");
+    CHECK(report["settings"]["image"] == json::array({64, 1024}));
+    CHECK(report["warnings"].size() == 2);
+    CHECK(read_image(out / "render.png").height == 1024);
+    // The image that camera gives at a larger width would be too high: the option is named.
+    expect_bad_input(dir,
+                     bake_args(dir / "extreme.gltf", dir / "never",
+                               {"--hemicube", "32", "--patch-size", "1.0", "--image-width", "2000", "--quiet"}),
+                     dir / "never", "--image-width");
+}
+
+TEST_CASE("hostile input: a texture's image that is missing, unreadable or undecodable is exit 2 naming it", "[cli][hostile]") {
+    // One rule (README): the image of a base colour or emissive texture must be read and decoded,
+    // else the bake stops naming it. (A FIFO and a directory: above and in the corpus.)
+    TempDir dir;
+    const fs::path out = dir / "never";
+    const auto refused = [&](const std::string& uri, const std::string& why) {
+        INFO(uri);
+        write_json(dir / "textured.gltf", with_texture(uri));
+        const RunResult r = expect_bad_input(dir, bake_args(dir / "textured.gltf", out), out, uri, kNoHang);
+        CHECK(r.err.find("baseColorTexture") != std::string::npos);
+        CHECK(r.err.find(why) != std::string::npos);
+    };
+    refused("missing.png", "No such file");
+    write_text(dir / "garbage.png", "not an image\n");
+    refused("garbage.png", "not a PNG, JPEG or WebP image");
+    {  // a PNG cut short: libpng's own complaint must not become a second line
+        auto image = OIIO::ImageOutput::create("png");
+        REQUIRE(image);
+        const OIIO::ImageSpec spec(64, 64, 3, OIIO::TypeDesc::UINT8);
+        std::vector<unsigned char> noise(64 * 64 * 3);
+        for (std::size_t i = 0; i < noise.size(); ++i) noise[i] = static_cast<unsigned char>((i * 2654435761u) >> 13);
+        REQUIRE(image->open((dir / "whole.png").string(), spec));
+        REQUIRE(image->write_image(OIIO::TypeDesc::UINT8, noise.data()));
+        REQUIRE(image->close());
+        const std::string png = read_text(dir / "whole.png");
+        write_text(dir / "cut.png", png.substr(0, png.size() / 2));
+    }
+    refused("cut.png", "does not decode");
+    // Unreadable by permission: root reads it all the same, so only where that bit is honoured.
+    write_text(dir / "secret.png", "whatever\n");
+    fs::permissions(dir / "secret.png", fs::perms::none);
+    if (::geteuid() != 0) refused("secret.png", "Permission denied");
+    else WARN("running as root, which reads a file of mode 000: its case is skipped");
+}
+
+TEST_CASE("textures: a decodable one is used and an image no texture uses does not matter", "[cli][hostile]") {
+    TempDir dir;
+    {
+        auto image = OIIO::ImageOutput::create("png");
+        REQUIRE(image);
+        const OIIO::ImageSpec spec(4, 2, 3, OIIO::TypeDesc::UINT8);
+        const std::vector<unsigned char> pixels(4 * 2 * 3, 64);
+        REQUIRE(image->open((dir / "dark.png").string(), spec));
+        REQUIRE(image->write_image(OIIO::TypeDesc::UINT8, pixels.data()));
+        image->close();
+    }
+    write_json(dir / "dark.gltf", with_texture("dark.png"));
+    json unused = read_json(kClosedRoom);
+    unused["images"] = json::array({{{"uri", "missing.png"}}});
+    write_json(dir / "unused.gltf", unused);
+    bake_ok(dir, dir / "dark.gltf", dir / "dark");
+    const json plain = bake_ok(dir, dir / "unused.gltf", dir / "plain");
+    CHECK(plain["warnings"].empty());  // not even a warning: no material uses it
+    CHECK(read_text(dir / "plain" / "baked.bin") != read_text(dir / "dark" / "baked.bin"));  // the walls darkened
+}
+
+TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same bytes) and values the kernels cannot take exit 2", "[cli][opencl][hostile]") {
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    TempDir dir;
+    const std::vector<std::string> on_opencl = concat(kFast, {"--device", "opencl"});
+    bake_ok(dir, kClosedRoom, dir / "default", on_opencl);
+    const std::string reference = read_text(dir / "default" / "baked.bin");
+    // -DHEMIRAD_TILE=8 and many counter copies used to corrupt the heap: the host sized the
+    // buffers with its own knobs. Now the host takes the overrides, and the results are the same.
+    int run = 0;
+    for (const std::string options : {"-DHEMIRAD_TILE=8", "-DHEMIRAD_COUNT_COPIES=64 -D HEMIRAD_WG=32"}) {
+        INFO(options);
+        const fs::path out = dir / ("tuned" + std::to_string(run++));
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, on_opencl),
+                                        "HEMIRAD_OPENCL_OPTIONS=" + shell_quote(options) + " ");
+        INFO("stderr: " << r.err);
+        REQUIRE(r.code == 0);
+        CHECK(read_json(out / "report.json")["device"]["backend"] == "opencl");
+        CHECK(read_text(out / "baked.bin") == reference);
+    }
+    // Refused before any shot, with the variable and the knob named; `auto` does not fall back.
+    const fs::path out = dir / "never";
+    // (Every knob and spelling: "opencl: -D overrides of the host's knobs …" in test_opencl.cpp.)
+    for (const auto& [options, device] : std::vector<std::pair<std::string, std::string>>{
+             {"-DHEMIRAD_COUNT_COPIES=1000", "opencl"}, {"-DHEMIRAD_COUNT_COPIES=1000", "auto"}, {"-UHEMIRAD_TILE", "auto"}}) {
+        INFO(options << " with --device " << device);
+        const RunResult r = expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--device", device})), out,
+                                             "HEMIRAD_OPENCL_OPTIONS",
+                                             "HEMIRAD_OPENCL_OPTIONS=" + shell_quote(options) + " ");
+        const std::string knob = options.substr(2, options.find('=') == std::string::npos ? std::string::npos
+                                                                                          : options.find('=') - 2);
+        CHECK(r.err.find(knob) != std::string::npos);
+    }
+}
+
+TEST_CASE("hostile input: a name with a newline or a terminal escape still gives one line", "[cli][hostile]") {
+    TempDir dir;
+    const fs::path out = dir / "never";
+    json g = read_json(kClosedRoom);
+    g["materials"][0]["name"] = "evil\nsecond line\x1b[31m";
+    g["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1.5, 0.5, 0.5, 1.0};
+    write_json(dir / "names.gltf", g);
+    const RunResult r = expect_bad_input(dir, bake_args(dir / "names.gltf", out), out, "evil\\x0asecond line\\x1b[31m");
+    CHECK(r.err.find('\x1b') == std::string::npos);
+    // An option's value as well.
+    expect_bad_input(dir, bake_args(kClosedRoom, out, concat(kFast, {"--camera", "a\nb"})), out, "a\\x0ab");
+}
+
+TEST_CASE("hostile input: a directory where an output file goes, or a file where previews go, is exit 2 before any work", "[cli][hostile]") {
+    TempDir dir;
+    const fs::path out = dir / "mine";
+    fs::create_directories(out / "report.json");
+    write_text(out / "preview", "my file\n");
+    for (const auto& [extra, obstacle] : std::vector<std::pair<std::vector<std::string>, std::string>>{
+             {kFast, "report.json"}, {concat(kFast, {"--preview-every", "50"}), "preview"}}) {
+        INFO(obstacle);
+        if (obstacle == "preview") fs::remove(out / "report.json");
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, extra));
+        INFO("stderr: " << r.err);
+        CHECK(r.code == 2);  // was exit 1, "cannot move report.json into place", at the very end
+        check_one_line(r.err);
+        CHECK(r.err.find(obstacle) != std::string::npos);
+    }
+    CHECK(listing(out) == std::set<std::string>{"preview"});
+    CHECK(read_text(out / "preview") == "my file\n");
+}
+
+TEST_CASE("hostile input: emission at the loader's limit bakes with every output finite", "[cli][hostile]") {
+    // 1e30 passes the loader (1e100 is in the corpus, exit 2); render.exr was half float, so
+    // anything brighter than 65504 was written as inf while the report said all was finite.
+    TempDir dir;
+    json g = read_json(kClosedRoom);
+    for (auto& material : g["materials"])
+        if (material.contains("emissiveFactor"))
+            material["extensions"] = {{"KHR_materials_emissive_strength", {{"emissiveStrength", 1e30}}}};
+    g["extensionsUsed"] = {"KHR_materials_emissive_strength"};
+    write_json(dir / "bright.gltf", g);
+    const json report = bake_ok(dir, dir / "bright.gltf", dir / "out");
+    CHECK(all_numbers_finite(report));
+    const ImageData exr = read_image(dir / "out" / "render.exr");
+    CHECK(std::all_of(exr.pixels.begin(), exr.pixels.end(), [](float v) { return std::isfinite(v); }));
+    CHECK(*std::max_element(exr.pixels.begin(), exr.pixels.end()) > 1e29f);
 }

@@ -154,23 +154,7 @@ TEST_CASE("default path: skinny triangles and a lamp inside the box keep the boo
     // floating in it: every emitted watt ends absorbed, nothing escapes. (The hard case's 200
     // needles are 2600 patches at the default patch size, a minute's bake: too long for a test.)
     TempDir dir;
-    scene::Scene s;
-    const std::uint32_t wall = scene::add_material(s, glm::dvec3(0.7), glm::dvec3(0.0));
-    const std::uint32_t lamp = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(5.0), /*double_sided=*/true);
-    s = closed_box({1.0, 1.0, 1.0}, [&](int face) { return face == 2 ? lamp : wall; }, s);
-    s.triangles.erase(std::remove_if(s.triangles.begin(), s.triangles.end(),
-                                     [&](const scene::Triangle& t) { return t.material == lamp; }),
-                      s.triangles.end());
-    const int needles = 60;
-    for (int i = 0; i < needles; ++i) {
-        const auto edge = [&](int k) {
-            const double t = double(k) / needles;
-            return t <= 0.5 ? glm::dvec3(1.0, 0.0, 2.0 * t) : glm::dvec3(2.0 - 2.0 * t, 0.0, 1.0);
-        };
-        add_triangle(s, {0, 0, 0}, edge(i + 1), edge(i), wall, "floor needle");
-    }
-    add_quad(s, {0.45, 0.5, 0.45}, {0.55, 0.5, 0.45}, {0.55, 0.5, 0.55}, {0.45, 0.5, 0.55}, lamp, "lamp");
-    finish(s);
+    const scene::Scene s = needle_box(60);
     const json report = bake_default(dir, s, "needles");
     CHECK(report.at("converged").get<bool>());
     check_books(report);

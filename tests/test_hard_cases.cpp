@@ -237,25 +237,7 @@ TEST_CASE("hard cases: skinny triangles and a lamp inside the box keep the books
     // A closed box whose floor is a fan of 200 needle triangles (1:100 to 1:140), lit by a
     // small two-sided lamp floating inside it: a shooter close to everything, seen edge-on by the
     // floor's slivers. Every emitted watt ends absorbed (the box is closed), nothing escapes.
-    scene::Scene s;
-    const std::uint32_t wall = scene::add_material(s, glm::dvec3(0.7), glm::dvec3(0.0));
-    const std::uint32_t lamp = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(5.0), /*double_sided=*/true);
-    s = test::closed_box(
-        {1.0, 1.0, 1.0}, [&](int face) { return face == 2 ? lamp : wall; }, s);
-    // Replace the floor (face 2) by needles from the corner (0, 0, 0).
-    s.triangles.erase(std::remove_if(s.triangles.begin(), s.triangles.end(),
-                                     [&](const scene::Triangle& t) { return t.material == lamp; }),
-                      s.triangles.end());
-    const int needles = 200;
-    for (int i = 0; i < needles; ++i) {
-        const auto edge = [&](int k) {
-            const double t = double(k) / needles;  // along the far edges x = 1 then z = 1
-            return t <= 0.5 ? glm::dvec3(1.0, 0.0, 2.0 * t) : glm::dvec3(2.0 - 2.0 * t, 0.0, 1.0);
-        };
-        test::add_triangle(s, {0, 0, 0}, edge(i + 1), edge(i), wall, "floor needle");  // normal +y
-    }
-    test::add_quad(s, {0.45, 0.5, 0.45}, {0.55, 0.5, 0.45}, {0.55, 0.5, 0.55}, {0.45, 0.5, 0.55}, lamp, "lamp");
-    test::finish(s);
+    const scene::Scene s = test::needle_box(200);
     const Result r = solve_scene(s, 0.25, 128);
     CHECK(r.converged);
     check_books(r.energy);

@@ -300,21 +300,6 @@ TEST_CASE("matrix stops early when cancelled", "[matrix]") {
     CHECK_THAT(e.absorbed + e.escaped + e.unshot, WithinRel(e.emitted, 1e-9));
 }
 
-TEST_CASE("matrix suits scenes up to the default patch count and reflectance", "[matrix]") {
-    mesh::Mesh m;
-    m.patches.resize(solve::Matrix::kDefaultMaxPatches);
-    CHECK(solve::Matrix::suits(m));
-    m.patches.resize(solve::Matrix::kDefaultMaxPatches + 1);
-    CHECK_FALSE(solve::Matrix::suits(m));
-    // Too reflective for Gauss–Seidel to be quick: progressive shooting's ambient term wins.
-    m.patches.resize(10);
-    m.elements.resize(10);
-    for (auto& e : m.elements) e.rho = glm::dvec3(0.9);
-    CHECK(solve::Matrix::suits(m));
-    m.elements[3].rho = glm::dvec3(0.5, 0.96, 0.5);
-    CHECK_FALSE(solve::Matrix::suits(m));
-}
-
 TEST_CASE("matrix saved part-way and loaded into a new solver ends exactly as one uninterrupted", "[matrix]") {
     // The rows a checkpoint holds: a solver that loads them shoots only the others, and its
     // radiosity, incident light and books are the uninterrupted solver's bit for bit.

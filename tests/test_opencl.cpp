@@ -7,6 +7,7 @@
 #include <cmath>
 #include <optional>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -468,4 +469,39 @@ TEST_CASE("opencl: HEMIRAD_FAULT's grammar", "[opencl][faults]") {
     CHECK(both.fail_after == formfactor::OpenCLFault::kNever);
     for (const char* bad : {"oom-above", "oom-above:", "oom-above:-1", "lost:2", "fail-after:1x", "oom-above:1,"})
         CHECK_THROWS_AS(formfactor::parse_fault(bad), std::invalid_argument);
+}
+
+TEST_CASE("opencl: -D overrides of the host's knobs set its tuning, validated, and other options pass through", "[opencl]") {
+    // No device needed: this is the parsing of HEMIRAD_OPENCL_OPTIONS' text.
+    formfactor::OpenCLTuning t;
+    t.extra_options = "-DKEEP=1";
+    formfactor::apply_build_options(t, "  -DHEMIRAD_TILE=8 -cl-opt-disable -D HEMIRAD_COUNT_COPIES=64 -DHEMIRAD_WG=32 "
+                                       "-DHEMIRAD_SCAN_WG=128 -DHEMIRAD_RASTER_WG=2 -DHEMIRAD_LANES=8 "
+                                       "-DHEMIRAD_SETUP_LANES -DHEMIRAD_CULL=0 -D OTHER=3 -DClipPolygon=42");
+    CHECK(t.tile == 8);
+    CHECK(t.count_copies == 64);
+    CHECK(t.work_group == 32);
+    CHECK(t.scan_work_group == 128);
+    CHECK(t.raster_work_group == 2);
+    CHECK(t.lanes == 8);
+    CHECK(t.setup_lanes);  // -DNAME alone is NAME=1, as the compiler reads it
+    CHECK_FALSE(t.cull);
+    // The knobs are the host's now (the engine passes them as -D); everything else is kept as it was.
+    CHECK(t.extra_options == "-DKEEP=1 -cl-opt-disable -D OTHER=3 -DClipPolygon=42");
+    CHECK(t.overrides.find("HEMIRAD_COUNT_COPIES=64") != std::string::npos);
+
+    for (const std::string bad : {"-DHEMIRAD_TILE=3", "-DHEMIRAD_TILE=65", "-DHEMIRAD_TILE=", "-DHEMIRAD_TILE=0x8",
+                                  "-DHEMIRAD_COUNT_COPIES=1000", "-DHEMIRAD_COUNT_COPIES=0", "-DHEMIRAD_SCAN_WG=96",
+                                  "-DHEMIRAD_LANES=6", "-DHEMIRAD_CULL=2", "-DHEMIRAD_WG=2048", "-UHEMIRAD_TILE",
+                                  "-U HEMIRAD_WG", "-DHEMIRAD_TILES=8", "-DHEMIRAD_TILE=99999999999"}) {
+        INFO(bad);
+        formfactor::OpenCLTuning u;
+        try {
+            formfactor::apply_build_options(u, bad);
+            FAIL("accepted");
+        } catch (const std::invalid_argument& e) {
+            CHECK(std::string(e.what()).find(bad.substr(0, bad.find('='))) != std::string::npos);  // names the option
+        }
+        CHECK(u.tile == formfactor::OpenCLTuning{}.tile);  // nothing applied
+    }
 }

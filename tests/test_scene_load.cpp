@@ -1,5 +1,7 @@
 // scene::load on small glTF files written here, checked against hand-computed positions,
 // materials and names, and against malformed files that must be rejected with one line.
+#include <OpenImageIO/imageio.h>
+#include <sys/stat.h>
 #include <tiny_gltf.h>
 
 #include <algorithm>
@@ -10,8 +12,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <glm/glm.hpp>
+#include <iterator>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <string>
 #include <vector>
@@ -542,5 +547,163 @@ TEST_CASE("bad input is one line naming the file", "[scene]") {
         b.at(p2).children = {0};
         b.scene({p1, p2});
         check_rejected(write(b.model, dir / "dag.gltf"), "node 0 has more than one parent");
+    }
+}
+
+namespace {
+
+// /proc/self/status's `field` ("VmRSS", "VmHWM": the peak), in kB; -1 where it cannot be read.
+long memory_kb(const std::string& field) {
+    std::ifstream status("/proc/self/status");
+    for (std::string line; std::getline(status, line);)
+        if (line.rfind(field + ":", 0) == 0) return std::stol(line.substr(field.size() + 1));
+    return -1;
+}
+
+// Resets VmHWM to the current resident size (Linux 4.0 and later); false where that is refused.
+bool reset_peak_memory() {
+    std::ofstream clear("/proc/self/clear_refs");
+    clear << "5";
+    clear.close();
+    return clear.good();
+}
+
+// `model` written as .gltf, then its JSON edited by `edit` (images, textures: what tinygltf's
+// writer would try to encode itself).
+fs::path write_edited(const tinygltf::Model& model, const fs::path& file,
+                      const std::function<void(nlohmann::json&)>& edit) {
+    write(model, file);
+    std::ifstream in(file);
+    nlohmann::json g = nlohmann::json::parse(in);
+    in.close();
+    edit(g);
+    std::ofstream(file) << g.dump();
+    return file;
+}
+
+}  // namespace
+
+TEST_CASE("a 20000 x 20000 PNG texture decodes, a band of rows at a time, to its mean", "[scene][hostile]") {
+    // tinygltf's stb refused it; OpenImageIO decodes it here with a few MB (grey, so that the
+    // test writes and reads 400 MB of pixels rather than 1.2 GB).
+    TempDir dir;
+    constexpr int kSide = 20000;
+    constexpr unsigned char kLevel = 200;
+    {
+        auto out = OIIO::ImageOutput::create("png");
+        REQUIRE(out);
+        OIIO::ImageSpec spec(kSide, kSide, 1, OIIO::TypeDesc::UINT8);
+        spec.attribute("png:compressionLevel", 1);
+        REQUIRE(out->open((dir / "big.png").string(), spec));
+        const std::vector<unsigned char> row(kSide, kLevel);
+        bool written = true;
+        for (int y = 0; y < kSide && written; ++y) written = out->write_scanline(y, 0, OIIO::TypeDesc::UINT8, row.data());
+        REQUIRE(written);
+        REQUIRE(out->close());
+    }
+    ModelBuilder b;
+    const int m = b.material("textured", {0.5, 1.0, 1.0, 1.0});
+    b.scene({b.node("n", b.unit_triangle_mesh("tri", m))});
+    const fs::path file = write_edited(b.model, dir / "big.gltf", [](nlohmann::json& g) {
+        g["images"] = {{{"uri", "big.png"}}};
+        g["textures"] = {{{"source", 0}}};
+        g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+    });
+    // The peak resident memory of the load, where Linux lets it be reset and read (stb needed
+    // over 3 GB for this image: the whole image at 4 bytes a pixel, and its inflated rows).
+    const bool measured = reset_peak_memory();
+    const long before = memory_kb("VmRSS");
+    const Scene s = hemirad::scene::load(file);
+    const double linear = std::pow((kLevel / 255.0 + 0.055) / 1.055, 2.4);  // sRGB decoded
+    CHECK(near(s.materials.at(0).base_color, dvec3(0.5 * linear, linear, linear), 1e-12));
+    if (measured && before > 0) {
+        CHECK(memory_kb("VmHWM") - before < 256 * 1024);
+    } else {
+        WARN("the peak resident memory cannot be reset here: not measured");
+    }
+}
+
+TEST_CASE("an image's bufferView past the end of its buffer is refused, never read", "[scene][hostile]") {
+    TempDir dir;
+    ModelBuilder b;
+    const int m = b.material("textured", {1.0, 1.0, 1.0, 1.0});
+    b.scene({b.node("n", b.unit_triangle_mesh("tri", m))});
+    const fs::path file = write_edited(b.model, dir / "past.gltf", [](nlohmann::json& g) {
+        g["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 1 << 20}});
+        g["images"] = {{{"bufferView", g["bufferViews"].size() - 1}, {"mimeType", "image/png"}}};
+        g["textures"] = {{{"source", 0}}};
+        g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+    });
+    check_rejected(file, "runs past the end of buffer 0");
+}
+
+TEST_CASE("hostile files: deep JSON, an empty .glb, a FIFO, wrong .glb headers", "[scene][hostile]") {
+    TempDir dir;
+    ModelBuilder good;
+    good.scene({good.node("n", good.unit_triangle_mesh())});
+    SECTION("JSON nested 100,000 deep") {
+        const fs::path file = write(good.model, dir / "deep.gltf");
+        std::ifstream in(file);
+        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        in.close();
+        text.insert(text.find('{') + 1, "\"extras\":" + std::string(100000, '{') + std::string(100000, '}') + ",");
+        std::ofstream(file) << text;
+        check_rejected(file, "nested more than 512 levels");
+    }
+    SECTION("an empty .glb") {
+        std::ofstream(dir / "empty.glb").close();
+        check_rejected(dir / "empty.glb", "empty");
+    }
+    SECTION("a FIFO") {
+        REQUIRE(::mkfifo((dir / "fifo.gltf").c_str(), 0600) == 0);
+        check_rejected(dir / "fifo.gltf", "is a FIFO, not a regular file");
+    }
+    SECTION("a texture's PNG cut short, and one under a JPEG's name") {
+        {
+            auto out = OIIO::ImageOutput::create("png");
+            REQUIRE(out);
+            const OIIO::ImageSpec spec(64, 64, 3, OIIO::TypeDesc::UINT8);
+            std::vector<unsigned char> noise(64 * 64 * 3);
+            std::mt19937 random(5);
+            for (unsigned char& v : noise) v = static_cast<unsigned char>(random());  // incompressible
+            REQUIRE(out->open((dir / "whole.png").string(), spec));
+            REQUIRE(out->write_image(OIIO::TypeDesc::UINT8, noise.data()));
+            REQUIRE(out->close());
+        }
+        std::ifstream in(dir / "whole.png", std::ios::binary);
+        const std::string png((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        std::ofstream(dir / "cut.png", std::ios::binary) << png.substr(0, png.size() / 2);
+        std::ofstream(dir / "named.jpg", std::ios::binary) << png;  // decoded as what it is
+        ModelBuilder b;
+        const int m = b.material("textured", {1.0, 1.0, 1.0, 1.0});
+        b.scene({b.node("n", b.unit_triangle_mesh("tri", m))});
+        for (const std::string uri : {"cut.png", "named.jpg"}) {
+            const fs::path file = write_edited(b.model, dir / "t.gltf", [&](nlohmann::json& g) {
+                g["images"] = {{{"uri", uri}}};
+                g["textures"] = {{{"source", 0}}};
+                g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+            });
+            if (uri == "cut.png") {
+                check_rejected(file, "image 0 'cut.png': the image does not decode past row");
+            } else {
+                const Scene s = hemirad::scene::load(file);
+                CHECK(s.materials.at(0).base_color.x > 0.1);  // the noise's mean, about 0.21 decoded
+            }
+        }
+    }
+    SECTION("a .glb cut short, and one whose JSON chunk runs past its end") {
+        const fs::path file = write(good.model, dir / "good.glb");
+        std::ifstream in(file, std::ios::binary);
+        std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        in.close();
+        std::ofstream(dir / "cut.glb", std::ios::binary) << bytes.substr(0, bytes.size() - 4);
+        check_rejected(dir / "cut.glb", "truncated");
+        bytes[12] = '\xff';  // the JSON chunk's length, far beyond the file
+        bytes[13] = '\xff';
+        std::ofstream(dir / "long_chunk.glb", std::ios::binary) << bytes;
+        check_rejected(dir / "long_chunk.glb", "runs past");
+        bytes.replace(12, 8, std::string("\x10\0\0\0BIN\0", 8));  // a first chunk that is not the JSON
+        std::ofstream(dir / "bin_first.glb", std::ios::binary) << bytes;
+        check_rejected(dir / "bin_first.glb", "first chunk of a .glb must be its JSON");
     }
 }

@@ -2,9 +2,31 @@
 // area form factor measured through any engine.
 #include "test_scenes.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace hemirad::test {
+
+scene::Scene needle_box(int needles) {
+    scene::Scene s;
+    const std::uint32_t wall = scene::add_material(s, glm::dvec3(0.7), glm::dvec3(0.0));
+    const std::uint32_t lamp = scene::add_material(s, glm::dvec3(0.0), glm::dvec3(5.0), /*double_sided=*/true);
+    // The box without its floor (face 2, y = 0, which the fan replaces).
+    s = closed_box({1.0, 1.0, 1.0}, [&](int face) { return face == 2 ? lamp : wall; }, s);
+    s.triangles.erase(std::remove_if(s.triangles.begin(), s.triangles.end(),
+                                     [&](const scene::Triangle& t) { return t.material == lamp; }),
+                      s.triangles.end());
+    for (int i = 0; i < needles; ++i) {
+        const auto edge = [&](int k) {
+            const double t = double(k) / needles;  // along the far edges x = 1 then z = 1
+            return t <= 0.5 ? glm::dvec3(1.0, 0.0, 2.0 * t) : glm::dvec3(2.0 - 2.0 * t, 0.0, 1.0);
+        };
+        add_triangle(s, {0, 0, 0}, edge(i + 1), edge(i), wall, "floor needle");  // normal +y
+    }
+    add_quad(s, {0.45, 0.5, 0.45}, {0.55, 0.5, 0.45}, {0.55, 0.5, 0.55}, {0.45, 0.5, 0.55}, lamp, "lamp");
+    finish(s);
+    return s;
+}
 
 double node_form_factor(const mesh::Mesh& m, const formfactor::ShotResult& r, std::uint32_t node) {
     double f = 0.0;

@@ -41,6 +41,12 @@ scene::Scene closed_box(glm::dvec3 size, MaterialOf material_of, scene::Scene s)
     return s;
 }
 
+// A closed unit box of grey walls (ρ 0.7) whose floor is a fan of `needles` triangles from the
+// corner (0, 0, 0) to the far edges (node "floor needle", 1:needles/2 to 1:needles·0.7), lit by a
+// small two-sided lamp (E = 5, ρ 0, node "lamp") floating at its centre: a shooter close to
+// everything, seen edge-on by the floor's slivers.
+scene::Scene needle_box(int needles);
+
 // Σ F of one shot over the elements of node `node`: the form factor to that surface.
 double node_form_factor(const mesh::Mesh& m, const formfactor::ShotResult& r, std::uint32_t node);
 

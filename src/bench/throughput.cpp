@@ -143,6 +143,48 @@ BenchScene load_bench_scene(const std::string& spec) {
     return {scene::load(spec), false};
 }
 
+namespace {
+
+// Unless given, the patch and element sizes of a bake at the default quality.
+mesh::Settings mesh_settings_for(const ThroughputOptions& o, const scene::Scene& s) {
+    const QualityPreset& quality = quality_preset("default");
+    mesh::Settings settings;
+    settings.patch_size = o.patch_size > 0.0 ? o.patch_size : s.diagonal() * quality.patch_fraction;
+    settings.element_size = o.element_size > 0.0 ? o.element_size : settings.patch_size / quality.elements_per_patch_edge;
+    return settings;
+}
+
+// The most elements a benchmark's mesh may have: a tiny --element-size (1e-4 on a room) would
+// exhaust the memory long after the calibration.
+constexpr double kMaxElements = double(1 << 24);
+
+// Sizes the mesher cannot take, or that would need too many elements: bad input, found by
+// counting the mesh (mesh::build stopped once it has counted) before anything is measured.
+void check_mesh_settings(const ThroughputOptions& o, const scene::Scene& s, const std::string& spec) {
+    const mesh::Settings settings = mesh_settings_for(o, s);
+    const std::string what = fmt::format("{} with --{}-size {:g}", spec, o.element_size > 0.0 ? "element" : "patch",
+                                         o.element_size > 0.0 ? o.element_size : settings.patch_size);
+    if (settings.element_size > settings.patch_size)
+        throw InputError(fmt::format("{}: elements of {:g} are larger than the patches ({:g})", what,
+                                     settings.element_size, settings.patch_size));
+    struct Counted {};
+    mesh::Counts counts;
+    try {
+        mesh::build(s, settings, [&counts](const mesh::Counts& c) {
+            counts = c;
+            throw Counted{};
+        });
+    } catch (const Counted&) {
+    } catch (const InputError& e) {
+        throw InputError(fmt::format("{}: {}", what, e.what()));
+    }
+    if (!(counts.elements <= kMaxElements))
+        throw InputError(fmt::format("{}: {:.3g} elements, more than the {:.0f} a benchmark may mesh", what,
+                                     counts.elements, kMaxElements));
+}
+
+}  // namespace
+
 ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
     if (o.scenes.empty()) throw InputError("bench: no scene given (a glTF file or procedural:<triangles>)");
     for (int n : o.hemicubes)
@@ -156,6 +198,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
     for (const std::string& spec : o.scenes) {
         scenes.push_back(load_bench_scene(spec));
         if (scenes.back().scene.triangles.empty()) throw InputError(fmt::format("{}: no triangles", spec));
+        check_mesh_settings(o, scenes.back().scene, spec);
     }
 
     ordered_json doc;
@@ -195,12 +238,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
         const std::string& spec = o.scenes[scene_index];
         const BenchScene& bench_scene = scenes[scene_index];
         const scene::Scene& s = bench_scene.scene;
-        mesh::Settings mesh_settings;
-        // Unless given, the patch and element sizes of a bake at the default quality.
-        const QualityPreset& quality = quality_preset("default");
-        mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : s.diagonal() * quality.patch_fraction;
-        mesh_settings.element_size =
-            o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / quality.elements_per_patch_edge;
+        const mesh::Settings mesh_settings = mesh_settings_for(o, s);
         const auto t_mesh = Clock::now();
         const mesh::Mesh m = mesh::build(s, mesh_settings);
         if (m.patches.empty()) throw InputError(fmt::format("{}: every triangle has zero area", spec));

@@ -7,12 +7,18 @@
 
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
+#include <limits>
 #include <iostream>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "cl/runtime.h"
@@ -24,6 +30,69 @@
 
 namespace hemirad::cli {
 namespace {
+
+// CLI11 converts with strtod and strtoll, which take "nan", "inf", "1e400" (as inf), hex and
+// octal, and its Range and PositiveNumber checks let NaN through (every comparison with NaN is
+// false), so a NaN threshold used to run a whole bake. Every number option goes through one of
+// these instead: the whole text a finite decimal number within the range, rewritten in a plain
+// spelling that CLI11's own conversion reads the same way.
+CLI::Validator real_in(double lo, double hi, bool above_lo = false) {
+    const std::string range = fmt::format("{}{:g}, {:g}]", above_lo ? "(" : "[", lo, hi);
+    return CLI::Validator(
+        [=](std::string& text) -> std::string {
+            char* end = nullptr;
+            errno = 0;
+            const double value = std::strtod(text.c_str(), &end);
+            if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(value))
+                return fmt::format("'{}' is not a finite number", text);
+            if (errno == ERANGE) return fmt::format("'{}' is out of the range of a double", text);
+            if (!(above_lo ? value > lo : value >= lo) || !(value <= hi))
+                return fmt::format("{} is outside {}", text, range);
+            text = fmt::format("{:.17g}", value);
+            return {};
+        },
+        "finite, in " + range);
+}
+
+template <class Int>
+CLI::Validator integer_in(Int lo, Int hi) {
+    const std::string range = fmt::format("[{}, {}]", lo, hi);
+    return CLI::Validator(
+        [=](std::string& text) -> std::string {
+            const std::size_t digits = !text.empty() && text[0] == '-' ? 1 : 0;
+            if (text.size() == digits || text.find_first_not_of("0123456789", digits) != std::string::npos)
+                return fmt::format("'{}' is not a whole decimal number", text);
+            const std::string outside = fmt::format("{} is outside {}", text, range);
+            errno = 0;
+            if (digits == 1) {
+                if constexpr (std::is_unsigned_v<Int>) {
+                    return outside;
+                } else {
+                    const long long value = std::strtoll(text.c_str(), nullptr, 10);
+                    if (errno == ERANGE || value < lo || value > hi) return outside;
+                    text = std::to_string(value);
+                }
+            } else {
+                const unsigned long long value = std::strtoull(text.c_str(), nullptr, 10);
+                if (errno == ERANGE || value > static_cast<unsigned long long>(hi)) return outside;
+                if constexpr (std::is_signed_v<Int>) {
+                    if (static_cast<long long>(value) < lo) return outside;
+                } else {
+                    if (value < lo) return outside;
+                }
+                text = std::to_string(value);  // no leading zeros, which CLI11 would read as octal
+            }
+            return {};
+        },
+        "in " + range);
+}
+
+template <class Int>
+CLI::Validator integer_from(Int lo) {
+    return integer_in<Int>(lo, std::numeric_limits<Int>::max());
+}
+
+constexpr double kLargestSize = 1e30;  // patch and element sizes, in scene units
 
 void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("scene", o.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
@@ -45,24 +114,24 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->capture_default_str();
     bake.add_option("--hemicube", o.hemicube,
                     "hemicube resolution N: top face N×N plus four N×N/2 half faces (default: the quality's)")
-        ->check(CLI::Range(8, 4096));
+        ->transform(integer_in(8, 4096));
     bake.add_option("--patch-size", o.patch_size,
                     "maximum patch edge, scene units (default: scene diagonal × the quality's fraction)")
-        ->check(CLI::PositiveNumber);
+        ->transform(real_in(0.0, kLargestSize, true));
     bake.add_option("--element-size", o.element_size,
                     "maximum element edge, scene units (default: patch size / the quality's elements a side)")
-        ->check(CLI::PositiveNumber);
+        ->transform(real_in(0.0, kLargestSize, true));
     bake.add_option("--threshold", o.threshold,
                     "progressive: stop when the share of final flux not yet placed is below this; matrix: iterate to a "
                     "residual of min(1e-4, T/100) (default: the quality's)")
-        ->check(CLI::Range(0.0, 1.0));
+        ->transform(real_in(0.0, 1.0));
     bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
-        ->check(CLI::NonNegativeNumber)
+        ->transform(integer_from(0L))
         ->capture_default_str();
     bake.add_option("--batch", o.batch,
                     "shoot the K patches with the most unshot flux together (one launch on OpenCL); "
                     "each still shoots its flux at the time it is applied")
-        ->check(CLI::Range(1, 256))
+        ->transform(integer_in(1, 256))
         ->capture_default_str();
     bake.add_option("--solver", o.solver,
                     "matrix (a form-factor row per patch, then Gauss-Seidel), progressive (shooting), or auto: "
@@ -75,31 +144,37 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "and report.json says why");
     bake.add_option("--refine-levels", o.refine_levels,
                     "adaptive refinement: split an element at most this often where the irradiance contrasts (0: off)")
-        ->check(CLI::Range(0, 6))
+        ->transform(integer_in(0, 6))
         ->capture_default_str();
     bake.add_option("--contrast", o.contrast,
                     "adaptive refinement: split neighbours whose irradiance differs by more than this share")
-        ->check(CLI::Range(0.01, 1.0))
+        ->transform(real_in(0.01, 1.0))
         ->capture_default_str();
     bake.add_option("--checkpoint", o.checkpoint,
                     "progressive solver: write its state to this file every --checkpoint-every passes (atomically)");
     bake.add_option("--checkpoint-every", o.checkpoint_every, "passes between checkpoints")
-        ->check(CLI::PositiveNumber)
+        ->transform(integer_from(1L))
         ->capture_default_str();
     bake.add_option("--resume", o.resume,
                     "progressive solver: go on from this checkpoint of the same scene and settings; the bake ends "
                     "with exactly the numbers of an uninterrupted one");
-    bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")->capture_default_str();
+    bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")
+        ->transform(integer_from(std::uint64_t{0}))
+        ->capture_default_str();
     bake.add_flag("--verify", o.verify, "check shots of the OpenCL engine against the scalar reference");
     bake.add_option("--verify-every", o.verify_every, "with --verify, check every K-th shot")
-        ->check(CLI::PositiveNumber)
+        ->transform(integer_from(1L))
         ->capture_default_str();
     bake.add_option("--camera", o.camera, "render from the camera with this name");
     bake.add_option("--preview-every", o.preview_every, "write DIR/preview/pass_NNNNNN.png every K passes")
-        ->check(CLI::NonNegativeNumber);
+        ->transform(integer_from(0L));
     bake.add_option("--image-width", o.image_width, "width of render.exr/png; height follows the camera's aspect")
-        ->check(CLI::Range(16, 16384))
+        ->transform(integer_in(16, kMaxImageSide))
         ->capture_default_str();
+    bake.add_option("--max-memory", o.max_memory,
+                    "memory the bake may use, e.g. 8G or 512M (default: what the machine has available); a bake "
+                    "estimated to need more is refused before it starts, --solver auto takes the solver that fits, "
+                    "and refinement stops where it would pass it");
     bake.add_flag("--quiet", o.quiet, "no progress line");
 }
 
@@ -108,26 +183,28 @@ void add_bench_options(CLI::App& cmd, BenchCommand& c) {
     cmd.add_option("scenes", o.scenes, "glTF files or procedural:<triangles> (e.g. procedural:100k, procedural:1M)");
     cmd.add_option("--hemicube", o.hemicubes, "hemicube resolutions N, comma-separated")
         ->delimiter(',')
-        ->check(CLI::Range(8, 4096))
+        ->transform(integer_in(8, 4096))
         ->capture_default_str();
     cmd.add_option("--engines", o.engines, "ref, embree, opencl (every device) or opencl:P.D; default: all")
         ->delimiter(',');
     cmd.add_option("--shots", o.shots, "shots per engine per repeat")
-        ->check(CLI::PositiveNumber)
+        ->transform(integer_from(1))
         ->capture_default_str();
     cmd.add_option("--repeats", o.repeats, "timed repeats (min, median and spread over them)")
-        ->check(CLI::PositiveNumber)
+        ->transform(integer_from(1))
         ->capture_default_str();
-    cmd.add_option("--batch", o.batch, "shots per engine call")->check(CLI::Range(1, 256))->capture_default_str();
+    cmd.add_option("--batch", o.batch, "shots per engine call")->transform(integer_in(1, 256))->capture_default_str();
     const QualityPreset& quality = quality_preset("default");
     cmd.add_option(
            "--patch-size", o.patch_size,
            fmt::format("maximum patch edge (default: scene diagonal / {:g}, as a bake)", 1.0 / quality.patch_fraction))
-        ->check(CLI::PositiveNumber);
+        ->transform(real_in(0.0, kLargestSize, true));
     cmd.add_option("--element-size", o.element_size,
                    fmt::format("maximum element edge (default: patch size / {:g})", quality.elements_per_patch_edge))
-        ->check(CLI::PositiveNumber);
-    cmd.add_option("--seed", o.seed, "seed of the hemicube rotations")->capture_default_str();
+        ->transform(real_in(0.0, kLargestSize, true));
+    cmd.add_option("--seed", o.seed, "seed of the hemicube rotations")
+        ->transform(integer_from(std::uint64_t{0}))
+        ->capture_default_str();
     cmd.add_flag(
         "--no-calibrate", [&o](std::int64_t) { o.calibrate = false; },
         "skip measuring the machine's limit (fill rate, bandwidth)");
@@ -173,7 +250,7 @@ int run(int argc, char** argv) {
     } catch (const CLI::CallForVersion& e) {
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
-        std::cerr << "hemirad: " << e.what() << " (see hemirad --help)\n";
+        std::cerr << "hemirad: " << printable(e.what()) << " (see hemirad --help)\n";
         return 2;
     }
 
@@ -186,35 +263,36 @@ int run(int argc, char** argv) {
             run_bench(bench_command, std::cout);
             return 0;
         }
-        std::signal(SIGINT, on_interrupt);
-        std::signal(SIGTERM, on_interrupt);
+        // SIGHUP (the terminal closed) is an interruption like Ctrl-C: clean up, exit 130.
+        for (const int signal : {SIGINT, SIGTERM, SIGHUP}) std::signal(signal, on_interrupt);
         bake_options.interrupted = &g_interrupted;
         bake_options.progress = !bake_options.quiet && isatty(fileno(stderr));
         run_bake(bake_options);
         return 0;
     } catch (const InputError& e) {
-        std::cerr << "hemirad: " << e.what() << "\n";
+        std::cerr << "hemirad: " << printable(e.what()) << "\n";
         return 2;
     } catch (const Interrupted&) {
         std::cerr << (bake_options.progress ? "\n" : "") << "hemirad: interrupted; no output written\n";
         return 130;
     } catch (const formfactor::VerifyError& e) {
-        std::cerr << "hemirad: verification failed: " << e.what() << "\n";
+        std::cerr << "hemirad: verification failed: " << printable(e.what()) << "\n";
         return 1;
     } catch (const ocl::BuildError& e) {
         std::cerr << "hemirad: " << e.what() << "\n";
         return 1;
     } catch (const ocl::DeviceError& e) {
-        std::cerr << "hemirad: device failed: " << e.what() << " (--device auto would start again on the reference)\n";
+        std::cerr << "hemirad: device failed: " << printable(e.what())
+                  << " (--device auto would start again on the reference)\n";
         return 1;
     } catch (const cl::Error& e) {
-        std::cerr << "hemirad: device failed: " << device_failure(e) << "\n";
+        std::cerr << "hemirad: device failed: " << printable(device_failure(e)) << "\n";
         return 1;
     } catch (const std::bad_alloc&) {
         std::cerr << "hemirad: out of memory\n";
         return 1;
     } catch (const std::exception& e) {
-        std::cerr << "hemirad: internal error: " << e.what() << "\n";
+        std::cerr << "hemirad: internal error: " << printable(e.what()) << "\n";
         return 1;
     }
 }

@@ -11,21 +11,25 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <iostream>
 #include <memory>
 #include <optional>
 #include <system_error>
+#include <vector>
 
 #include <fmt/core.h>
 #include <nlohmann/json.hpp>
 
 #include "cl/runtime.h"
+#include "cli/budget.h"
 #include "cli/checkpoint.h"
 #include "cli/engine_select.h"
 #include "core/durable.h"
 #include "core/error.h"
+#include "core/memory.h"
 #include "core/timing.h"
 #include "formfactor/near_field.h"
 #include "mesh/mesh.h"
@@ -98,6 +102,24 @@ std::unique_ptr<formfactor::Engine> observed(std::unique_ptr<formfactor::Engine>
 
 // A bake stages its files in DIR/.hemirad-tmp-<pid> until all of them exist.
 constexpr char kStagingPrefix[] = ".hemirad-tmp-";
+// What a bake writes into DIR, in the order they are moved into place (report.json last).
+const std::vector<std::string> kOutputNames = {"baked.gltf", "baked.bin", "render.exr", "render.png", "report.json"};
+
+// Before any work: whatever is in the way of the outputs is the user's and stays. A directory
+// (or a FIFO, a device) named like an output would stop the bake only when it is moved into
+// place, at the end; a file named preview, only at the first preview frame.
+void check_output_names(const BakeOptions& o) {
+    std::error_code ec;
+    const fs::path dir = o.output;
+    for (const std::string& name : kOutputNames) {
+        const fs::file_status st = fs::symlink_status(dir / name, ec);
+        if (fs::exists(st) && !fs::is_regular_file(st) && !fs::is_symlink(st))
+            throw InputError(fmt::format("{}: exists and is not a file; the bake would replace it", (dir / name).string()));
+    }
+    if (o.preview_every > 0 && fs::exists(dir / "preview", ec) && !fs::is_directory(dir / "preview", ec))
+        throw InputError(fmt::format("{}: exists and is not a directory (--preview-every writes its frames there)",
+                                     (dir / "preview").string()));
+}
 
 // Staging directories left by bakes that were killed (SIGKILL, power loss): those whose process
 // no longer exists. A live process's, another user's or a reused pid's are left alone.
@@ -205,6 +227,36 @@ void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const 
     const fs::path tmp = file.parent_path() / (".tmp-" + file.filename().string());
     output::write_png(image, tmp, output::auto_exposure(image));
     fs::rename(tmp, file);
+}
+
+// The memory a bake may use, and where that figure comes from (for messages and the report).
+struct MemoryLimit {
+    double bytes = 0.0;
+    std::string source;
+};
+
+MemoryLimit memory_limit_of(const std::string& option) {
+    if (!option.empty()) {
+        try {
+            return {parse_bytes(option), "--max-memory allows"};
+        } catch (const std::invalid_argument& e) {
+            throw InputError(fmt::format("--max-memory {}: {}", option, e.what()));
+        }
+    }
+    if (const std::optional<double> available = available_memory()) return {*available, "available on this machine"};
+    return {double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE)), "this machine has"};
+}
+
+// Whether the hemicube engine --device picks may be an OpenCL one (whose buffers, on a CPU device,
+// are host memory).
+bool may_use_opencl(const std::string& device) {
+    if (device == "ref") return false;
+    if (device == "auto") {
+        const char* env = std::getenv("HEMIRAD_DEVICE");
+        if (env && std::string(env) == "ref") return false;
+        return !ocl::list_devices().empty();
+    }
+    return true;
 }
 
 // Convergence forced off: shoot until this little is left (progressive), or solve to rounding (matrix).
@@ -404,10 +456,18 @@ void run_bake(const BakeOptions& options) {
         throw InputError(fmt::format("--effects {}: {}", o.effects, e.what()));
     }
 
+    // Files named by options, before any work: a wrong --resume fails at once, and a --checkpoint
+    // naming the scene (or any file not a checkpoint) must not be overwritten.
+    if (!o.checkpoint.empty()) check_checkpoint_target(o.checkpoint);
+    if (!o.resume.empty()) check_resume_source(o.resume);
+    check_output_names(o);
+    const MemoryLimit memory_limit = memory_limit_of(o.max_memory);
+
     auto t0 = Clock::now();
     scene::Scene scene = scene::load(o.scene);
     check_scene(scene);
     const double t_load = seconds_since(t0);
+    if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while loading a large scene
 
     // Which effects this scene calls for (report.json `effects` says why).
     scene::EffectsPlan plan = scene::plan_effects(scene, overrides);
@@ -431,10 +491,70 @@ void run_bake(const BakeOptions& options) {
         throw InputError(fmt::format("--element-size {} is larger than the patch size {}", mesh_settings.element_size, mesh_settings.patch_size));
     const output::View view = output::choose_view(scene, o.camera);  // fails early on a bad --camera
     const int width = o.image_width;
-    const int height = std::max(1, static_cast<int>(std::lround(width / view.aspect)));
+    const double rows = std::max(1.0, std::round(width / view.aspect));  // the loader keeps aspects within [1/16, 16]
+    if (!(rows <= kMaxImageSide))
+        throw InputError(fmt::format("--image-width {}: camera '{}' (aspect ratio {:g}) makes the image {:g} pixels "
+                                     "high, above {}; choose a smaller --image-width",
+                                     width, view.name, view.aspect, rows, kMaxImageSide));
+    const int height = static_cast<int>(rows);
+
+    // Before any of the mesh is built: how much memory the bake will need with each solver, which
+    // solver `auto` takes (by that memory and by expected time), and whether the bake fits at all.
+    const bool direct_only = !plan.interreflection.on;
+    solve::MatrixSettings matrix_settings = solve::matrix_settings(o.threshold, o.batch);
+    if (!plan.convergence.on) matrix_settings.tolerance = kUnconvergedTolerance;
+    matrix_settings.grey = !plan.colour.on;
+    matrix_settings.interreflection = !direct_only;
+    matrix_settings.max_iterations = kMaxSweeps;
+    BakeShape shape;
+    shape.hemicube = o.hemicube;
+    shape.batch = o.batch;
+    shape.matrix_batch = matrix_settings.batch;
+    shape.grey = !plan.colour.on;
+    shape.direct_only = direct_only;
+    shape.opencl = plan.occlusion.on && may_use_opencl(o.device);
+    shape.fallback_copy = shape.opencl && o.device == "auto";
+    for (const scene::Triangle& t : scene.triangles)
+        for (const glm::dvec3& rho : t.rho) shape.max_reflectance = std::max({shape.max_reflectance, rho.x, rho.y, rho.z});
+    shape.tolerance = matrix_settings.tolerance;
+    shape.refine_levels = plan.refinement.on ? o.refine_levels : 0;
+    shape.pixels = double(width) * double(height);
+    std::string solver_name = o.solver, solver_why = "--solver " + o.solver;
+    MemoryEstimate memory;
+    const auto plan_memory = [&](const mesh::Counts& counts) {
+        shape.counts = counts;
+        // Direct light only is a matrix of the emitters' rows; previews show the progressive
+        // solution pass by pass, which a matrix solve does not have.
+        if (solver_name == "auto") {
+            if (overrides.interreflection == scene::Force::off) {
+                solver_name = "matrix";
+                solver_why = "--effects interreflection=off: direct light only is the emitters' rows";
+            } else if (o.preview_every > 0) {
+                solver_name = "progressive";
+                solver_why = "--preview-every shows the progressive solver's passes";
+            } else {
+                const SolverChoice c = choose_solver(shape, memory_limit.bytes);
+                solver_name = c.solver;
+                solver_why = c.why;
+            }
+        }
+        memory = estimate_memory(shape, solver_name);
+        if (memory.needed() <= memory_limit.bytes) return;
+        std::string hint = fmt::format("a larger --patch-size or --element-size (now {:.4g} and {:.4g}) needs less",
+                                       mesh_settings.patch_size, mesh_settings.element_size);
+        if (solver_name == "matrix") {
+            const double progressive = estimate_memory(shape, "progressive").needed();
+            if (progressive <= memory_limit.bytes)
+                hint = fmt::format("--solver progressive would need about {}", format_bytes(progressive));
+        }
+        throw InputError(fmt::format("{}: the bake would need about {} for {:.4g} patches and {:.4g} elements ({}), "
+                                     "more than the {} {}; {}",
+                                     o.scene, format_bytes(memory.needed()), counts.patches, counts.elements,
+                                     memory.describe(), format_bytes(memory_limit.bytes), memory_limit.source, hint));
+    };
 
     t0 = Clock::now();
-    mesh::Mesh mesh = mesh::build(scene, mesh_settings);
+    mesh::Mesh mesh = mesh::build(scene, mesh_settings, plan_memory);
     const double t_mesh = seconds_since(t0);
     if (mesh.patches.empty())
         throw InputError(fmt::format("{}: every triangle has zero area; nothing to bake", o.scene));
@@ -443,15 +563,6 @@ void run_bake(const BakeOptions& options) {
                                              "squared) and were dropped; report.json counts them",
                                              o.scene, mesh.dropped_triangles, scene.triangles.size()));
 
-    const bool direct_only = !plan.interreflection.on;
-    std::string solver_name = o.solver;
-    // Direct light only is a matrix of the emitters' rows; previews show the progressive solution
-    // pass by pass, which a matrix solve does not have; otherwise the matrix while it is small.
-    if (solver_name == "auto") {
-        if (overrides.interreflection == scene::Force::off) solver_name = "matrix";
-        else if (o.preview_every > 0) solver_name = "progressive";
-        else solver_name = direct_only || solve::Matrix::suits(mesh) ? "matrix" : "progressive";
-    }
     const bool checkpoints = !o.checkpoint.empty() || !o.resume.empty();
     if (o.preview_every > 0 && solver_name == "matrix")
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");
@@ -495,18 +606,13 @@ void run_bake(const BakeOptions& options) {
 
     OutputTransaction out(o.output);
     // Only now, so that bad input is always exactly one line on stderr.
-    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << w << "\n";
+    for (const auto& w : scene.warnings) std::cerr << "hemirad: warning: " << printable(w) << "\n";
     std::vector<std::string> warnings = scene.warnings;  // for report.json
     if (!choice.warning.empty()) {
         std::cerr << "hemirad: warning: " << choice.warning << "\n";
         warnings.push_back(choice.warning);
     }
     const double threshold = plan.convergence.on ? o.threshold : kUnconvergedThreshold;
-    solve::MatrixSettings matrix_settings = solve::matrix_settings(o.threshold, o.batch);
-    if (!plan.convergence.on) matrix_settings.tolerance = kUnconvergedTolerance;
-    matrix_settings.grey = !plan.colour.on;
-    matrix_settings.interreflection = !direct_only;
-    matrix_settings.max_iterations = kMaxSweeps;
     const std::size_t elements_before = mesh.elements.size();
     // Should the automatically chosen device fail part-way, the bake starts again on the
     // reference engine from the mesh as built (refinement replaces it).
@@ -539,7 +645,7 @@ void run_bake(const BakeOptions& options) {
         progress.finish();
         if (!solution.converged && !o.quiet) {
             if (solver_name == "matrix")
-                std::cerr << fmt::format("hemirad: warning: Gauss-Seidel stopped after {} sweeps at residual {:.3g}\n",
+                std::cerr << fmt::format("hemirad: warning: Gauss-Seidel stopped after {} sweeps with an error bound of {:.3g}\n",
                                          solution.iterations, solution.error);
             else
                 std::cerr << fmt::format("hemirad: warning: stopped at --max-passes {} before the threshold {} was reached (error {:.3g})\n",
@@ -557,10 +663,19 @@ void run_bake(const BakeOptions& options) {
             rs.contrast = o.contrast;
             rs.max_levels = o.refine_levels;
             rs.batch = std::max(o.batch, 64);
+            rs.max_elements = refinement_room(shape, solver_name, memory_limit.bytes);
             rs.cancelled = [&] { return o.interrupted && *o.interrupted; };
             solve::RefineResult refined =
                 solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
             if (o.interrupted && *o.interrupted) throw Interrupted();
+            if (refined.stopped_for_memory.level > 0) {
+                const std::string warning = fmt::format(
+                    "refinement stopped before level {}: splitting {} more elements would pass the {} {}",
+                    refined.stopped_for_memory.level, refined.stopped_for_memory.split,
+                    format_bytes(memory_limit.bytes), memory_limit.source);
+                if (!o.quiet) std::cerr << (o.progress ? "\n" : "") << "hemirad: warning: " << warning << "\n";
+                warnings.push_back(warning);
+            }
             mesh = std::move(refined.mesh);
             solution.irradiance = std::move(refined.irradiance);
             solution.radiosity = std::move(refined.radiosity);
@@ -644,6 +759,16 @@ void run_bake(const BakeOptions& options) {
                         {"quads", mesh.quads},
                         {"dropped_triangles", mesh.dropped_triangles},
                         {"skipped_primitives", scene.skipped_primitives}};
+    report["plan"] = {{"solver", {{"name", solver_name}, {"why", solver_why}}},
+                      {"memory", {{"limit", memory_limit.bytes},
+                                  {"limit_from", memory_limit.source},
+                                  {"estimate", memory.total()},
+                                  {"needed", memory.needed()},
+                                  {"parts", [&] {
+                                       ordered_json parts = ordered_json::object();
+                                       for (const MemoryPart& p : memory.parts) parts[p.what] = p.bytes;
+                                       return parts;
+                                   }()}}}};
     report["passes"] = solution.passes;
     if (solution.resumed_from >= 0) report["resumed_from_pass"] = solution.resumed_from;
     report["converged"] = solution.converged;
@@ -713,7 +838,8 @@ void run_bake(const BakeOptions& options) {
         f << report.dump(2) << "\n";
         if (!f) throw InternalError("cannot write report.json");
     }
-    out.commit({"baked.gltf", "baked.bin", "render.exr", "render.png", "report.json"});
+    if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while writing: nothing is committed
+    out.commit(kOutputNames);
     if (!o.quiet)
         std::cerr << fmt::format("hemirad: {}, {} elements, wrote {}/report.json, baked.gltf, render.exr, render.png\n",
                                  solver_name == "matrix"

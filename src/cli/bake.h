@@ -16,6 +16,9 @@ struct ShotResult;
 
 namespace hemirad::cli {
 
+// The largest render, in pixels a side (--image-width, and the height its camera's aspect gives).
+inline constexpr int kMaxImageSide = 16384;
+
 struct BakeOptions {
     std::string scene;
     std::string output = "out";
@@ -40,9 +43,10 @@ struct BakeOptions {
     std::string camera;
     long preview_every = 0;
     int image_width = 640;
+    std::string max_memory;       // --max-memory SIZE; empty: the memory available (core/memory.h)
     bool quiet = false;
     bool progress = false;                       // draw a progress line (a TTY and not --quiet)
-    const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT/SIGTERM
+    const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT, SIGTERM or SIGHUP
     // Called with every shot the solve and refinement's re-gather take, as the solver sees it
     // (near-field corrected), so tests and the fuzzer can check what the engines return.
     std::function<void(const formfactor::ShotResult&)> on_shot;

@@ -16,6 +16,7 @@
 
 #include "core/durable.h"
 #include "core/error.h"
+#include "core/regular_file.h"
 
 namespace hemirad::cli {
 namespace fs = std::filesystem;
@@ -79,7 +80,40 @@ private:
     std::size_t at_;
 };
 
+// Whether an open file starts with the checkpoint magic.
+bool starts_with_magic(const RegularFile& file) {
+    char head[sizeof kMagic - 1];
+    return file.size() >= sizeof head && file.read(0, sizeof head, head) &&
+           std::memcmp(head, kMagic, sizeof head) == 0;
+}
+
 }  // namespace
+
+void check_checkpoint_target(const fs::path& file) {
+    const std::string name = file.string();
+    std::error_code ec;
+    if (!fs::exists(fs::symlink_status(file, ec))) {
+        // A new file: its directory must exist and take it, or the bake would fail at its first checkpoint.
+        const fs::path dir = file.has_parent_path() ? file.parent_path() : fs::path(".");
+        if (!fs::is_directory(dir, ec))
+            throw InputError(fmt::format("{}: cannot write the checkpoint: its directory {} does not exist", name,
+                                         dir.string()));
+        if (::access(dir.c_str(), W_OK) != 0)
+            throw InputError(fmt::format("{}: cannot write the checkpoint: {}", name, std::strerror(errno)));
+        return;
+    }
+    // Only a checkpoint is replaced: a --checkpoint naming the scene or any other file must not destroy it.
+    const RegularFile existing(file, name);
+    if (!starts_with_magic(existing))
+        throw InputError(fmt::format("{}: exists and is not a hemirad checkpoint; refusing to replace it (remove it "
+                                     "or name another --checkpoint file)",
+                                     name));
+}
+
+void check_resume_source(const fs::path& file) {
+    if (!starts_with_magic(RegularFile(file, file.string())))
+        throw InputError(fmt::format("{}: not a hemirad checkpoint", file.string()));
+}
 
 std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings) {
     Hash h;
@@ -102,9 +136,12 @@ std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings
 }
 
 void write_checkpoint(const fs::path& file, const std::string& fingerprint, const solve::Resumable& solver) {
+    check_checkpoint_target(file);  // again: the file may have changed since the bake began
     fs::path temp = file;
     temp += fmt::format(".tmp-{}", static_cast<long>(getpid()));
     {
+        std::error_code ignored;
+        fs::remove(temp, ignored);  // a leftover (even a FIFO, which opening would wait on) is this process's
         std::ofstream out(temp, std::ios::binary | std::ios::trunc);
         if (!out)
             throw InputError(fmt::format("{}: cannot write the checkpoint (does its directory exist?)", file.string()));
@@ -138,13 +175,11 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
 }
 
 std::string read_checkpoint(const fs::path& file, const std::string& fingerprint) {
-    std::ifstream in(file, std::ios::binary | std::ios::ate);
-    if (!in) throw InputError(fmt::format("{}: cannot read the checkpoint ({})", file.string(), std::strerror(errno)));
-    // Read once into the string that is returned: a matrix bake's checkpoint can be large.
-    std::string bytes(static_cast<std::size_t>(std::max<std::streamoff>(0, in.tellg())), '\0');
-    in.seekg(0);
-    if (!in.read(bytes.data(), static_cast<std::streamsize>(bytes.size())))
-        throw InputError(fmt::format("{}: cannot read the checkpoint ({})", file.string(), std::strerror(errno)));
+    // A regular file only (a directory or FIFO is refused, never waited on), read once into the
+    // string that is returned: a matrix bake's checkpoint can be large.
+    const RegularFile in(file, file.string());
+    std::string bytes(static_cast<std::size_t>(in.size()), '\0');
+    in.read_exactly(0, bytes.size(), bytes.data());
     if (bytes.compare(0, sizeof kMagic - 1, kMagic) != 0)
         throw InputError(fmt::format("{}: not a hemirad checkpoint", file.string()));
     Cursor s(bytes, sizeof kMagic - 1);

@@ -16,9 +16,18 @@ namespace hemirad::cli {
 // `settings`, the solver and engine settings as text. A checkpoint resumes only the same bake.
 std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings);
 
+// Before a bake does any work: that --checkpoint FILE can be written, and is either new or a
+// hemirad checkpoint (recognised by its magic) — never the scene or any other file, which writing
+// would destroy. Throws InputError (exit 2) naming the file otherwise.
+void check_checkpoint_target(const std::filesystem::path& file);
+
+// Before a bake does any work: that --resume FILE is a readable hemirad checkpoint (a regular
+// file with the magic; a directory or FIFO is refused, not waited on). Throws InputError.
+void check_resume_source(const std::filesystem::path& file);
+
 // Writes the solver's state to `file` atomically (a temporary file beside it, then a rename), so
 // a bake killed while writing leaves the previous checkpoint whole. Throws InputError when the
-// file cannot be written.
+// file cannot be written, or has become something other than a checkpoint since the bake began.
 void write_checkpoint(const std::filesystem::path& file, const std::string& fingerprint,
                       const solve::Resumable& solver);
 

@@ -28,7 +28,7 @@ std::string first_line(const std::string& text) { return text.substr(0, text.fin
 
 std::unique_ptr<formfactor::OpenCLEngine> make_opencl_engine(const mesh::Mesh& mesh, const EngineChoice& choice,
                                                              const formfactor::Settings& settings) {
-    formfactor::OpenCLTuning tuning = formfactor::tuning_from_environment(choice.context->info());
+    formfactor::OpenCLTuning tuning = choice.tuning;
     tuning.on_shrink = [shrinks = choice.shrinks](std::size_t, std::size_t limit, const std::string& why) {
         if (shrinks->count++ == 0) shrinks->why = why;
         shrinks->smallest = std::min(shrinks->smallest, limit);
@@ -66,14 +66,19 @@ EngineChoice choose_engine(const std::string& device, bool verify, long verify_e
         out.id = "ref";
         return out;
     }
-    out.fault = formfactor::fault_from_environment();  // malformed: exit 2, never a fallback
+    // Malformed: exit 2, never a fallback.
+    out.fault = formfactor::fault_from_environment();
+    out.tuning = formfactor::tuning_from_environment(*chosen);
     if (spec == "auto") {
-        // Any failure of the automatic choice falls back to the reference, with a warning.
+        // Any failure of the automatic choice falls back to the reference, with a warning; bad
+        // input (tuning knobs the device cannot take) stays exit 2.
         try {
             out.context = std::make_unique<ocl::Context>(*chosen);
             out.engine = make_opencl_engine(mesh, out, settings);
             if (const std::string problem = probe(*out.engine, mesh, settings); !problem.empty())
                 throw std::runtime_error("its first shot disagrees with the reference: " + problem);
+        } catch (const InputError&) {
+            throw;
         } catch (const std::exception& e) {
             EngineChoice fallback = choose_engine("ref", verify, verify_every, mesh, settings);
             fallback.warning = fmt::format("{} ({}): {}; using the reference engine", chosen->id(), chosen->name,

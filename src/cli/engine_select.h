@@ -23,6 +23,7 @@ struct EngineChoice {
     std::string warning;                             // why `auto` fell back to the reference, if it did
     bool automatic = false;                          // `auto` chose this OpenCL device: a bake may fall back
     formfactor::OpenCLFault fault;                   // HEMIRAD_FAULT, for every engine made on the device
+    formfactor::OpenCLTuning tuning;                 // the device's, with HEMIRAD_OPENCL_OPTIONS applied
     // How often the device's engines ran out of memory and cut their batches, and to how few.
     struct Shrinks {
         long count = 0;
@@ -37,7 +38,7 @@ struct EngineChoice {
 // else the reference; an automatic OpenCL choice whose kernels fail to build or whose first shot
 // disagrees with the reference falls back to the reference with `warning` set. Throws InputError
 // for a device that is malformed or not present, --verify without an OpenCL engine, or a
-// malformed HEMIRAD_FAULT.
+// malformed HEMIRAD_FAULT or HEMIRAD_OPENCL_OPTIONS.
 EngineChoice choose_engine(const std::string& device, bool verify, long verify_every, const mesh::Mesh& mesh,
                            const formfactor::Settings& settings);
 

@@ -3,6 +3,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace hemirad {
 
@@ -18,5 +19,25 @@ class InternalError : public std::runtime_error {
 public:
     using std::runtime_error::runtime_error;
 };
+
+// `text` as one printable line: control characters (a newline, or a terminal escape, that the
+// names in a file or on the command line may hold) become \xNN, so that a message the CLI prints
+// stays one line and cannot rewrite the terminal. Other bytes, UTF-8 included, are kept.
+inline std::string printable(std::string_view text) {
+    static constexpr char kHex[] = "0123456789abcdef";
+    std::string out;
+    out.reserve(text.size());
+    for (const char c : text) {
+        const auto byte = static_cast<unsigned char>(c);
+        if (byte < 0x20 || byte == 0x7f) {
+            out += "\\x";
+            out += kHex[byte >> 4];
+            out += kHex[byte & 0xf];
+        } else {
+            out += c;
+        }
+    }
+    return out;
+}
 
 }  // namespace hemirad

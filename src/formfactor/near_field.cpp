@@ -2,6 +2,7 @@
 #include "formfactor/near_field.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "formfactor/analytic.h"
 
@@ -37,11 +38,11 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
         const glm::dvec3 d = e.centroid - shooter.centroid;
         // What the hemicube would have measured with nothing in the way, from the same point.
         const double unoccluded = glm::dot(d, d) < reach2 ? point_to_polygon(shooter.centroid, shooter.normal, e.poly) : 0.0;
-        if (unoccluded <= 0.0) {
+        const double visible = out.F[k] / unoccluded;  // not clamped: aliasing noise stays unbiased
+        if (!(unoccluded > 0.0) || !std::isfinite(visible)) {  // seen only by aliasing (F / 1e-310 is inf)
             far += out.F[k];
             continue;
         }
-        const double visible = out.F[k] / unoccluded;  // not clamped: aliasing noise stays unbiased
         near_before += out.F[k];
         out.F[k] = visible * point_to_polygon(e.centroid, e.normal, shooter.poly) * e.area / shooter.area;
         near_after += out.F[k];

@@ -10,8 +10,10 @@
 #include <cstddef>
 #include <cstdlib>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 #include <string_view>
+#include <vector>
 
 #include "core/error.h"
 #include "hemicube_types.h"
@@ -44,14 +46,14 @@ struct TuningEntry {
 };
 const TuningEntry kTuningTable[] = {
     // Not yet measured: 256-cell raster groups, 4 warps per 1D group.
-    {"gpu", {16, false, 4, 128, 256, 1, 4, false, "", 0, 0, true, {}}},
+    {"gpu", {16, false, 4, 128, 256, 1, 4, false, "", 0, 0, true, {}, ""}},
     // PoCL, 2 cores (Cornell, N = 256): the per-record raster ~2.5x faster than per-cell;
     // with integer edges, tiles of 32 ~20% ahead of 16 (fewer record-tile pieces); with span
     // records, tiles of 64 ~4% ahead in batches of 8 but ~7% behind one shot at a time, and
     // 64x32 behind too; a raster group of 1 ahead of 4 and 16. Setup in double8 lanes ~1.6x
     // faster on one thread. Setup and scatter groups of 16 work-items (65 groups) ~5% ahead of
     // 64 (17 groups, unevenly shared by 2 cores) one shot at a time, in 4 of 5 pairs; 8 no better.
-    {"cpu", {32, true, 1, 16, 256, 8, 8, true, "", 0, 0, true, {}}},
+    {"cpu", {32, true, 1, 16, 256, 8, 8, true, "", 0, 0, true, {}, ""}},
 };
 
 // Binds a kernel's arguments in order: the one place each kernel's signature is spelled out.
@@ -142,6 +144,85 @@ std::size_t select_clusters(const std::vector<std::array<double, 4>>& bounds, co
 
 }  // namespace
 
+namespace {
+
+// The knobs of kernels/hemicube.cl the host must agree with: it sizes buffers and launches by
+// them, so a kernel built with another tile or counter-copy count than the host's overruns its
+// buffers. A -D override of one sets the host's value too, within what the kernels take: tiles of
+// at least 4 cells and at most 64 copies keep the tile counters of N = 4096 (3 (N / tile)² copies
+// times) within the kernels' 32-bit ints; the scan's work-group is a power of two; raster_records
+// steps 4 or 8 cells a row. Device limits (work-items per group) are checked by the engine.
+struct Knob {
+    enum class Rule { range, power_of_two, either };  // lo..hi; a power of two in it; lo or hi
+    std::string_view macro;
+    int lo, hi;
+    Rule rule;
+    void (*set)(OpenCLTuning&, int);
+};
+const Knob kKnobs[] = {
+    {"HEMIRAD_TILE", 4, 64, Knob::Rule::range, [](OpenCLTuning& t, int v) { t.tile = v; }},
+    {"HEMIRAD_WG", 1, 1024, Knob::Rule::range, [](OpenCLTuning& t, int v) { t.work_group = v; }},
+    {"HEMIRAD_SCAN_WG", 1, 1024, Knob::Rule::power_of_two, [](OpenCLTuning& t, int v) { t.scan_work_group = v; }},
+    {"HEMIRAD_RASTER_WG", 1, 1024, Knob::Rule::range, [](OpenCLTuning& t, int v) { t.raster_work_group = v; }},
+    {"HEMIRAD_COUNT_COPIES", 1, 64, Knob::Rule::range, [](OpenCLTuning& t, int v) { t.count_copies = v; }},
+    {"HEMIRAD_LANES", 4, 8, Knob::Rule::either, [](OpenCLTuning& t, int v) { t.lanes = v; }},
+    {"HEMIRAD_SETUP_LANES", 0, 1, Knob::Rule::either, [](OpenCLTuning& t, int v) { t.setup_lanes = v != 0; }},
+    {"HEMIRAD_CULL", 0, 1, Knob::Rule::either, [](OpenCLTuning& t, int v) { t.cull = v != 0; }},
+};
+
+std::string knob_rule(const Knob& k) {
+    if (k.rule == Knob::Rule::either) return fmt::format("{} or {}", k.lo, k.hi);
+    return fmt::format("{}in [{}, {}]", k.rule == Knob::Rule::power_of_two ? "a power of two " : "", k.lo, k.hi);
+}
+
+bool knob_accepts(const Knob& k, long v) {
+    if (k.rule == Knob::Rule::either) return v == k.lo || v == k.hi;
+    return v >= k.lo && v <= k.hi && (k.rule != Knob::Rule::power_of_two || (v & (v - 1)) == 0);
+}
+
+}  // namespace
+
+void apply_build_options(OpenCLTuning& tuning, const std::string& text) {
+    std::istringstream words(text);
+    std::vector<std::string> tokens;
+    for (std::string word; words >> word;) tokens.push_back(word);
+    std::string passed;  // what is not a knob goes to the compiler as it was
+    for (std::size_t i = 0; i < tokens.size(); ++i) {
+        std::string option = tokens[i], definition;
+        if (option == "-D" || option == "-U") {  // "-D NAME=V", two words
+            if (i + 1 < tokens.size()) definition = tokens[++i];
+            option += " " + definition;
+        } else if (option.rfind("-D", 0) == 0 || option.rfind("-U", 0) == 0) {
+            definition = option.substr(2);
+        } else {
+            passed += " " + option;
+            continue;
+        }
+        const std::string macro = definition.substr(0, definition.find('='));
+        if (macro.rfind("HEMIRAD_", 0) != 0) {
+            passed += " " + option;
+            continue;
+        }
+        const Knob* knob = nullptr;
+        std::string names;
+        for (const Knob& k : kKnobs) {
+            if (k.macro == macro) knob = &k;
+            names += fmt::format("{}{}", names.empty() ? "" : ", ", k.macro);
+        }
+        if (!knob) throw std::invalid_argument(fmt::format("'{}': {} is no tuning knob of the kernels ({})", option, macro, names));
+        if (option[1] == 'U')
+            throw std::invalid_argument(fmt::format("'{}': the host sizes its buffers by {}; it can be set, not undefined", option, macro));
+        // "-DNAME" alone defines it as 1, as the compiler reads it.
+        const std::string value = definition.size() > macro.size() ? definition.substr(macro.size() + 1) : "1";
+        const bool digits = !value.empty() && value.size() <= 9 && value.find_first_not_of("0123456789") == std::string::npos;
+        if (!digits || !knob_accepts(*knob, std::stol(value)))
+            throw std::invalid_argument(fmt::format("'{}': {} must be {}", option, macro, knob_rule(*knob)));
+        knob->set(tuning, static_cast<int>(std::stol(value)));
+        tuning.overrides += fmt::format("{}{}={}", tuning.overrides.empty() ? "" : " ", macro, value);
+    }
+    if (!passed.empty()) tuning.extra_options += (tuning.extra_options.empty() ? "" : " ") + passed.substr(1);
+}
+
 OpenCLTuning default_tuning(const ocl::DeviceInfo& device) {
     for (const auto& entry : kTuningTable)
         if (entry.type == device.type) return entry.tuning;
@@ -178,8 +259,13 @@ OpenCLFault fault_from_environment() {
 
 OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device) {
     OpenCLTuning tuning = default_tuning(device);
-    if (const char* extra = std::getenv("HEMIRAD_OPENCL_OPTIONS"); extra && *extra)
-        tuning.extra_options += std::string(" ") + extra;
+    if (const char* extra = std::getenv("HEMIRAD_OPENCL_OPTIONS"); extra && *extra) {
+        try {
+            apply_build_options(tuning, extra);
+        } catch (const std::invalid_argument& e) {
+            throw InputError(fmt::format("HEMIRAD_OPENCL_OPTIONS={}: {}", extra, e.what()));
+        }
+    }
     if (const char* cull = std::getenv("HEMIRAD_CULL"); cull && std::string_view(cull) == "0") tuning.cull = false;
     return tuning;
 }
@@ -226,6 +312,10 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
     check_layout(context, program);
     const auto check_group = [&](cl::Kernel& kernel, const char* name, int size) {
         const std::size_t most = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(context.device());
+        if (static_cast<std::size_t>(size) > most && !tuning.overrides.empty())
+            throw InputError(fmt::format("HEMIRAD_OPENCL_OPTIONS ({}): on {} kernel {} runs at most {} work-items per "
+                                         "group, these knobs ask for {}",
+                                         tuning.overrides, info.name, name, most, size));
         if (static_cast<std::size_t>(size) > most)
             throw InternalError(
                 fmt::format("{}: kernel {} runs at most {} work-items per group, the tuning asks for {}", info.name,
@@ -362,6 +452,20 @@ std::size_t OpenCLEngine::raster_group_size() const {
 
 std::size_t OpenCLEngine::max_batch() const {
     return std::min(batch_limit_, memory_batch());
+}
+
+double OpenCLEngine::mesh_bytes(double elements, double patches) {
+    return elements * (sizeof(HrElement) + double(sizeof(HrElementLanes)) / HR_SETUP_LANES) + patches * sizeof(HrPatch);
+}
+
+double OpenCLEngine::shot_bytes(double elements, int hemicube) {
+    // As allocate_batch sizes them: records and boxes, the initial lists, the ids (device and
+    // host), the sums (device and host).
+    const double records = std::max(1.0, elements * kFaces);
+    const double lists = std::max(double(1u << 16), 4.0 * records);
+    const double cells = 3.0 * double(hemicube) * double(hemicube);
+    return records * double(sizeof(HrRecord) + sizeof(HrBox)) + lists * sizeof(hr_uint) +
+           2.0 * cells * sizeof(hr_int) + 2.0 * (elements + 2.0) * sizeof(hr_long);
 }
 
 std::size_t OpenCLEngine::memory_batch() const {

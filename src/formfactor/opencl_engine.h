@@ -25,13 +25,14 @@ struct OpenCLTuning {
     int count_copies = 1;             // copies of the per-tile counters (work-group mod copies): less contention
     int lanes = 4;                    // cells per row step of raster_records: 4 or 8
     bool setup_lanes = false;         // setup takes 8 elements per work-item in double8 lanes (CPUs)
-    std::string extra_options;        // appended to the build options (more -D overrides)
+    std::string extra_options;        // appended to the build options (never a knob above: apply_build_options)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
     std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: 1 GiB or device memory / 4
     bool cull = true;                 // lanes setup skips clusters and groups behind the shooter (off: to measure)
     // Told each time the device had not the memory for a batch of `shots` and the engine retried
     // it in parts of at most `limit` (the results do not change); `why`: the OpenCL error.
     std::function<void(std::size_t shots, std::size_t limit, const std::string& why)> on_shrink;
+    std::string overrides;  // the knobs HEMIRAD_OPENCL_OPTIONS set ("HEMIRAD_TILE=8 ..."), for messages
 };
 
 // Faults the engine can be told to simulate (HEMIRAD_FAULT), so that what a bake does about a
@@ -49,9 +50,14 @@ OpenCLFault parse_fault(const std::string& text);
 
 // The knobs for a device, from a small hand-edited table.
 OpenCLTuning default_tuning(const ocl::DeviceInfo& device);
-// default_tuning with HEMIRAD_OPENCL_OPTIONS, where set, appended to the build options (extra -D
-// overrides of the kernels' knobs), and culling off where HEMIRAD_CULL=0: what bakes and
-// benchmarks use.
+// Build options for the kernels (HEMIRAD_OPENCL_OPTIONS' text): a -D of a knob the host sizes
+// buffers and launches by (HEMIRAD_TILE, HEMIRAD_COUNT_COPIES, …) sets it in `tuning`, so that
+// host and kernels agree, and only within what the kernels take; anything else is appended to
+// extra_options as it is. Throws std::invalid_argument naming the option for a value the kernels
+// cannot take, an unknown HEMIRAD_ knob, or -U of a knob.
+void apply_build_options(OpenCLTuning& tuning, const std::string& text);
+// default_tuning with HEMIRAD_OPENCL_OPTIONS applied (apply_build_options; InputError naming it
+// when it cannot be), and culling off where HEMIRAD_CULL=0: what bakes and benchmarks use.
 OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device);
 // HEMIRAD_FAULT parsed (no fault where unset). Throws InputError naming it when malformed.
 OpenCLFault fault_from_environment();
@@ -88,6 +94,14 @@ public:
     const std::string& build_options() const { return options_; }
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
+
+    // Memory the engine holds for a mesh of `elements` elements and `patches` patches at
+    // resolution `hemicube`: the uploaded mesh, and each shot of a launch's buffers (on the device,
+    // and the host's copies of its ids and sums). A launch holds as many shots as the batch asks,
+    // up to what fits its budget (tuning's batch_memory: 1 GiB or a quarter of the device's memory)
+    // and at least one. For planning a bake before its mesh is built.
+    static double mesh_bytes(double elements, double patches);
+    static double shot_bytes(double elements, int hemicube);
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
     static constexpr int kStages = 5;

@@ -68,14 +68,17 @@ dvec3 unit_normal(const scene::Triangle& t) {
     return glm::normalize(glm::cross(t.p[1] - t.p[0], t.p[2] - t.p[0]));
 }
 
-// Divisions needed so no piece of an edge of this length is longer than size.
-int divisions(double length, double size) {
-    const double n = std::ceil(length / size - kCountSlack);
+// Divisions needed so no piece of an edge of this length is longer than size, as a double: a
+// count of the cells a size would make must not overflow, however small the size.
+double divisions_needed(double length, double size) {
+    return std::max(1.0, std::ceil(length / size - kCountSlack));
+}
+
+// The same as an int, for building the lattice.
+int divisions(double n) {
     if (!(n <= kMaxDivisions))
-        throw InternalError(
-            fmt::format("mesh: an edge of length {} needs {} divisions of {}; the size is too small for the scene",
-                        length, n, size));
-    return std::max(1, static_cast<int>(n));
+        throw InputError(fmt::format("an edge needs {} divisions: the patch or element size is too small for the scene", n));
+    return static_cast<int>(n);
 }
 
 bool lex_less(const dvec3& a, const dvec3& b) {
@@ -146,23 +149,64 @@ Polygon make_polygon(std::initializer_list<dvec3> corners) {
     return poly;
 }
 
-// Cells of a quad face: nu × nv patches, each cut into mu × mv elements on one fine lattice.
-// The element counts are the largest any patch needs, the same for all patches of the face, so
-// elements of neighbouring patches meet vertex to vertex (no T-junctions) even on a trapezoid.
-std::vector<PatchCells> quad_cells(const Polygon& q, const Settings& s) {
-    const int nu = divisions(std::max(glm::length(q.v[1] - q.v[0]), glm::length(q.v[2] - q.v[3])), s.patch_size);
-    const int nv = divisions(std::max(glm::length(q.v[3] - q.v[0]), glm::length(q.v[2] - q.v[1])), s.patch_size);
+// How a face is gridded. A quad: nu × nv bilinear patches, each cut into mu × mv elements, the
+// counts from its longer opposite sides (in a bilinear quad every row of cells is a straight
+// segment, longest at an end, so the largest step is that side over the count). A needle, whose
+// shortest side needs at most half the patch divisions of its longest, likewise as the quad
+// (B, C, A, A) collapsed at the corner A opposite its shortest side BC: strips across it, where n²
+// congruent cells would be n² slivers as thin as the needle (a 1:100 fan of 200 needles made
+// 25,590 patches). Any other triangle: n² congruent patches (nu = n) of m² elements (mu = m), n
+// from its longest side. Counts are doubles, so that counting never overflows.
+struct Grid {
+    bool quad_like = false;
+    Polygon poly;
+    double nu = 1.0, nv = 1.0, mu = 1.0, mv = 1.0;
 
-    const Lattice coarse = quad_lattice(q, nu, nv);
-    double u_edge = 0.0, v_edge = 0.0;
-    for (int j = 0; j <= nv; ++j)
-        for (int i = 0; i < nu; ++i) u_edge = std::max(u_edge, glm::length(coarse.at(i + 1, j) - coarse.at(i, j)));
-    for (int j = 0; j < nv; ++j)
-        for (int i = 0; i <= nu; ++i) v_edge = std::max(v_edge, glm::length(coarse.at(i, j + 1) - coarse.at(i, j)));
-    const int mu = divisions(u_edge, s.element_size);
-    const int mv = divisions(v_edge, s.element_size);
+    double patches() const { return quad_like ? nu * nv : nu * nu; }
+    double elements() const { return quad_like ? nu * nv * mu * mv : nu * nu * mu * mu; }
+};
+
+Grid bilinear_grid(const Polygon& q, const Settings& s) {
+    Grid g;
+    g.quad_like = true;
+    g.poly = q;
+    const double u_side = std::max(glm::length(q.v[1] - q.v[0]), glm::length(q.v[2] - q.v[3]));
+    const double v_side = std::max(glm::length(q.v[3] - q.v[0]), glm::length(q.v[2] - q.v[1]));
+    g.nu = divisions_needed(u_side, s.patch_size);
+    g.nv = divisions_needed(v_side, s.patch_size);
+    g.mu = divisions_needed(u_side / g.nu, s.element_size);
+    g.mv = divisions_needed(v_side / g.nv, s.element_size);
+    return g;
+}
+
+Grid grid_of(const Polygon& face, const Settings& s) {
+    if (face.n == 4) return bilinear_grid(face, s);
+    const auto side = [&](int k) { return glm::length(face.v[std::size_t((k + 1) % 3)] - face.v[std::size_t(k)]); };
+    int shortest = 0;
+    for (int k = 1; k < 3; ++k)
+        if (side(k) < side(shortest)) shortest = k;
+    const double longest = std::max({side(0), side(1), side(2)});
+    const double n = divisions_needed(longest, s.patch_size);
+    if (2.0 * divisions_needed(side(shortest), s.patch_size) <= n) {
+        const dvec3& a = face.v[std::size_t((shortest + 2) % 3)];
+        return bilinear_grid(make_polygon({face.v[std::size_t(shortest)], face.v[std::size_t((shortest + 1) % 3)], a, a}), s);
+    }
+    Grid g;
+    g.poly = face;
+    g.nu = n;
+    g.mu = divisions_needed(longest / n, s.element_size);
+    return g;
+}
+
+// Cells of a quad-like grid: nu × nv patches, each cut into mu × mv elements on one fine
+// lattice. The element counts are the largest any patch needs, the same for all patches of the
+// face, so elements of neighbouring patches meet vertex to vertex (no T-junctions) even on a
+// trapezoid.
+std::vector<PatchCells> quad_cells(const Grid& grid) {
+    const Polygon& q = grid.poly;
+    const int nu = divisions(grid.nu), nv = divisions(grid.nv), mu = divisions(grid.mu), mv = divisions(grid.mv);
     if (double(nu) * mu > kMaxDivisions || double(nv) * mv > kMaxDivisions)
-        throw InternalError("mesh: element_size is too small for the scene (too many elements per face)");
+        throw InputError("the element size is too small for the scene (over 32768 elements along a face's side)");
 
     const Lattice g = quad_lattice(q, nu * mu, nv * mv);
     auto cell = [&g](int i0, int j0, int i1, int j1) {
@@ -217,35 +261,25 @@ Polygon without_repeated_corner(const Polygon& poly) {
     return poly;
 }
 
-// Cells of a lone triangle. A needle, whose shortest side needs at most half the patch divisions
-// of its longest, is the quad (B, C, A, A) collapsed at the corner A opposite its shortest side BC: strips
-// across it, nu × nv cells (triangles at A), where n² congruent cells would be n² slivers as thin
-// as the needle (a 1:100 fan of 200 needles made 25,590 patches). Otherwise n² congruent patches,
-// each cut into m² congruent elements, all taken from one fine lattice of n·m divisions.
-std::vector<PatchCells> triangle_cells(const Polygon& t, const Settings& s) {
-    const double longest = longest_edge({t.v[0], t.v[1], t.v[2]});
-    int shortest = 0;
-    for (int k = 1; k < 3; ++k)
-        if (glm::length(t.v[std::size_t((k + 1) % 3)] - t.v[std::size_t(k)]) <
-            glm::length(t.v[std::size_t((shortest + 1) % 3)] - t.v[std::size_t(shortest)]))
-            shortest = k;
-    const dvec3& b = t.v[std::size_t(shortest)];
-    const dvec3& c = t.v[std::size_t((shortest + 1) % 3)];
-    const dvec3& a = t.v[std::size_t((shortest + 2) % 3)];
-    if (2 * divisions(glm::length(c - b), s.patch_size) <= divisions(longest, s.patch_size)) {
-        std::vector<PatchCells> cells = quad_cells(make_polygon({b, c, a, a}), s);
-        for (PatchCells& pc : cells) {
-            pc.poly = without_repeated_corner(pc.poly);
-            for (Polygon& e : pc.elements) e = without_repeated_corner(e);
+// Cells of a face by its grid. A needle's quad is collapsed at its apex: the cells there are
+// triangles. A triangle's n² congruent patches are each cut into m² congruent elements, all taken
+// from one fine lattice of n·m divisions.
+std::vector<PatchCells> face_cells(const Grid& grid) {
+    if (grid.quad_like) {
+        std::vector<PatchCells> cells = quad_cells(grid);
+        if (grid.poly.v[2] == grid.poly.v[3]) {
+            for (PatchCells& pc : cells) {
+                pc.poly = without_repeated_corner(pc.poly);
+                for (Polygon& e : pc.elements) e = without_repeated_corner(e);
+            }
         }
         return cells;
     }
-    const int n = divisions(longest, s.patch_size);
-    const int m = divisions(longest / n, s.element_size);
+    const int n = divisions(grid.nu), m = divisions(grid.mu);
     if (double(n) * m > kMaxDivisions)
-        throw InternalError("mesh: element_size is too small for the scene (too many elements per face)");
+        throw InputError("the element size is too small for the scene (over 32768 elements along a face's side)");
 
-    const Lattice g = triangle_lattice(t, n * m);
+    const Lattice g = triangle_lattice(grid.poly, n * m);
     std::vector<PatchCells> cells;
     auto add_patch = [&](Node2 A, Node2 B, Node2 C) {
         PatchCells pc;
@@ -463,16 +497,26 @@ double longest_edge(const Polygon& poly) {
     return longest;
 }
 
-Mesh build(const scene::Scene& scene, const Settings& settings) {
+Mesh build(const scene::Scene& scene, const Settings& settings, const std::function<void(const Counts&)>& before) {
     check_settings(settings);
     Mesh mesh;
-    for (const Face& face : make_faces(scene, mesh)) {
+    const std::vector<Face> faces = make_faces(scene, mesh);
+    if (before) {
+        Counts counts;
+        for (const Face& face : faces) {
+            const Grid grid = grid_of(face.poly, settings);
+            const double sides = scene.materials.at(face.src[0]->material).double_sided ? 2.0 : 1.0;
+            counts.patches += sides * grid.patches();
+            counts.elements += sides * grid.elements();
+        }
+        before(counts);
+    }
+    for (const Face& face : faces) {
         const scene::Triangle& t0 = *face.src[0];
         if (t0.material >= scene.materials.size())
             throw InternalError(fmt::format("mesh: triangle material {} out of range", t0.material));
         const scene::Material& mat = scene.materials[t0.material];
-        const std::vector<PatchCells> cells =
-            face.poly.n == 4 ? quad_cells(face.poly, settings) : triangle_cells(face.poly, settings);
+        const std::vector<PatchCells> cells = face_cells(grid_of(face.poly, settings));
         append_side(mesh, face, cells, mat, false);
         if (mat.double_sided) append_side(mesh, face, cells, mat, true);
     }

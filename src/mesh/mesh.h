@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -59,7 +60,17 @@ struct Mesh {
     std::size_t quads = 0;              // triangle pairs meshed as quads
 };
 
-Mesh build(const scene::Scene& scene, const Settings& settings);
+// What a mesh will hold, counted before any of it is built (doubles: any size can be counted).
+struct Counts {
+    double patches = 0.0;
+    double elements = 0.0;
+};
+
+// Meshes the scene. `before` (if set) is told the counts once the faces are known and before
+// any patch is built, and may throw to stop: a bake checks there that the mesh and the rest of
+// the bake fit in memory.
+Mesh build(const scene::Scene& scene, const Settings& settings,
+           const std::function<void(const Counts&)>& before = {});
 
 // Normal (unit, front side), area centroid and area of a planar convex polygon.
 struct Shape {

@@ -74,7 +74,9 @@ double auto_exposure(const Image& image) {
 
 void write_exr(const Image& image, const std::filesystem::path& file) {
     check_size(image, file);
-    OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::HALF);
+    // 32-bit floats: half floats end at 65504, and a scene's units may put radiosity far above
+    // (the loader allows emission up to 1e30): every pixel became inf.
+    OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
     spec.attribute("compression", "zip");
     write_image(file, "openexr", spec, OIIO::TypeDesc::FLOAT, image.rgb.data());
 }

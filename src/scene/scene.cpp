@@ -14,6 +14,8 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
+#include <limits>
+#include <map>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -23,6 +25,8 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/regular_file.h"
+#include "scene/image_mean.h"
 
 namespace hemirad::scene {
 namespace {
@@ -43,6 +47,8 @@ struct Loader {
     Scene& scene;
     std::set<std::string> warned;
     int default_material = -1;  // index in scene.materials once some primitive needs it
+    std::string base_dir;             // where the file's uris are resolved
+    std::map<int, ImageMean> images;  // what the image loader made of each image, by index
 
     [[noreturn]] void fail(const std::string& problem) const { throw InputError(file + ": " + problem); }
     void warn(const std::string& problem) { scene.warnings.push_back(file + ": " + problem); }
@@ -52,9 +58,21 @@ struct Loader {
 };
 
 // tinygltf's messages in plain words: without nlohmann's exception tags and the tail of the text
-// it read off a JSON parse error, or tinygltf's repetition of a path read_regular_file names,
+// it read off a JSON parse error, or tinygltf's repetition of a path read_file names,
 // and a data URI's payload (it can be megabytes) cut to its first bytes.
 std::string plain_words(std::string text) {
+    // libstdc++'s regex recurses once per character matched: a parse error quoting 20 KB of the
+    // file ("last read: '[[[[…") overflowed the stack. The message is cut to one short line
+    // afterwards anyway, so every line is cut first.
+    constexpr std::size_t kLongestLine = 1024;
+    std::string clipped;
+    for (std::size_t start = 0; start < text.size();) {
+        const std::size_t end = std::min(text.find('\n', start), text.size());
+        clipped.append(text, start, std::min(end - start, kLongestLine));
+        if (end < text.size()) clipped += '\n';
+        start = end + 1;
+    }
+    text = std::move(clipped);
     static const std::regex json_tag(R"(\[json\.exception\.[a-z_]+\.[0-9]+\] )");
     static const std::regex last_read(R"(; last read: '[^\n]*)");
     static const std::regex decode(R"(Failed to decode 'uri' : (.*) in Buffer)");
@@ -92,62 +110,197 @@ std::string lowercase(std::string s) {
     return s;
 }
 
-// Checks the file is there ourselves: tinygltf's own message for a missing file is vaguer.
-void check_readable(const fs::path& file, const std::string& name) {
-    std::error_code ec;
-    const fs::file_status st = fs::status(file, ec);
-    if (ec && st.type() != fs::file_type::not_found) throw InputError(name + ": cannot open: " + ec.message());
-    if (!fs::exists(st)) throw InputError(name + ": cannot open: No such file or directory");
-    if (fs::is_directory(st)) throw InputError(name + ": cannot open: Is a directory");
-    errno = 0;
-    std::ifstream probe(file, std::ios::binary);
-    if (!probe) {
-        throw InputError(name + ": cannot open: " + (errno != 0 ? std::strerror(errno) : "unknown error"));
+// Limits on what the loader reads before it trusts a file. nlohmann (under tinygltf) parses JSON
+// nesting with its own stack, but tinygltf converts `extras` and `extensions` recursively: a file
+// nested thousands deep would overflow the call stack. No glTF needs more than a few dozen levels.
+constexpr int kMaxJsonDepth = 512;
+// A .gltf's JSON text (or a .glb's JSON chunk): parsed whole, at several times its size in memory.
+constexpr std::uint64_t kMaxJsonBytes = std::uint64_t{1} << 30;
+constexpr std::size_t kGlbHeader = 12, kChunkHeader = 8;
+constexpr std::uint32_t kGlbMagic = 0x46546c67;  // "glTF", little-endian
+constexpr std::uint32_t kChunkJson = 0x4e4f534a;  // "JSON"
+
+std::uint32_t little_endian32(const unsigned char* p) {
+    return std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24;
+}
+
+// Refuses JSON nested deeper than kMaxJsonDepth, before it is parsed: a scan that counts '{' and
+// '[' outside strings (a backslash in a string escapes the byte after it).
+void check_json_depth(const unsigned char* text, std::size_t size, const std::string& name) {
+    int depth = 0;
+    bool in_string = false;
+    for (std::size_t i = 0; i < size; ++i) {
+        const unsigned char c = text[i];
+        if (in_string) {
+            if (c == '\\') ++i;
+            else if (c == '"') in_string = false;
+        } else if (c == '"') {
+            in_string = true;
+        } else if (c == '{' || c == '[') {
+            if (++depth > kMaxJsonDepth)
+                throw InputError(fmt::format("{}: JSON nested more than {} levels deep (at byte {} of the JSON); refused", name,
+                                             kMaxJsonDepth, i));
+        } else if ((c == '}' || c == ']') && depth > 0) {
+            --depth;
+        }
     }
 }
 
-// tinygltf's own reader sizes its buffer by seeking to the end, which for a directory (a buffer
-// uri naming one) gives an absurd size and an out-of-memory crash: only regular files are read.
-bool read_regular_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+// A .gltf is JSON: its first byte past a UTF-8 byte-order mark and white space is '{'. Checked on
+// the first bytes, so that a huge file of something else is refused without reading it.
+void check_looks_like_json(const RegularFile& file, const std::string& name) {
+    if (file.size() == 0) throw InputError(name + ": the file is empty (0 bytes)");
+    unsigned char head[256];
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(file.size(), sizeof head));
+    file.read_exactly(0, n, head);
+    std::size_t i = n >= 3 && head[0] == 0xef && head[1] == 0xbb && head[2] == 0xbf ? 3 : 0;
+    while (i < n && (head[i] == ' ' || head[i] == '\t' || head[i] == '\n' || head[i] == '\r')) ++i;
+    if (i == n && n == file.size()) throw InputError(name + ": not JSON (only white space)");
+    if (i < n && head[i] != '{') {
+        const unsigned char c = head[i];
+        throw InputError(fmt::format("{}: not JSON (a glTF file starts with '{{', this one with {})", name,
+                                     std::isprint(c) ? fmt::format("'{}'", char(c)) : fmt::format("byte 0x{:02x}", c)));
+    }
+}
+
+// The JSON text of a .gltf, checked before tinygltf sees it.
+std::vector<unsigned char> read_gltf(const fs::path& path, const std::string& name) {
+    const RegularFile file(path, name);
+    check_looks_like_json(file, name);
+    if (file.size() > kMaxJsonBytes)
+        throw InputError(fmt::format("{}: {} bytes of JSON, above the limit of {} (keep large buffers in .bin files or "
+                                     "a .glb)",
+                                     name, file.size(), kMaxJsonBytes));
+    std::vector<unsigned char> text(std::size_t(file.size()));
+    file.read_exactly(0, text.size(), text.data());
+    check_json_depth(text.data(), text.size(), name);
+    return text;
+}
+
+// A .glb, its header and JSON chunk checked from the first bytes before the rest is read: a file
+// that is no .glb, or is cut short, is refused without reading it whole.
+std::vector<unsigned char> read_glb(const fs::path& path, const std::string& name) {
+    const RegularFile file(path, name);
+    if (file.size() == 0) throw InputError(name + ": the file is empty (0 bytes)");
+    if (file.size() < kGlbHeader)
+        throw InputError(fmt::format("{}: not a .glb: {} bytes, shorter than the 12-byte header", name, file.size()));
+    unsigned char header[kGlbHeader + kChunkHeader] = {};
+    file.read_exactly(0, std::size_t(std::min<std::uint64_t>(file.size(), sizeof header)), header);
+    if (little_endian32(header) != kGlbMagic)
+        throw InputError(name + ": not a .glb (its first 4 bytes are not the magic 'glTF')");
+    if (const std::uint32_t version = little_endian32(header + 4); version != 2)
+        throw InputError(fmt::format("{}: .glb container version {} is not supported (need 2)", name, version));
+    const std::uint32_t length = little_endian32(header + 8);
+    if (length > file.size())
+        throw InputError(
+            fmt::format("{}: truncated: its header declares {} bytes, the file holds {}", name, length, file.size()));
+    if (length < sizeof header)
+        throw InputError(fmt::format("{}: its header declares {} bytes, too few for a JSON chunk", name, length));
+    const std::uint32_t json_length = little_endian32(header + kGlbHeader);
+    if (little_endian32(header + kGlbHeader + 4) != kChunkJson)
+        throw InputError(name + ": the first chunk of a .glb must be its JSON");
+    if (json_length > length - sizeof header)
+        throw InputError(fmt::format("{}: its JSON chunk ({} bytes) runs past the {} bytes the header declares", name,
+                                     json_length, length));
+    if (json_length > kMaxJsonBytes)
+        throw InputError(
+            fmt::format("{}: {} bytes of JSON, above the limit of {}", name, json_length, kMaxJsonBytes));
+    std::vector<unsigned char> bytes(length);  // bytes past `length` are not part of the .glb
+    file.read_exactly(0, bytes.size(), bytes.data());
+    check_json_depth(bytes.data() + sizeof header, json_length, name);
+    return bytes;
+}
+
+// tinygltf's file callbacks, given only regular files: its own FileExists opens the file (a FIFO
+// would block there), and its reader sizes its buffer by seeking to the end, which for a directory
+// (a buffer uri naming one) gives an absurd size and an out-of-memory crash.
+bool file_exists(const std::string& path, void*) {
     std::error_code ec;
-    if (!fs::is_regular_file(path, ec)) {
-        if (err) *err += "'" + path + "' (a buffer or image the scene names) is not a readable file\n";
+    return fs::exists(path, ec);  // stat only; read_file says what is wrong with it
+}
+
+bool read_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+    try {
+        *out = read_regular_file(path, "'" + path + "' (a buffer or image the scene names)",
+                                 std::numeric_limits<std::uint64_t>::max());
+        return true;
+    } catch (const InputError& e) {
+        if (err) *err += std::string(e.what()) + "\n";
         return false;
     }
-    const std::uintmax_t size = fs::file_size(path, ec);
-    std::ifstream in(path, std::ios::binary);
-    if (ec || !in) {
-        if (err) *err += "cannot read '" + path + "'\n";
-        return false;
+}
+
+// What the image loader found for each image of the file, by index: the loader needs only each
+// texture's mean colour, and says what is wrong only for the textures a material uses.
+struct ImageDecoder {
+    const tinygltf::Model* model = nullptr;  // being filled in by tinygltf: its buffers come before images
+    std::map<int, ImageMean> images;
+};
+
+// tinygltf's image callback: decodes with OpenImageIO (no size limit of its own stb), keeps the
+// mean and never fails the load, so that an image no material uses cannot stop a bake.
+bool decode_image(tinygltf::Image* image, const int index, std::string*, std::string*, int, int,
+                  const unsigned char* bytes, int size, void* user) {
+    auto& decoder = *static_cast<ImageDecoder*>(user);
+    ImageMean& mean = decoder.images[index];
+    if (image->bufferView >= 0) {  // tinygltf passes its bytes unchecked against the buffer
+        const tinygltf::BufferView& view = decoder.model->bufferViews[std::size_t(image->bufferView)];
+        const std::size_t buffer_size = decoder.model->buffers[std::size_t(view.buffer)].data.size();
+        if (view.byteOffset > buffer_size || view.byteLength > buffer_size - view.byteOffset) {
+            mean.problem = fmt::format("bufferView {} (offset {}, length {}) runs past the end of buffer {} ({} bytes)",
+                                       image->bufferView, view.byteOffset, view.byteLength, view.buffer, buffer_size);
+            return true;
+        }
     }
-    out->resize(static_cast<std::size_t>(size));
-    if (size > 0 && !in.read(reinterpret_cast<char*>(out->data()), static_cast<std::streamsize>(size))) {
-        if (err) *err += "cannot read '" + path + "'\n";
-        return false;
-    }
+    mean = decode_image_mean(bytes, size > 0 ? std::size_t(size) : 0);
+    image->width = mean.width;
+    image->height = mean.height;
+    image->component = mean.channels;
+    image->bits = mean.bits;
     return true;
 }
 
-tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector<std::string>& warnings) {
+// The base directory tinygltf resolves uris against, as its LoadASCIIFromFile computes it.
+std::string base_dir(const std::string& file) {
+    const std::size_t slash = file.find_last_of('/');
+    return slash == std::string::npos ? std::string() : file.substr(0, slash);
+}
+
+tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector<std::string>& warnings,
+                      std::map<int, ImageMean>& images) {
     const std::string ext = lowercase(file.extension().string());
     if (ext != ".gltf" && ext != ".glb") {
         throw InputError(name + ": not a glTF file (expected a .gltf or .glb extension)");
     }
-    check_readable(file, name);
+    const std::vector<unsigned char> bytes = ext == ".glb" ? read_glb(file, name) : read_gltf(file, name);
 
     tinygltf::TinyGLTF gltf;
-    gltf.SetFsCallbacks({&tinygltf::FileExists, &tinygltf::ExpandFilePath, &read_regular_file, &tinygltf::WriteWholeFile,
-                         nullptr});
+    gltf.SetFsCallbacks({&file_exists, &tinygltf::ExpandFilePath, &read_file, &tinygltf::WriteWholeFile, nullptr});
     tinygltf::Model model;
+    ImageDecoder decoder{&model, {}};
+    gltf.SetImageLoader(&decode_image, &decoder);
     std::string err, warn;
-    const bool ok = ext == ".glb" ? gltf.LoadBinaryFromFile(&model, &err, &warn, file.string())
-                                  : gltf.LoadASCIIFromFile(&model, &err, &warn, file.string());
+    const bool ok = ext == ".glb"
+                        ? gltf.LoadBinaryFromMemory(&model, &err, &warn, bytes.data(), unsigned(bytes.size()),
+                                                    base_dir(file.string()))
+                        : gltf.LoadASCIIFromString(&model, &err, &warn, reinterpret_cast<const char*>(bytes.data()),
+                                                   unsigned(bytes.size()), base_dir(file.string()));
     if (!ok || !err.empty()) {
         const std::string why = one_line(plain_words(err));
         throw InputError(name + ": " + (why.empty() ? "cannot parse glTF" : why));
     }
+    images = std::move(decoder.images);
+    // tinygltf only warns for an external image it cannot read; texture_average fails for one a
+    // material uses, and one no material uses does not matter.
+    const auto about_an_image = [](const std::string& line) {
+        for (const char* start : {"File not found : ", "File read error : ", "File is empty : ",
+                                  "Failed to load external 'uri' for image"})
+            if (line.rfind(start, 0) == 0) return true;
+        return false;
+    };
     std::istringstream lines(warn);
     for (std::string line; std::getline(lines, line);) {
+        if (about_an_image(line)) continue;
         if (!one_line(line).empty()) warnings.push_back(name + ": " + one_line(line));
     }
 
@@ -342,50 +495,24 @@ std::vector<dvec3> read_colors(const Loader& L, int index, const std::string& wh
 // ---------------------------------------------------------------------------------------
 // Materials
 
-double srgb_to_linear(double x) {
-    return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
-}
-
-// Mean linear RGB of a decoded image. Colour textures are sRGB-encoded, and averaging the
-// encoded values would darken the result, so each value is decoded first. A histogram per
-// channel keeps that to one pow() per distinct level instead of one per pixel.
-dvec3 average_linear(const tinygltf::Image& img) {
-    const std::size_t pixels = std::size_t(img.width) * std::size_t(img.height);
-    const std::size_t comps = std::size_t(img.component);
-    const int colour_channels = comps >= 3 ? 3 : 1;  // grey (+alpha) images: one channel for all three
-    dvec3 sum(0.0);
-    if (img.bits == 8 || img.bits == 16) {
-        const std::size_t levels = img.bits == 8 ? 256 : 65536;
-        const std::size_t bytes = std::size_t(img.bits / 8);
-        std::vector<std::uint64_t> histogram(3 * levels, 0);
-        for (std::size_t p = 0; p < pixels; ++p) {
-            for (int c = 0; c < colour_channels; ++c) {
-                const unsigned char* src = img.image.data() + (p * comps + std::size_t(c)) * bytes;
-                std::uint16_t value = *src;
-                if (bytes == 2) std::memcpy(&value, src, 2);
-                ++histogram[std::size_t(c) * levels + value];
-            }
-        }
-        for (int c = 0; c < colour_channels; ++c) {
-            for (std::size_t level = 0; level < levels; ++level) {
-                const std::uint64_t n = histogram[std::size_t(c) * levels + level];
-                if (n != 0) sum[c] += double(n) * srgb_to_linear(double(level) / double(levels - 1));
-            }
-        }
-    } else {  // 32-bit float images are already linear
-        for (std::size_t p = 0; p < pixels; ++p) {
-            for (int c = 0; c < colour_channels; ++c) {
-                float value;
-                std::memcpy(&value, img.image.data() + (p * comps + std::size_t(c)) * 4, 4);
-                sum[c] += double(value);
-            }
+// "a.png" with %XX escapes decoded, as tinygltf decodes an image uri before it opens the file.
+std::string percent_decoded(const std::string& uri) {
+    std::string out;
+    for (std::size_t i = 0; i < uri.size(); ++i) {
+        if (uri[i] == '%' && i + 2 < uri.size() && std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
+            std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
+            out += static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16));
+            i += 2;
+        } else {
+            out += uri[i];
         }
     }
-    if (colour_channels == 1) sum = dvec3(sum[0]);
-    return sum / double(pixels);
+    return out;
 }
 
-// 1 when the material has no such texture or its image could not be decoded (with a warning).
+// The mean linear colour of a material's texture: 1 when it has none. A texture whose image is
+// missing, unreadable or does not decode is an error (exit 2, naming the image): a bake that went
+// on with some stand-in colour would be silently wrong.
 dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
     if (info.index < 0) return dvec3(1.0);
     const tinygltf::Model& m = L.model;
@@ -394,23 +521,27 @@ dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::s
     }
     const tinygltf::Texture& tex = m.textures[std::size_t(info.index)];
     if (tex.source < 0) {
-        L.warn(fmt::format("{}: texture {} has no image this loader can decode; using 1", what, info.index));
-        return dvec3(1.0);
+        L.fail(fmt::format("{}: texture {} has no 'source' image (one only in an extension, such as "
+                           "KHR_texture_basisu, is not read)",
+                           what, info.index));
     }
     if (std::size_t(tex.source) >= m.images.size()) {
         L.fail(fmt::format("{}: texture {} names image {}, out of range", what, info.index, tex.source));
     }
     const tinygltf::Image& img = m.images[std::size_t(tex.source)];
-    const bool known_format =
-        img.bits == 8 || img.bits == 16 || (img.bits == 32 && img.pixel_type == TINYGLTF_COMPONENT_TYPE_FLOAT);
-    const bool complete = img.width > 0 && img.height > 0 && img.component > 0 && known_format &&
-                          img.image.size() >= std::size_t(img.width) * std::size_t(img.height) *
-                                                  std::size_t(img.component) * std::size_t(img.bits / 8);
-    if (!complete) {
-        L.warn(fmt::format("{}: image {} could not be decoded; using 1", what, tex.source));
-        return dvec3(1.0);
+    const std::string image = !img.uri.empty()      ? fmt::format("image {} '{}'", tex.source, img.uri)
+                              : img.bufferView >= 0 ? fmt::format("image {} (bufferView {})", tex.source, img.bufferView)
+                                                    : fmt::format("image {}", tex.source);
+    const auto decoded = L.images.find(tex.source);
+    if (decoded == L.images.end()) {
+        // tinygltf could not read the file, so never gave its bytes to the decoder: say why.
+        std::string problem = img.uri.empty() ? std::string("no image data")
+                                              : regular_file_problem(fs::path(L.base_dir) / percent_decoded(img.uri));
+        if (problem.empty()) problem = "cannot be read";
+        L.fail(fmt::format("{}: {}: {}", what, image, problem));
     }
-    return average_linear(img);
+    if (!decoded->second.ok) L.fail(fmt::format("{}: {}: {}", what, image, decoded->second.problem));
+    return decoded->second.mean;
 }
 
 std::string material_label(const tinygltf::Material& mat, int index) {
@@ -458,6 +589,14 @@ Material convert_material(Loader& L, int index) {
     if (!emissive.empty() && (emissive[0] > 0.0 || emissive[1] > 0.0 || emissive[2] > 0.0) && strength > 0.0) {
         out.emission = dvec3(emissive[0], emissive[1], emissive[2]) * strength *
                        texture_average(L, mat.emissiveTexture, label + " emissiveTexture");
+    }
+    for (int c = 0; c < 3; ++c) {
+        if (!(out.emission[c] <= kMaxEmission)) {
+            L.fail(fmt::format("{}: emission {:g} (emissiveFactor x emissiveStrength x texture) is above {:g}: the "
+                               "outputs hold 32-bit floats, and reflection can multiply it 10^4 times; rescale the "
+                               "scene's units",
+                               label, out.emission[c], kMaxEmission));
+        }
     }
     return out;
 }
@@ -736,17 +875,29 @@ void add_camera(Loader& L, const Instance& inst) {
         return;
     }
     const tinygltf::PerspectiveCamera& p = cam.perspective;
+    // Invalid glTF is refused; legal values no image can be made with are clamped, with a warning.
     if (!(p.yfov > 0.0 && p.yfov < glm::pi<double>())) {
         L.fail(fmt::format("camera '{}': yfov {} must be in (0, pi)", name, p.yfov));
     }
     if (!(p.znear > 0.0) || !std::isfinite(p.znear)) {
         L.fail(fmt::format("camera '{}': znear {} must be > 0", name, p.znear));
     }
+    // tinygltf reads an absent aspectRatio as 0 (the render is then square).
+    if (!(p.aspectRatio >= 0.0) || !std::isfinite(p.aspectRatio)) {
+        L.fail(fmt::format("camera '{}': aspectRatio {} must be > 0", name, p.aspectRatio));
+    }
     Camera out;
     out.name = name;
     out.camera_to_world = rigid_frame(L, inst.world, inst.node);
-    out.yfov = p.yfov;
-    out.aspect = p.aspectRatio > 0.0 && std::isfinite(p.aspectRatio) ? p.aspectRatio : 0.0;
+    out.yfov = std::max(p.yfov, kMinYfov);
+    if (out.yfov != p.yfov) {
+        L.warn(fmt::format("camera '{}': yfov {:g} is too narrow to render; using {:g}", name, p.yfov, out.yfov));
+    }
+    out.aspect = p.aspectRatio > 0.0 ? std::clamp(p.aspectRatio, kMinAspect, kMaxAspect) : 0.0;
+    if (out.aspect != p.aspectRatio) {
+        L.warn(fmt::format("camera '{}': aspectRatio {:g} is outside [{:g}, {:g}]; using {:g}", name, p.aspectRatio,
+                           kMinAspect, kMaxAspect, out.aspect));
+    }
     out.znear = p.znear;
     L.scene.cameras.push_back(out);
 }
@@ -768,8 +919,9 @@ Scene load(const std::filesystem::path& file) {
     Scene scene;
     scene.path = file;
     const std::string name = file.string();
-    const tinygltf::Model model = parse(file, name, scene.warnings);
-    Loader L{model, name, scene, {}, -1};
+    std::map<int, ImageMean> images;
+    const tinygltf::Model model = parse(file, name, scene.warnings, images);
+    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images)};
 
     // Converted in file order so a primitive's material index is also its Scene index.
     for (std::size_t i = 0; i < model.materials.size(); ++i) scene.materials.push_back(convert_material(L, int(i)));

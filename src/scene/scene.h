@@ -49,6 +49,17 @@ struct Camera {
 // Reflectance 1 cannot conserve energy; the loader clamps to this and warns.
 inline constexpr double kMaxReflectance = 0.9999;
 
+// The largest emission (per channel, in the file's units) the loader accepts: radiosity reaches
+// E / (1 - ρ), up to 10^4 E at kMaxReflectance, and baked.gltf stores it as 32-bit floats
+// (at most 3.4e38). Legal glTF beyond it (emissiveStrength 1e100) is refused, not clamped.
+inline constexpr double kMaxEmission = 1e30;
+
+// A camera's aspect ratio (width / height) outside this range is clamped, with a warning: legal
+// glTF, but an image 10^9 times taller than wide cannot be rendered. Neither can a field of view
+// narrower than kMinYfov radians (its projection overflows), which is raised to it likewise.
+inline constexpr double kMinAspect = 1.0 / 16.0, kMaxAspect = 16.0;
+inline constexpr double kMinYfov = 1e-4;
+
 struct Scene {
     std::filesystem::path path;
     std::vector<Material> materials;

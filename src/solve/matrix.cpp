@@ -68,24 +68,26 @@ MatrixSettings matrix_settings(double threshold, int batch) {
     return s;
 }
 
-bool Matrix::suits(const mesh::Mesh& mesh) {
-    if (mesh.patches.size() > kDefaultMaxPatches) return false;
-    for (const mesh::Element& e : mesh.elements)
-        if (std::max({e.rho.x, e.rho.y, e.rho.z}) > kMaxReflectance) return false;
-    return true;
+std::size_t Matrix::estimate_bytes(const mesh::Mesh& mesh, const MatrixSettings& settings) {
+    return static_cast<std::size_t>(estimate_bytes(static_cast<double>(active_patches(mesh, settings).size()),
+                                                   static_cast<double>(mesh.elements.size()), settings));
 }
 
-std::size_t Matrix::estimate_bytes(const mesh::Mesh& mesh, const MatrixSettings& settings) {
-    const std::size_t rows = active_patches(mesh, settings).size();
-    const std::size_t elements = mesh.elements.size();
-    const std::size_t channels = settings.grey ? 1 : 3;
-    const std::size_t dense = settings.interreflection ? channels * rows * rows * sizeof(double) : 0;
+double Matrix::estimate_bytes(double rows, double elements, const MatrixSettings& settings) {
+    const double channels = settings.grey ? 1.0 : 3.0;
+    const double dense = settings.interreflection ? channels * rows * rows * sizeof(double) : 0.0;
     // An estimate, not a bound: a row holds at most every element (uint32 + double, 12 bytes),
     // but a hemicube sees a fraction of the scene, so a quarter of that worst case is charged.
-    const std::size_t sparse = rows * elements * 12 / 4;
+    const double sparse = rows * elements * 12.0 / 4.0;
     // The engine's dense results for one batch, one double per element per shot.
-    const std::size_t batch = static_cast<std::size_t>(std::max(1, settings.batch)) * elements * sizeof(double);
+    const double batch = std::max(1, settings.batch) * elements * sizeof(double);
     return dense + sparse + batch;
+}
+
+double Matrix::expected_sweeps(double q, double tolerance) {
+    if (!(q < 1.0)) return std::numeric_limits<double>::infinity();
+    if (q <= 0.0) return 1.0;
+    return std::max(1.0, std::ceil(std::log(tolerance * (1.0 - q)) / (2.0 * std::log(q))));
 }
 
 bool Matrix::cancelled() const {

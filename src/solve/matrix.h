@@ -45,23 +45,18 @@ public:
     // Throws std::invalid_argument when settings.grey is set and some element's ρ or E is not grey.
     Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixSettings& settings);
 
-    // Patch counts up to which the matrix solver is the better choice. It shoots one hemicube
-    // per patch and holds a dense P×P K per channel (72 MB a channel at 3000 patches) whose
-    // sweeps cost P² each; progressive shooting stops early once its ambient estimate is small,
-    // and on large scenes shoots far fewer than P hemicubes, so beyond a few thousand patches it
-    // is faster.
-    // Gauss–Seidel converges at about the rate of the reflectance: from ρ = 0.95 up it needs
-    // hundreds to thousands of sweeps (a closed room at ρ = 0.999 about 9000 to 1e-4), where
-    // progressive shooting with its measured ambient term gets there in one round.
-    static constexpr std::size_t kDefaultMaxPatches = 3000;
-    static constexpr double kMaxReflectance = 0.95;
-    static bool suits(const mesh::Mesh& mesh);
-
     // An estimate of the memory solve() needs, P being the patches that get rows: the dense K
     // exactly (none for direct light), the sparse rows at a quarter of their worst case (every
     // row holding all E elements, 12 bytes each: P·E·12), and the engine's results for one
-    // batch (batch·E doubles).
+    // batch (batch·E doubles). The second form counts before a mesh is built.
     static std::size_t estimate_bytes(const mesh::Mesh& mesh, const MatrixSettings& settings);
+    static double estimate_bytes(double rows, double elements, const MatrixSettings& settings);
+
+    // Gauss–Seidel sweeps expected to bring the error bound to `tolerance` where K's norm is q
+    // (at most the largest reflectance): the bound starts near 1 / (1 − q) times the residual,
+    // and a sweep shrinks it by about q², the square of Jacobi's rate q (as Young's theorem has it
+    // for consistently ordered systems), so ln(tolerance (1 − q)) / (2 ln q); infinite for q >= 1.
+    static double expected_sweeps(double q, double tolerance);
 
     // Computes the rows not yet computed (calling `progress(rows_done, rows_total)` after each
     // batch if set) and solves. Does its work once: later calls return at once.

@@ -120,6 +120,10 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
         const std::vector<bool> marked = mark_contrast(mesh, irradiance, level, settings);
         const std::size_t count = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
         if (count == 0) break;
+        if (static_cast<double>(mesh.elements.size()) + 3.0 * static_cast<double>(count) > settings.max_elements) {
+            result.stopped_for_memory = {depth + 1, count};
+            break;
+        }
         mesh::Refined refined = mesh::split_elements(mesh, marked);
         const mesh::Mesh& m = refined.mesh;
 

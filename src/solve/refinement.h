@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <functional>
 #include <glm/glm.hpp>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -37,6 +38,8 @@ struct RefineSettings {
     double regather_share = 0.6;
     int max_shooters = 256;
     std::uint64_t first_shot = std::uint64_t{1} << 40;  // re-gather shot counters start here
+    // A level that would leave more elements than this is not split (the bake's memory budget).
+    double max_elements = std::numeric_limits<double>::infinity();
     // Checked between engine calls; when set the refinement stops at the level it is in.
     std::function<bool()> cancelled;
 };
@@ -52,6 +55,12 @@ struct RefineResult {
     std::vector<glm::dvec3> irradiance;  // per element of `mesh`
     std::vector<glm::dvec3> radiosity;   // per element: E + ρ·irradiance
     std::vector<RefineLevel> levels;     // one per level that split anything
+    // The level that was not split for max_elements, and the elements it would have split; level
+    // 0 when none was stopped.
+    struct Stop {
+        int level = 0;
+        std::size_t split = 0;
+    } stopped_for_memory;
 };
 
 // Elements to split: both members of every neighbouring pair whose irradiance contrasts by the

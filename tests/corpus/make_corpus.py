@@ -133,13 +133,56 @@ def cases():
         glb_json += b" "
     glb = b"glTF" + struct.pack("<II", 2, 12 + 8 + len(glb_json)) + struct.pack("<I", len(glb_json)) + b"JSON" + glb_json
     out.append(("truncated.glb", glb[: len(glb) // 2], "truncated.glb"))
+
+    # Hostile files: made to overflow the stack, crash on no data, or be read whole before refused.
+    out.append(("empty.glb", b"", "empty"))
+    deep = good.replace("{", '{"extras": ' + "[" * 20000 + "]" * 20000 + ", ", 1)
+    out.append(("deep_nesting.gltf", deep, "512 levels"))
+    out.append(("deep_nesting.glb", glb_of(deep.encode()), "512 levels"))
+    header = glb_of(glb_json)
+    out.append(("length_past_end.glb", header[:8] + struct.pack("<I", len(header) + 1000) + header[12:], "truncated"))
+    out.append(("binary_zeros.gltf", bytes(64), "not JSON"))
+
+    # Legal glTF no bake can use, and invalid cameras.
+    g = base_scene(); g["materials"][1]["extensions"] = {"KHR_materials_emissive_strength": {"emissiveStrength": 1e100}}
+    g["extensionsUsed"] = ["KHR_materials_emissive_strength"]
+    out.append(("emission_too_strong.gltf", dump(g), "1e+100"))
+    for name, key, value in (("camera_aspect_negative.gltf", "aspectRatio", -1.0), ("camera_yfov_zero.gltf", "yfov", 0.0)):
+        g = base_scene()
+        g["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}]
+        g["cameras"][0]["perspective"][key] = value
+        g["nodes"].append({"name": "camera", "camera": 0, "translation": [0, 0.5, 3]})
+        g["scenes"][0]["nodes"].append(2)
+        out.append((name, dump(g), key))
+
+    # Textures whose image cannot be used: one rule, exit 2 naming the image.
+    def textured(image):
+        g = base_scene()
+        g["images"] = [image]
+        g["textures"] = [{"source": 0}] if image else [{}]
+        if not image:
+            del g["images"]
+        g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+        return dump(g)
+    out.append(("missing_texture.gltf", textured({"uri": "missing_texture.png"}), "missing_texture.png"))
+    out.append(("undecodable_texture.gltf", textured({"uri": "undecodable_texture.png"}), "undecodable_texture.png"))
+    out.append(("texture_without_source.gltf", textured(None), "texture 0"))
     return out
+
+
+def glb_of(json_bytes):
+    while len(json_bytes) % 4:
+        json_bytes += b" "
+    return b"glTF" + struct.pack("<II", 2, 12 + 8 + len(json_bytes)) + struct.pack("<I", len(json_bytes)) + b"JSON" + json_bytes
 
 
 def main():
     os.makedirs(os.path.join(HERE, "unreadable_buffer.bin"), exist_ok=True)
     with open(os.path.join(HERE, "unreadable_buffer.bin", "README"), "w") as f:
         f.write("A directory where unreadable_buffer.gltf expects its buffer file.\n")
+    # Not an image at all, under an image's name (undecodable_texture.gltf uses it).
+    with open(os.path.join(HERE, "undecodable_texture.png"), "w") as f:
+        f.write("This is text, not a PNG.\n")
     manifest = []
     for name, contents, word in cases():
         path = os.path.join(HERE, name)

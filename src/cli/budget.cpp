@@ -1,0 +1,138 @@
+// Memory and time estimates for planning a bake before its mesh is built.
+#include "cli/budget.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/memory.h"
+#include "formfactor/opencl_engine.h"
+#include "solve/matrix.h"
+
+namespace hemirad::cli {
+namespace {
+
+// Refinement is taken to double the elements (the Cornell box: 8316 → 15231).
+constexpr double kRefinedGrowth = 2.0;
+// Per element of the progressive solver: incident light, the round's snapshot, and the two
+// per-element vectors its queries return (dvec3 each).
+constexpr double kProgressivePerElement = 4 * 24.0;
+constexpr double kProgressivePerPatch = 3 * 24.0 + 2 * 8.0;  // unshot, shot, snapshot; hit, round share
+// Output: the welded mesh (about four vertices per element: position, normal, radiosity, index)
+// and the renderer's supersampled strip and image (3 × 3 samples of depth and colour per pixel).
+constexpr double kWeldedPerElement = 4 * 40.0;
+constexpr double kRenderPerPixel = 9 * 32.0 + 32.0;
+
+// The model's constants, measured on 2 cores of a Xeon through PoCL (ratios matter): a hemicube
+// shot at N = 256 over ~8k elements, host work per element per progressive pass (applying the
+// shot, the ambient share, the books), one Gauss–Seidel multiply-add, and a row's sparsification
+// per element.
+constexpr double kShotSeconds = 1.3e-3;
+constexpr double kPassSecondsPerElement = 1.7e-7;
+constexpr double kSweepSecondsPerEntry = 1e-9;
+constexpr double kRowSecondsPerElement = 3e-9;
+constexpr double kProgressiveRounds = 3.0;
+
+double engine_bytes(const BakeShape& s, double elements, int hemicube, double shots) {
+    if (!s.opencl) return 3.0 * hemicube * hemicube * 17.0 + elements * sizeof(double);  // reference: cells, one F
+    const double per_shot = formfactor::OpenCLEngine::shot_bytes(elements, hemicube);
+    const double budget = std::max(per_shot, 1024.0 * 1024.0 * 1024.0);  // a launch's budget, one shot at least
+    return formfactor::OpenCLEngine::mesh_bytes(elements, s.counts.patches) + std::min(shots * per_shot, budget);
+}
+
+}  // namespace
+
+double MemoryEstimate::total() const {
+    double sum = 0.0;
+    for (const MemoryPart& p : parts) sum += p.bytes;
+    return sum;
+}
+
+double MemoryEstimate::needed() const {
+    double sum = 0.0;
+    for (const MemoryPart& p : parts)
+        if (p.what != "refinement") sum += p.bytes;
+    return sum;
+}
+
+std::string MemoryEstimate::describe() const {
+    std::string out;
+    for (const MemoryPart& p : parts) {
+        if (!out.empty()) out += ", ";
+        out += p.what + " " + format_bytes(p.bytes);
+    }
+    return out;
+}
+
+MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
+    const double E = s.counts.elements, P = s.counts.patches;
+    const double mesh = E * sizeof(mesh::Element) + P * sizeof(mesh::Patch);
+    MemoryEstimate m;
+    m.parts.push_back({"mesh", mesh * (s.fallback_copy ? 2.0 : 1.0)});
+    const bool matrix = solver == "matrix";
+    m.parts.push_back({"engine", engine_bytes(s, E, s.hemicube, matrix ? s.matrix_batch : s.batch)});
+    if (matrix) {
+        solve::MatrixSettings ms;
+        ms.grey = s.grey;
+        ms.interreflection = !s.direct_only;
+        ms.batch = s.matrix_batch;
+        m.parts.push_back({"matrix", solve::Matrix::estimate_bytes(P, E, ms)});
+    } else {
+        m.parts.push_back({"solver", E * kProgressivePerElement + P * kProgressivePerPatch +
+                                         std::max(1, s.batch) * E * sizeof(double)});
+    }
+    if (s.refine_levels > 0) {
+        const double refined = E * kRefinedGrowth;
+        const int top = std::min(s.hemicube << std::min(s.refine_levels, 4), 2048);
+        m.parts.push_back({"refinement", refined * sizeof(mesh::Element) + engine_bytes(s, refined, top, 64) +
+                                             refined * 2 * 24.0});
+    }
+    m.parts.push_back({"output", E * (s.refine_levels > 0 ? kRefinedGrowth : 1.0) * kWeldedPerElement +
+                                     s.pixels * kRenderPerPixel});
+    return m;
+}
+
+double refinement_room(const BakeShape& s, const std::string& solver, double limit) {
+    // Bytes per refined element: itself, its engine share, its re-gathered light and its output.
+    const double per_element = sizeof(mesh::Element) + 2 * 24.0 + kWeldedPerElement +
+                               (s.opencl ? formfactor::OpenCLEngine::mesh_bytes(1.0, 0.0) : sizeof(double));
+    const double spent = estimate_memory(s, solver).needed();
+    return std::max(s.counts.elements, (limit - spent) / per_element);
+}
+
+SolverTimes expected_times(const BakeShape& s) {
+    const double E = s.counts.elements, P = s.counts.patches;
+    const double channels = s.grey ? 1.0 : 3.0;
+    // A shot's time grows with the elements it sets up and the cells it draws.
+    const double shot = kShotSeconds * (0.5 + 0.5 * E / 8316.0) * std::max(1.0, double(s.hemicube) * s.hemicube / (256.0 * 256.0));
+    SolverTimes t;
+    const double sweeps = s.direct_only ? 0.0 : solve::Matrix::expected_sweeps(s.max_reflectance, s.tolerance);
+    t.matrix = P * (shot + E * kRowSecondsPerElement) + sweeps * channels * P * P * kSweepSecondsPerEntry;
+    t.progressive = kProgressiveRounds * P * (shot + E * kPassSecondsPerElement);
+    return t;
+}
+
+SolverChoice choose_solver(const BakeShape& s, double limit) {
+    const double with_matrix = estimate_memory(s, "matrix").needed();
+    if (with_matrix > 0.5 * limit)
+        return {"progressive", fmt::format("the matrix solver would need about {} ({} patches), more than half of the "
+                                           "{} the bake may use",
+                                           format_bytes(with_matrix), s.counts.patches, format_bytes(limit))};
+    if (s.direct_only) return {"matrix", "direct light only is the emitters' rows"};
+    const SolverTimes t = expected_times(s);
+    if (t.matrix <= t.progressive)
+        return {"matrix", fmt::format("expected faster than progressive shooting ({:.3g} s against {:.3g} s: {} rows, "
+                                      "{:.0f} Gauss-Seidel sweeps at reflectance up to {:.3g}) and it fits in memory "
+                                      "({} of {})",
+                                      t.matrix, t.progressive, s.counts.patches,
+                                      solve::Matrix::expected_sweeps(s.max_reflectance, s.tolerance),
+                                      s.max_reflectance, format_bytes(with_matrix), format_bytes(limit))};
+    return {"progressive", fmt::format("expected faster than the matrix solver ({:.3g} s against {:.3g} s: "
+                                       "{:.3g} Gauss-Seidel sweeps at reflectance up to {:.3g})",
+                                       t.progressive, t.matrix,
+                                       solve::Matrix::expected_sweeps(s.max_reflectance, s.tolerance),
+                                       s.max_reflectance)};
+}
+
+}  // namespace hemirad::cli

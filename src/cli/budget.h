@@ -1,0 +1,67 @@
+// A bake's memory, estimated from its mesh counts before the mesh is built, and the solver
+// `--solver auto` picks by that memory and by expected time.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "mesh/mesh.h"
+
+namespace hemirad::cli {
+
+// What the estimate is made from.
+struct BakeShape {
+    mesh::Counts counts;        // of the mesh as built (before refinement)
+    int hemicube = 256;         // N
+    int batch = 1;              // progressive shots per engine call
+    int matrix_batch = 64;      // matrix rows per engine call
+    bool grey = false;          // one channel
+    bool direct_only = false;   // interreflection off: the emitters' rows only
+    bool opencl = false;        // an OpenCL engine (on a CPU, its buffers are host memory)
+    bool fallback_copy = false; // auto chose OpenCL: the mesh as built is kept for a restart on the reference
+    double max_reflectance = 0.0;
+    double tolerance = 1e-4;    // the matrix solver's error bound
+    int refine_levels = 2;
+    double pixels = 640.0 * 480.0;  // of render.exr/.png
+};
+
+struct MemoryPart {
+    std::string what;
+    double bytes = 0.0;
+};
+
+// Bytes by part: the mesh, the form-factor engine, the solver, refinement and the output.
+// Estimates, not bounds: refinement is taken to double the elements (measured 1.8× on the Cornell
+// box) and is stopped at run time where it would pass the budget.
+struct MemoryEstimate {
+    std::vector<MemoryPart> parts;
+    double total() const;
+    // The total without refinement's part: what a bake needs whatever refinement finds to split
+    // (refinement itself is stopped where it would pass the budget).
+    double needed() const;
+    std::string describe() const;  // "mesh 1.2 GB, engine 300 MB, ..."
+};
+MemoryEstimate estimate_memory(const BakeShape& shape, const std::string& solver);
+
+// Refined elements the budget leaves room for once the rest of the estimate is spent (at least
+// the elements as built).
+double refinement_room(const BakeShape& shape, const std::string& solver, double limit);
+
+// Seconds the two solvers are expected to take, in a model with constants measured on 2 PoCL
+// cores (their ratio decides, not their values): the matrix shoots every patch once, then sweeps
+// a dense K per channel (expected_sweeps of it, each P² multiply-adds); progressive shooting takes
+// about three rounds of one pass per patch, each pass with host work for every element.
+struct SolverTimes {
+    double matrix = 0.0, progressive = 0.0;
+};
+SolverTimes expected_times(const BakeShape& shape);
+
+// `auto`'s choice: the matrix where the bake with it needs at most half the memory limit and it
+// is expected to be no slower; else progressive. `why` says which rule decided, with the numbers.
+struct SolverChoice {
+    std::string solver;
+    std::string why;
+};
+SolverChoice choose_solver(const BakeShape& shape, double limit);
+
+}  // namespace hemirad::cli

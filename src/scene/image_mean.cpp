@@ -1,0 +1,166 @@
+// Texture means decoded by OpenImageIO from memory, a band of rows at a time (see image_mean.h).
+#include "scene/image_mean.h"
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <vector>
+
+#include <fmt/core.h>
+
+namespace hemirad::scene {
+namespace {
+
+// Each band of rows decoded at once holds at most this many bytes.
+constexpr std::size_t kBandBytes = std::size_t{16} << 20;
+
+double srgb_to_linear(double x) {
+    return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
+}
+
+// The first line of a decoder's message, without the made-up file name it was given.
+std::string first_line(std::string text) {
+    text = text.substr(0, text.find('\n'));
+    for (const char* ext : {"png", "jpg", "webp"}) {
+        for (const std::string& name : {fmt::format(" (\"image.{}\")", ext), fmt::format("\"image.{}\"", ext)})
+            for (std::size_t at; (at = text.find(name)) != std::string::npos;) text.erase(at, name.size());
+    }
+    while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
+    return text.empty() ? "no reason given" : text;
+}
+
+// OpenImageIO picks a reader by the file name's extension, and reading from memory there is no
+// file to probe: the bytes' own signature says which, and only glTF's image formats (PNG, JPEG,
+// and WebP from EXT_texture_webp) are given to it, not every format a plugin might read.
+std::string extension_for(const unsigned char* bytes, std::size_t size) {
+    static const unsigned char kPng[] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    static const unsigned char kJpeg[] = {0xff, 0xd8, 0xff};
+    if (size >= sizeof kPng && std::memcmp(bytes, kPng, sizeof kPng) == 0) return "png";
+    if (size >= sizeof kJpeg && std::memcmp(bytes, kJpeg, sizeof kJpeg) == 0) return "jpg";
+    if (size >= 12 && std::memcmp(bytes, "RIFF", 4) == 0 && std::memcmp(bytes + 8, "WEBP", 4) == 0) return "webp";
+    return {};
+}
+
+// Sends what the image libraries print to stderr (fd 2) to a scratch file while it lives:
+// libpng's default handlers print "libpng error: …" and "libpng warning: …" themselves, which
+// would be a second line beside the CLI's one line, or noise on a good bake.
+class StderrCapture {
+public:
+    StderrCapture() {
+        std::fflush(stderr);
+        file_ = std::tmpfile();
+        saved_ = file_ ? ::dup(2) : -1;
+        if (saved_ >= 0 && ::dup2(::fileno(file_), 2) < 0) {
+            ::close(saved_);
+            saved_ = -1;
+        }
+    }
+    ~StderrCapture() {
+        if (saved_ >= 0) {
+            std::fflush(stderr);
+            ::dup2(saved_, 2);
+            ::close(saved_);
+        }
+        if (file_) std::fclose(file_);
+    }
+    StderrCapture(const StderrCapture&) = delete;
+    StderrCapture& operator=(const StderrCapture&) = delete;
+
+private:
+    std::FILE* file_ = nullptr;
+    int saved_ = -1;
+};
+
+}  // namespace
+
+ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size) {
+    ImageMean out;
+    const auto fail = [&out](std::string problem) {
+        out.problem = std::move(problem);
+        return out;
+    };
+    if (size == 0) return fail("the image is empty (0 bytes)");
+    const std::string ext = extension_for(bytes, size);
+    if (ext.empty()) return fail("not a PNG, JPEG or WebP image (its first bytes are none of their signatures)");
+    const std::string name = "image." + ext;
+
+    const StderrCapture quiet;  // the decoders' own complaints: the problem below says what went wrong
+    OIIO::Filesystem::IOMemReader memory(bytes, size);
+    OIIO::ImageSpec config;
+    void* proxy = &memory;
+    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
+    config.attribute("oiio:UnassociatedAlpha", 1);  // the file's colours, not multiplied by alpha
+    std::unique_ptr<OIIO::ImageInput> in = OIIO::ImageInput::create(name, false, &config);
+    if (!in) return fail(fmt::format("cannot decode a .{} image ({})", ext, first_line(OIIO::geterror())));
+    OIIO::ImageSpec spec;
+    if (!in->open(name, spec, config))
+        return fail(fmt::format("not a .{} image OpenImageIO can decode ({})", ext, first_line(in->geterror())));
+    const std::uint64_t pixels = std::uint64_t(std::max(spec.width, 0)) * std::uint64_t(std::max(spec.height, 0));
+    if (spec.width < 1 || spec.height < 1 || spec.depth > 1 || spec.nchannels < 1)
+        return fail(fmt::format("not a picture ({} × {} × {} pixels, {} channels)", spec.width, spec.height,
+                                spec.depth, spec.nchannels));
+    if (pixels > kMaxImagePixels || spec.width > kMaxImageEdge || spec.height > kMaxImageEdge)
+        return fail(fmt::format("{} × {} pixels, above the limits of {} pixels and {} a side", spec.width,
+                                spec.height, kMaxImagePixels, kMaxImageEdge));
+
+    // 8- and 16-bit values are counted per level, then decoded once per level (a histogram:
+    // one pow() per distinct level, not per pixel); anything else is read as linear floats.
+    const std::size_t base = spec.format.basetype;
+    const int bits = base == OIIO::TypeDesc::UINT8 || base == OIIO::TypeDesc::INT8 ? 8
+                     : base == OIIO::TypeDesc::UINT16 || base == OIIO::TypeDesc::INT16 ? 16
+                                                                                         : 32;
+    const OIIO::TypeDesc type = bits == 8 ? OIIO::TypeDesc::UINT8 : bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::FLOAT;
+    const int colour = spec.nchannels >= 3 ? 3 : 1;  // grey (+alpha): one channel for all three
+    const std::size_t value_bytes = std::size_t(bits / 8);
+    const std::size_t row_values = std::size_t(spec.width) * std::size_t(colour);
+    const int band = int(std::clamp<std::size_t>(kBandBytes / (row_values * value_bytes), 1, std::size_t(spec.height)));
+    std::vector<unsigned char> rows(std::size_t(band) * row_values * value_bytes);
+
+    const std::size_t levels = bits == 8 ? 256 : bits == 16 ? 65536 : 0;
+    std::vector<std::uint64_t> histogram(std::size_t(colour) * levels, 0);
+    glm::dvec3 sum(0.0);
+    for (int y = 0; y < spec.height; y += band) {
+        const int n = std::min(band, spec.height - y);
+        if (!in->read_scanlines(0, 0, spec.y + y, spec.y + y + n, 0, 0, colour, type, rows.data()))
+            return fail(fmt::format("the image does not decode past row {} ({})", y, first_line(in->geterror())));
+        const std::size_t values = std::size_t(n) * row_values;
+        if (bits == 8) {
+            for (std::size_t i = 0; i < values; ++i) ++histogram[(i % std::size_t(colour)) * levels + rows[i]];
+        } else if (bits == 16) {
+            for (std::size_t i = 0; i < values; ++i) {
+                std::uint16_t v;
+                std::memcpy(&v, rows.data() + 2 * i, 2);
+                ++histogram[(i % std::size_t(colour)) * levels + v];
+            }
+        } else {
+            for (std::size_t i = 0; i < values; ++i) {
+                float v;
+                std::memcpy(&v, rows.data() + 4 * i, 4);
+                sum[int(i % std::size_t(colour))] += double(v);
+            }
+        }
+    }
+    for (int c = 0; c < colour && levels > 0; ++c)
+        for (std::size_t level = 0; level < levels; ++level)
+            if (const std::uint64_t count = histogram[std::size_t(c) * levels + level]; count != 0)
+                sum[c] += double(count) * srgb_to_linear(double(level) / double(levels - 1));
+    if (colour == 1) sum = glm::dvec3(sum[0]);
+    out.mean = sum / double(pixels);
+    for (int c = 0; c < 3; ++c)
+        if (!std::isfinite(out.mean[c]) || out.mean[c] < 0.0)
+            return fail(fmt::format("its mean colour has channel {} = {}, not a finite value >= 0", c, out.mean[c]));
+    out.ok = true;
+    out.width = spec.width;
+    out.height = spec.height;
+    out.channels = spec.nchannels;
+    out.bits = bits;
+    return out;
+}
+
+}  // namespace hemirad::scene

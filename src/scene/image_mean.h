@@ -1,0 +1,31 @@
+// The mean linear colour of an encoded texture image (PNG, JPEG or WebP), decoded by OpenImageIO
+// a band of rows at a time: the loader needs only the mean, so a 20000 × 20000
+// PNG costs a few megabytes of memory, not gigabytes.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include <glm/glm.hpp>
+
+namespace hemirad::scene {
+
+// Images with more pixels than this are refused (decoding one takes tens of seconds), and so
+// are those wider or taller than kMaxImageEdge (a row of them is decoded at once).
+inline constexpr std::uint64_t kMaxImagePixels = std::uint64_t{1} << 30;  // 32768 × 32768
+inline constexpr int kMaxImageEdge = 65536;
+
+struct ImageMean {
+    bool ok = false;
+    std::string problem;    // when !ok: "not an image OpenImageIO can decode (…)", …
+    glm::dvec3 mean{1.0};   // linear RGB; a grey image's one channel in all three
+    int width = 0, height = 0, channels = 0, bits = 0;
+};
+
+// 8- and 16-bit values are sRGB-encoded and decoded to linear before averaging (averaging the
+// encoded values would darken the result); float images are linear already. Alpha is ignored.
+// The format is the bytes' own (PNG, JPEG or WebP), whatever the uri or mime type says.
+ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size);
+
+}  // namespace hemirad::scene
