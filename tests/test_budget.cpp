@@ -54,7 +54,7 @@ TEST_CASE("budget: the estimate is within a factor of two of a real bake's peak 
     // counts it, against the plan's estimate in report.json.
     TempDir dir;
     for (const std::vector<std::string>& extra :
-         {std::vector<std::string>{}, std::vector<std::string>{"--solver", "progressive", "--max-passes", "3000"}}) {
+         {std::vector<std::string>{}, std::vector<std::string>{"--solver", "progressive", "--max-passes", "500"}}) {
         const fs::path scene = extra.empty() ? kCornellBox : kClosedRoom;
         const fs::path out = dir / (extra.empty() ? "cornell" : "room");
         const Measured m = bake_measuring_memory(dir, concat({"bake", scene.string(), "-o", out.string(), "--quiet"}, extra));
@@ -79,7 +79,7 @@ TEST_CASE("budget: a bake that cannot fit is refused before it starts, naming th
                    "more than the 50 MB --max-memory allows");
     // The matrix solver forced where only progressive shooting fits: the message says so.
     expect_refused(dir,
-                   {"bake", kClosedRoom.string(), "-o", out.string(), "--solver", "matrix", "--patch-size", "0.17",
+                   {"bake", kClosedRoom.string(), "-o", out.string(), "--solver", "matrix", "--patch-size", "0.25",
                     "--refine-levels", "0", "--max-memory", "600M"},
                    out, "--solver progressive would need about");
     // Malformed limits.
@@ -89,11 +89,10 @@ TEST_CASE("budget: a bake that cannot fit is refused before it starts, naming th
 }
 
 TEST_CASE("budget: auto takes progressive shooting where the matrix would not fit", "[budget]") {
-    // The closed room at patches of 0.17: 3221 patches, whose matrix bake needs about 1.6 GB (a
-    // dense K of three channels, 250 MB; rows in batches of 64 on the device), its progressive
-    // bake about 100 MB.
+    // The closed room at patches of 0.25: 1456 patches, whose matrix bake needs about 1.2 GB (rows
+    // in batches of 64 on the device, a dense K of three channels), its progressive bake 34 MB.
     TempDir dir;
-    const std::vector<std::string> common = {"--patch-size", "0.17", "--refine-levels", "0", "--max-passes", "50",
+    const std::vector<std::string> common = {"--patch-size", "0.25", "--refine-levels", "0", "--max-passes", "50",
                                              "--quiet", "--image-width", "32", "--hemicube", "32"};
     const json roomy = bake_ok(dir, kClosedRoom, dir / "roomy", concat({"--max-memory", "16G"}, common));
     CHECK(roomy.at("plan").at("solver").at("name") == "matrix");

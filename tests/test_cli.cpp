@@ -1054,10 +1054,10 @@ TEST_CASE("bench refuses a fast wrong OpenCL kernel: no result, no JSON", "[cli]
     HEMIRAD_SKIP_WITHOUT_OPENCL();
     const TempDir dir;
     const fs::path file = dir / "results.json";
-    // Setup built for the other layout than the host drives (per patch against lanes of eight
-    // elements, or the reverse) sets up only some elements: fewer records, less work, wrong F.
-    const bool lanes = hemirad::ocl::list_devices().front().type == "cpu";
-    const std::string wrong = std::string("HEMIRAD_OPENCL_OPTIONS=-DHEMIRAD_SETUP_LANES=") + (lanes ? "0" : "1") + " ";
+    // HEMIRAD_FAULT=wrong-after:0: every launch returns a wrong form factor, as a broken kernel or
+    // device might. (A kernel built for the other setup layout than the host drives did this
+    // before HEMIRAD_OPENCL_OPTIONS set the host's knobs too.)
+    const std::string wrong = "HEMIRAD_FAULT=wrong-after:0 ";
     const RunResult r = run_hemirad(dir, {"bench", "procedural:100", "--hemicube", "16", "--shots", "2", "--repeats",
                                           "1", "--no-calibrate", "--engines", "ref,opencl", "--patch-size", "1",
                                           "--element-size", "1", "--json", file.string()},

@@ -280,7 +280,8 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                                    info.name + " (" + info.id() + ")",
                                    contexts[d].get(),
                                    std::make_unique<formfactor::OpenCLEngine>(
-                                       m, *contexts[d], settings, formfactor::tuning_from_environment(info)),
+                                       m, *contexts[d], settings, formfactor::tuning_from_environment(info),
+                                       formfactor::fault_from_environment()),
                                    kRasterizer,
                                    {}});
             }
