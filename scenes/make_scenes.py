@@ -97,8 +97,16 @@ def faces_direction(d):
     return ("direction", tuple(unit(d)))
 
 
+def closed_outward():
+    """The node's triangles form a closed surface facing out (checked as a whole: every edge
+    matched by its reverse, and a positive enclosed volume), for shapes like a torus."""
+    return ("closed_outward", None)
+
+
 def check_rule(rule, n, centroid):
     kind, p = rule
+    if kind == "closed_outward":
+        return True
     if kind == "towards":
         return dot(n, sub(p, centroid)) > 0.0
     if kind == "away":
@@ -158,8 +166,9 @@ class GltfBuilder:
         )
         return len(self.gltf["bufferViews"]) - 1
 
-    def material(self, name, base_color, emission=None, strength=None):
-        """emission: emissiveFactor (each in [0,1]); strength: KHR_materials_emissive_strength."""
+    def material(self, name, base_color, emission=None, strength=None, double_sided=False):
+        """emission: emissiveFactor (each in [0,1]); strength: KHR_materials_emissive_strength;
+        double_sided: glTF doubleSided (both sides are surfaces: they emit and reflect)."""
         for c in base_color:
             assert 0.0 <= c <= 1.0
         m = {
@@ -169,7 +178,7 @@ class GltfBuilder:
                 "metallicFactor": 0.0,
                 "roughnessFactor": 1.0,
             },
-            "doubleSided": False,
+            "doubleSided": bool(double_sided),
         }
         if emission is not None:
             for c in emission:
@@ -185,13 +194,22 @@ class GltfBuilder:
     def mesh_node(self, name, quads, material):
         """One node + one mesh + one primitive holding the given (already oriented) quads."""
         positions = []
-        indices = []
+        triangles = []
         for q in quads:
             base = len(positions)
             positions.extend(q)
             for t in QUAD_TRIS:
-                indices.extend(base + i for i in t)
+                triangles.append(tuple(base + i for i in t))
+        mesh = self.triangle_mesh(name, positions, triangles, material)
+        self.add_node({"name": name, "mesh": mesh})
+
+    def triangle_mesh(self, name, positions, triangles, material, colors=None):
+        """One mesh with one primitive of indexed triangles (already oriented, in the mesh's own
+        frame) and, if given, per-vertex COLOR_0 (float RGB in [0, 1]); returns its index. A node
+        places it (add_node, or a child of one)."""
         assert len(positions) <= 65535
+        indices = [i for t in triangles for i in t]
+        assert all(0 <= i < len(positions) for i in indices)
 
         pos_data = b"".join(struct.pack("<3f", *p) for p in positions)
         idx_data = struct.pack("<%dH" % len(indices), *indices)
@@ -220,13 +238,20 @@ class GltfBuilder:
             }
         )
         idx_acc = len(acc) - 1
+        attributes = {"POSITION": pos_acc}
+        if colors is not None:
+            assert len(colors) == len(positions)
+            assert all(0.0 <= c <= 1.0 for rgb in colors for c in rgb)
+            col_view = self._view(b"".join(struct.pack("<3f", *c) for c in colors), 34962)
+            acc.append({"bufferView": col_view, "componentType": 5126, "count": len(colors), "type": "VEC3"})
+            attributes["COLOR_0"] = len(acc) - 1
 
         self.gltf["meshes"].append(
             {
                 "name": name,
                 "primitives": [
                     {
-                        "attributes": {"POSITION": pos_acc},
+                        "attributes": attributes,
                         "indices": idx_acc,
                         "material": self.material_index[material],
                         "mode": 4,  # TRIANGLES
@@ -234,7 +259,7 @@ class GltfBuilder:
                 ],
             }
         )
-        self.add_node({"name": name, "mesh": len(self.gltf["meshes"]) - 1})
+        return len(self.gltf["meshes"]) - 1
 
     def camera_node(self, node_name, camera_name, yfov, aspect, znear, translation, rotation=None):
         cams = self.gltf.setdefault("cameras", [])
@@ -250,9 +275,14 @@ class GltfBuilder:
             node["rotation"] = [float(c) for c in rotation]
         self.add_node(node)
 
-    def add_node(self, node):
+    def add_node(self, node, root=True):
+        """Appends a node (a dict as glTF writes it); a root of the scene unless root is False
+        (then some node names it among its children). Returns its index."""
         self.gltf["nodes"].append(node)
-        self.gltf["scenes"][0]["nodes"].append(len(self.gltf["nodes"]) - 1)
+        index = len(self.gltf["nodes"]) - 1
+        if root:
+            self.gltf["scenes"][0]["nodes"].append(index)
+        return index
 
     def write(self, path):
         self._align()
@@ -288,7 +318,64 @@ def quat_rotate(q, v):
     return (v[0] + w * t[0] + c[0], v[1] + w * t[1] + c[1], v[2] + w * t[2] + c[2])
 
 
-def load_and_check(path, rules, expect_camera=None, closed_groups=()):
+def mat_mul(a, b):
+    """4x4 matrices as lists of rows."""
+    return [[sum(a[i][k] * b[k][j] for k in range(4)) for j in range(4)] for i in range(4)]
+
+
+def node_matrix(node):
+    """A glTF node's local transform (rows): its matrix (stored column-major), else T * R * S."""
+    if "matrix" in node:
+        m = node["matrix"]
+        return [[m[4 * j + i] for j in range(4)] for i in range(4)]
+    t = node.get("translation", [0.0, 0.0, 0.0])
+    x, y, z, w = node.get("rotation", [0.0, 0.0, 0.0, 1.0])
+    s = node.get("scale", [1.0, 1.0, 1.0])
+    r = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+    return [[r[i][0] * s[0], r[i][1] * s[1], r[i][2] * s[2], t[i]] for i in range(3)] + [[0.0, 0.0, 0.0, 1.0]]
+
+
+def transform_point(m, p):
+    return tuple(m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3] for i in range(3))
+
+
+def det3(m):
+    return (m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]))
+
+
+def axis_quat(axis, degrees):
+    """Unit quaternion (x, y, z, w) of a turn about an axis."""
+    a = unit(axis)
+    h = math.radians(degrees) / 2.0
+    return (a[0] * math.sin(h), a[1] * math.sin(h), a[2] * math.sin(h), math.cos(h))
+
+
+def quat_mul(p, q):
+    """The rotation q, then p."""
+    px, py, pz, pw = p
+    qx, qy, qz, qw = q
+    return (pw * qx + px * qw + py * qz - pz * qy, pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw, pw * qw - px * qx - py * qy - pz * qz)
+
+
+def world_transforms(g, roots):
+    """{node index: world matrix} for every node under the given roots."""
+    out = {}
+    stack = [(i, [[1.0 if i == j else 0.0 for j in range(4)] for i in range(4)]) for i in roots]
+    while stack:
+        index, parent = stack.pop()
+        world = mat_mul(parent, node_matrix(g["nodes"][index]))
+        out[index] = world
+        stack.extend((c, world) for c in g["nodes"][index].get("children", []))
+    return out
+
+
+def load_and_check(path, rules, expect_camera=None, closed_groups=(), double_sided=()):
     """rules: node name -> orientation rule (every mesh node must have one).
     expect_camera: (node name, world position, world view direction, world up).
     closed_groups: lists of node names whose triangles together must form a closed,
@@ -307,7 +394,7 @@ def load_and_check(path, rules, expect_camera=None, closed_groups=()):
     if any(EMISSIVE_EXT in m.get("extensions", {}) for m in g["materials"]):
         assert EMISSIVE_EXT in g.get("extensionsUsed", [])
     for m in g["materials"]:
-        assert m.get("doubleSided", False) is False
+        assert m.get("doubleSided", False) is (m["name"] in double_sided), m["name"]
         for c in m["pbrMetallicRoughness"]["baseColorFactor"]:
             assert 0.0 <= c <= 1.0, (m["name"], c)
         for c in m.get("emissiveFactor", [0, 0, 0]):
@@ -330,24 +417,40 @@ def load_and_check(path, rules, expect_camera=None, closed_groups=()):
             return list(struct.unpack_from("<%dH" % a["count"], blob, start))
         raise AssertionError("unexpected accessor %r" % a)
 
+    def read_colors(i):
+        a = g["accessors"][i]
+        v = g["bufferViews"][a["bufferView"]]
+        start = v.get("byteOffset", 0) + a.get("byteOffset", 0)
+        assert a["componentType"] == 5126 and a["type"] == "VEC3" and v["byteLength"] >= 12 * a["count"]
+        flat = struct.unpack_from("<%df" % (3 * a["count"]), blob, start)
+        assert all(0.0 <= c <= 1.0 for c in flat)
+        return a["count"]
+
     scene_nodes = g["scenes"][g["scene"]]["nodes"]
+    world = world_transforms(g, scene_nodes)
     tris_by_node = {}
-    for ni in scene_nodes:
+    for ni in sorted(world):
         node = g["nodes"][ni]
         if "mesh" not in node:
             continue
-        # mesh nodes carry no transform: local = world
-        assert not any(k in node for k in ("matrix", "translation", "rotation", "scale", "children"))
+        # World positions; a mirroring transform (negative determinant) turns the winding over
+        # (glTF 2.0, 3.7.2.1), so the front is then the clockwise side: swap to compare.
+        m = world[ni]
+        mirrored = det3(m) < 0.0
         name = node["name"]
         assert name in rules, "no orientation rule for node %r" % name
         tris = []
         for prim in g["meshes"][node["mesh"]]["primitives"]:
             assert prim.get("mode", 4) == 4
-            pos = read_accessor(prim["attributes"]["POSITION"])
+            pos = [transform_point(m, p) for p in read_accessor(prim["attributes"]["POSITION"])]
+            if "COLOR_0" in prim["attributes"]:
+                assert read_colors(prim["attributes"]["COLOR_0"]) == len(pos)
             idx = read_accessor(prim["indices"])
             assert len(idx) % 3 == 0 and all(0 <= i < len(pos) for i in idx)
             for k in range(0, len(idx), 3):
                 a, b, c = (pos[idx[k]], pos[idx[k + 1]], pos[idx[k + 2]])
+                if mirrored:
+                    b, c = c, b
                 n = tri_normal(a, b, c)
                 assert check_rule(rules[name], n, mean([a, b, c])), (
                     "%s: triangle %d of node %r faces the wrong way (normal %r)" % (path, k // 3, name, n)
@@ -356,7 +459,11 @@ def load_and_check(path, rules, expect_camera=None, closed_groups=()):
         tris_by_node[name] = tris
     assert set(tris_by_node) == set(rules), (sorted(tris_by_node), sorted(rules))
 
-    for group in closed_groups:
+    outward = [(name,) for name, rule in rules.items() if rule[0] == "closed_outward"]
+    for name, in outward:
+        volume = sum(dot(t[0], cross(t[1], t[2])) for t in tris_by_node[name]) / 6.0
+        assert volume > 0.0, "%s: node %r does not face out (enclosed volume %r)" % (path, name, volume)
+    for group in list(closed_groups) + outward:
         edges = {}
         for name in group:
             for t in tris_by_node[name]:
@@ -658,11 +765,321 @@ def make_empty_room(path):
     load_and_check(path, rules, expect_camera=("camera", cam_pos, (0, 0, -1), (0, 1, 0)))
 
 
+# --------------------------------------------------------------------------------------
+# Real-shaped scenes (issue 20): curved double-sided meshes under nested node transforms, as
+# Blender and Sketchfab export them. Meshes are triangle lists in their own frame, placed by
+# nodes; every triangle is wound by a rule and checked again in world space after loading.
+# --------------------------------------------------------------------------------------
+
+
+def orient_triangle(positions, tri, rule):
+    """tri (3 indices), reversed if needed so its front obeys `rule` (in the mesh's frame)."""
+    a, b, c = (positions[i] for i in tri)
+    if check_rule(rule, tri_normal(a, b, c), mean([a, b, c])):
+        return tuple(tri)
+    flipped = (tri[0], tri[2], tri[1])
+    assert check_rule(rule, tri_normal(*(positions[i] for i in flipped)), mean([a, b, c]))
+    return flipped
+
+
+def cylinder_mesh(segments, stacks):
+    """Radius 1, along y from -1 to 1: `stacks` bands of `segments` side quads (2 triangles
+    each) and two caps fanned from a centre vertex (`segments` triangles each), facing out."""
+    positions = []
+    for k in range(stacks + 1):
+        y = -1.0 + 2.0 * k / stacks
+        for j in range(segments):
+            a = 2.0 * math.pi * j / segments
+            positions.append((math.cos(a), y, math.sin(a)))
+
+    def at(k, j):
+        return k * segments + j % segments
+
+    triangles = []
+    for k in range(stacks):
+        for j in range(segments):
+            quad = (at(k, j), at(k, j + 1), at(k + 1, j + 1), at(k + 1, j))
+            for t in QUAD_TRIS:
+                tri = tuple(quad[i] for i in t)
+                y = mean([positions[i] for i in tri])[1]
+                triangles.append(orient_triangle(positions, tri, faces_away_from((0.0, y, 0.0))))
+    for k, y in ((0, -1.0), (stacks, 1.0)):
+        centre = len(positions)
+        positions.append((0.0, y, 0.0))
+        for j in range(segments):
+            triangles.append(orient_triangle(positions, (centre, at(k, j), at(k, j + 1)), faces_direction((0.0, y, 0.0))))
+    return positions, triangles
+
+
+def sphere_mesh(segments, rings):
+    """Unit UV sphere, poles on y, polar bands fanned from the poles, facing out."""
+    positions = [(0.0, 1.0, 0.0)]
+    for b in range(1, rings):
+        theta = math.pi * b / rings
+        for j in range(segments):
+            phi = 2.0 * math.pi * j / segments
+            positions.append((math.sin(theta) * math.cos(phi), math.cos(theta), math.sin(theta) * math.sin(phi)))
+    positions.append((0.0, -1.0, 0.0))
+    south = len(positions) - 1
+
+    def at(b, j):
+        return 1 + (b - 1) * segments + j % segments
+
+    out = faces_away_from((0.0, 0.0, 0.0))
+    triangles = []
+    for j in range(segments):
+        triangles.append(orient_triangle(positions, (0, at(1, j), at(1, j + 1)), out))
+        for b in range(1, rings - 1):
+            quad = (at(b, j), at(b, j + 1), at(b + 1, j + 1), at(b + 1, j))
+            for t in QUAD_TRIS:
+                triangles.append(orient_triangle(positions, tuple(quad[i] for i in t), out))
+        triangles.append(orient_triangle(positions, (at(rings - 1, j), at(rings - 1, j + 1), south), out))
+    return positions, triangles
+
+
+def torus_mesh(major, minor, tube):
+    """A torus about y, tube centre radius 1, tube radius `tube`, facing out of the tube; the
+    vertex (i, j) is at index i * minor + j (i around y, j around the tube)."""
+    positions = []
+    for i in range(major):
+        u = 2.0 * math.pi * i / major
+        for j in range(minor):
+            v = 2.0 * math.pi * j / minor
+            r = 1.0 + tube * math.cos(v)
+            positions.append((r * math.cos(u), tube * math.sin(v), r * math.sin(u)))
+
+    def at(i, j):
+        return (i % major) * minor + j % minor
+
+    triangles = []
+    for i in range(major):
+        u = 2.0 * math.pi * (i + 0.5) / major
+        core = (math.cos(u), 0.0, math.sin(u))  # the tube's centre line at this quad
+        for j in range(minor):
+            quad = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1))
+            for t in QUAD_TRIS:
+                triangles.append(orient_triangle(positions, tuple(quad[k] for k in t), faces_away_from(core)))
+    return positions, triangles
+
+
+def look_at_quat(eye, target):
+    """The rotation (x, y, z, w) of a glTF camera at `eye` (looking down its local -Z, +Y up)
+    that looks at `target` with world +Y up."""
+    d = unit(sub(target, eye))
+    x = unit(cross(d, (0.0, 1.0, 0.0)))
+    y = cross(x, d)
+    z = (-d[0], -d[1], -d[2])
+    m = [[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]]  # columns: the camera's axes
+    w = math.sqrt(max(0.0, 1.0 + m[0][0] + m[1][1] + m[2][2])) / 2.0
+    assert w > 0.1, "look_at_quat: a turn near 180 degrees"
+    return ((m[2][1] - m[1][2]) / (4 * w), (m[0][2] - m[2][0]) / (4 * w), (m[1][0] - m[0][1]) / (4 * w), w)
+
+
+def place(m, positions):
+    return [transform_point(m, p) for p in positions]
+
+
+def add_shell(b, rules, floor_material, wall_material, inside):
+    """The closed room's six inward-facing walls, a node each."""
+    hx, hz = ROOM_X / 2.0, ROOM_Z / 2.0
+    shell = box_faces(-hx, hx, 0.0, ROOM_Y, -hz, hz)
+    for name in ("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west"):
+        rules[name] = faces_towards(inside)
+        b.mesh_node(name, [orient_quad(shell[name], rules[name])], floor_material if name == "floor" else wall_material)
+    return ("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west")
+
+
+def assert_inside_room(points, clearance):
+    hx, hz = ROOM_X / 2.0, ROOM_Z / 2.0
+    for p in points:
+        assert -hx + clearance < p[0] < hx - clearance and clearance < p[1] < ROOM_Y - clearance, p
+        assert -hz + clearance < p[2] < hz - clearance, p
+
+
+# The cylinder lamp: 28 segments, 2 stacks of side quads and two centre-fan caps: 112 + 56 = 168
+# triangles; radius 0.15 m and 0.7 m long once its node scales it.
+CYLINDER_SEGMENTS, CYLINDER_STACKS = 28, 2
+CYLINDER_RADIUS, CYLINDER_HALF_LENGTH = 0.15, 0.35
+CYLINDER_MOUNT = {"translation": [0.3, 1.3, -0.4], "rotation": list(quat_mul(axis_quat((0, 1, 0), 25.0),
+                                                                            axis_quat((0, 0, 1), 35.0)))}
+CYLINDER_NODE = {"rotation": list(axis_quat((1, 0, 0), 15.0)),
+                 "scale": [CYLINDER_RADIUS, CYLINDER_HALF_LENGTH, CYLINDER_RADIUS]}
+
+
+def make_double_sided_cylinder(path):
+    """A 168-triangle double-sided emissive cylinder under a rotated parent and a rotated and
+    scaled node, in the closed room, everything grey (rho 0.5)."""
+    inside = (0.0, ROOM_Y / 2.0, 0.0)
+    b = GltfBuilder(
+        {
+            "title": "Double-sided cylinder lamp",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres",
+            "layout": "the closed room (4 x 2.5 x 5 m, x in [-2, 2], y in [0, 2.5], z in [-2.5, 2.5]), "
+                      "every surface grey (reflectance 0.5)",
+            "lamp": "a 28-segment cylinder (168 triangles: 2 stacks of side quads, centre-fan caps), radius "
+                    "0.15 m, 0.7 m long, doubleSided, emission white x strength 5, reflectance 0.5; node "
+                    "'cylinder' (turned 15 degrees about x, scaled 0.15, 0.35, 0.15) under 'lamp_mount' "
+                    "(at (0.3, 1.3, -0.4), turned 35 degrees about z then 25 about y)",
+            "purpose": "the configuration that crashed hemirad (stack overflow in point_to_polygon); in a "
+                       "closed grey room the flux balance gives the sum of irradiance x area exactly",
+        }
+    )
+    b.material("grey", (0.5, 0.5, 0.5))
+    b.material("lamp", (0.5, 0.5, 0.5), emission=(1.0, 1.0, 1.0), strength=5.0, double_sided=True)
+    rules = {}
+    shell = add_shell(b, rules, "grey", "grey", inside)
+
+    positions, triangles = cylinder_mesh(CYLINDER_SEGMENTS, CYLINDER_STACKS)
+    assert len(triangles) == 168
+    mesh = b.triangle_mesh("cylinder", positions, triangles, "lamp")
+    child = b.add_node(dict(name="cylinder", mesh=mesh, **CYLINDER_NODE), root=False)
+    b.add_node(dict(name="lamp_mount", children=[child], **CYLINDER_MOUNT))
+    m = mat_mul(node_matrix(CYLINDER_MOUNT), node_matrix(CYLINDER_NODE))
+    assert_inside_room(place(m, positions), 0.2)
+    rules["cylinder"] = faces_away_from(transform_point(m, (0.0, 0.0, 0.0)))
+
+    cam_pos = (0.0, 1.4, ROOM_Z / 2.0 - 0.2)
+    b.camera_node("camera", "room", 1.0, 4.0 / 3.0, 0.01, cam_pos)
+    b.write(path)
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, (0, 0, -1), (0, 1, 0)),
+                   closed_groups=[shell, ("cylinder",)], double_sided=("lamp",))
+
+
+# The lamp facing the sky: a 0.5 m square lamp 1 m above a 4 m square floor, nothing else.
+SKY_FLOOR_HALF, SKY_LAMP_HALF, SKY_LAMP_HEIGHT, SKY_LAMP_GAP = 2.0, 0.25, 1.0, 0.001
+SKY_LAMP_DIM, SKY_LAMP_BRIGHT = 1.0, 10.0
+
+
+def make_lamp_facing_sky(path):
+    """A lamp whose brighter side faces the open sky, above a floor: two one-sided squares back to
+    back, 1 mm apart, the upper facing up (exitance 10), the lower facing the floor (exitance 1),
+    neither reflecting."""
+    f, h, g = SKY_FLOOR_HALF, SKY_LAMP_HALF, SKY_LAMP_GAP
+    b = GltfBuilder(
+        {
+            "title": "Lamp facing the sky",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres",
+            "layout": "a 4 x 4 m floor (y = 0, facing up, reflectance 0.5) and, 1 m above its centre, a "
+                      "0.5 x 0.5 m lamp; no walls, no ceiling: open to the sky",
+            "lamp": "node 'lamp' (at y = 1) holds 'lamp_down' (y = 0, facing the floor, exitance 1) and "
+                    "'lamp_up' (1 mm above it, facing the sky, exitance 10 = emissiveFactor 1 x "
+                    "emissiveStrength 10); both one-sided, reflectance 0",
+            "purpose": "most of the light leaves for the sky; the floor is lit only by the dim side, "
+                       "exactly E * F(point -> lamp) (nothing else reflects onto it)",
+        }
+    )
+    b.material("floor", (0.5, 0.5, 0.5))
+    b.material("lamp_dim", (0.0, 0.0, 0.0), emission=(SKY_LAMP_DIM,) * 3)
+    b.material("lamp_bright", (0.0, 0.0, 0.0), emission=(1.0, 1.0, 1.0), strength=SKY_LAMP_BRIGHT)
+    rules = {
+        "floor": faces_direction((0.0, 1.0, 0.0)),
+        "lamp_down": faces_direction((0.0, -1.0, 0.0)),
+        "lamp_up": faces_direction((0.0, 1.0, 0.0)),
+    }
+    b.mesh_node("floor", [orient_quad([(-f, 0.0, -f), (f, 0.0, -f), (f, 0.0, f), (-f, 0.0, f)], rules["floor"])],
+                "floor")
+    children = []
+    for name, y, material in (("lamp_down", 0.0, "lamp_dim"), ("lamp_up", g, "lamp_bright")):
+        quad = orient_quad([(-h, y, -h), (h, y, -h), (h, y, h), (-h, y, h)], rules[name])
+        mesh = b.triangle_mesh(name, quad, list(QUAD_TRIS), material)
+        children.append(b.add_node({"name": name, "mesh": mesh}, root=False))
+    b.add_node({"name": "lamp", "translation": [0.0, SKY_LAMP_HEIGHT, 0.0], "children": children})
+
+    cam_pos = (0.0, 1.8, 3.2)
+    target = (0.0, 0.4, 0.0)
+    b.camera_node("camera", "side", 1.0, 4.0 / 3.0, 0.01, cam_pos, rotation=look_at_quat(cam_pos, target))
+    b.write(path)
+    d = unit(sub(target, cam_pos))
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, d, cross(unit(cross(d, (0, 1, 0))), d)))
+
+
+# The curved objects: a double-sided, vertex-coloured torus and a one-sided sphere, both under
+# mirroring node chains, in the closed room with its ceiling light.
+TORUS_MAJOR, TORUS_MINOR, TORUS_TUBE, TORUS_SCALE = 24, 12, 0.35, 0.3
+TORUS_COLOURS = ((0.9, 0.35, 0.2), (0.25, 0.5, 0.9))  # a checker of 2 x 2 vertex blocks
+TORUS_RHO = 0.8
+TORUS_STAND = {"rotation": list(axis_quat((0, 1, 0), 30.0)), "scale": [-1.0, 1.0, 1.0]}  # mirrors
+TORUS_TILT = {"rotation": list(axis_quat((1, 0, 0), 70.0))}
+BALL_SEGMENTS, BALL_RINGS, BALL_RADIUS, BALL_RHO = 24, 12, 0.3, 0.6
+BALL_SHELF = {"translation": [-0.8, 0.35, 0.9], "rotation": list(axis_quat((1, 1, 0), 50.0)),
+              "scale": [1.0, -1.0, 1.0]}  # mirrors
+
+
+def make_curved_objects(path):
+    inside = (0.0, ROOM_Y / 2.0, 0.0)
+    b = GltfBuilder(
+        {
+            "title": "Curved objects under mirrored nodes",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres",
+            "layout": "the closed room (4 x 2.5 x 5 m, x in [-2, 2], y in [0, 2.5], z in [-2.5, 2.5]): walls "
+                      "and ceiling reflectance 0.7, floor (0.5, 0.45, 0.4), a 1 x 1 m ceiling light 1 cm below "
+                      "the ceiling, facing down, white emission x strength 10 (reflectance 0.8)",
+            "torus": "24 x 12 segments (576 triangles), tube radius 0.35 of the ring's, doubleSided, reflectance "
+                     "0.8 x COLOR_0, a checker of (0.9, 0.35, 0.2) and (0.25, 0.5, 0.9); node 'torus' (scaled "
+                     "0.3) under 'tilt' (70 degrees about x) under 'stand' (30 degrees about y, mirrored in x), "
+                     "resting 2 cm above the floor",
+            "ball": "a UV sphere (24 x 12), radius 0.3 m, one-sided, reflectance 0.6; node 'ball' (scaled 0.3, "
+                    "turned 20 degrees about z) under 'shelf' (at (-0.8, 0.35, 0.9), 50 degrees about (1, 1, 0), "
+                    "mirrored in y)",
+            "purpose": "mirrored world transforms (negative determinants) must keep every front facing out",
+        }
+    )
+    b.material("wall_grey", (0.7, 0.7, 0.7))
+    b.material("floor", (0.5, 0.45, 0.4))
+    b.material("light", (0.8, 0.8, 0.8), emission=(1.0, 1.0, 1.0), strength=10.0)
+    b.material("ceramic", (TORUS_RHO,) * 3, double_sided=True)
+    b.material("ball_grey", (BALL_RHO,) * 3)
+    rules = {}
+    shell = add_shell(b, rules, "floor", "wall_grey", inside)
+    ly = ROOM_Y - 0.01
+    rules["light"] = faces_direction((0.0, -1.0, 0.0))
+    b.mesh_node("light", [orient_quad([(-0.5, ly, -0.5), (0.5, ly, -0.5), (0.5, ly, 0.5), (-0.5, ly, 0.5)],
+                                      rules["light"])], "light")
+
+    positions, triangles = torus_mesh(TORUS_MAJOR, TORUS_MINOR, TORUS_TUBE)
+    colours = [TORUS_COLOURS[(i // 2 + j // 2) % 2] for i in range(TORUS_MAJOR) for j in range(TORUS_MINOR)]
+    torus = b.triangle_mesh("torus", positions, triangles, "ceramic", colors=colours)
+    torus_node = {"scale": [TORUS_SCALE] * 3}
+    # Stand the torus 2 cm above the floor, at (0.7, z = -0.6).
+    local = mat_mul(mat_mul(node_matrix(TORUS_STAND), node_matrix(TORUS_TILT)), node_matrix(torus_node))
+    lift = 0.02 - min(p[1] for p in place(local, positions))
+    stand = dict(TORUS_STAND, translation=[0.7, lift, -0.6])
+    m = mat_mul(mat_mul(node_matrix(stand), node_matrix(TORUS_TILT)), node_matrix(torus_node))
+    assert det3(m) < 0.0
+    assert_inside_room(place(m, positions), 0.019)
+    t = b.add_node(dict(name="torus", mesh=torus, **torus_node), root=False)
+    tilt = b.add_node(dict(name="tilt", children=[t], **TORUS_TILT), root=False)
+    b.add_node(dict(name="stand", children=[tilt], **stand))
+    rules["torus"] = closed_outward()
+
+    positions, triangles = sphere_mesh(BALL_SEGMENTS, BALL_RINGS)
+    ball = b.triangle_mesh("ball", positions, triangles, "ball_grey")
+    ball_node = {"rotation": list(axis_quat((0, 0, 1), 20.0)), "scale": [BALL_RADIUS] * 3}
+    m = mat_mul(node_matrix(BALL_SHELF), node_matrix(ball_node))
+    assert det3(m) < 0.0
+    assert_inside_room(place(m, positions), 0.04)
+    child = b.add_node(dict(name="ball", mesh=ball, **ball_node), root=False)
+    b.add_node(dict(name="shelf", children=[child], **BALL_SHELF))
+    rules["ball"] = faces_away_from(transform_point(m, (0.0, 0.0, 0.0)))
+
+    cam_pos = (0.0, 1.4, ROOM_Z / 2.0 - 0.2)
+    b.camera_node("camera", "room", 1.0, 4.0 / 3.0, 0.01, cam_pos)
+    b.write(path)
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, (0, 0, -1), (0, 1, 0)),
+                   closed_groups=[shell, ("ball",)], double_sided=("ceramic",))
+
+
 def main():
     for name, make in (
         ("cornell_box.gltf", make_cornell),
         ("closed_room.gltf", make_room),
         ("empty_room.gltf", make_empty_room),
+        ("double_sided_cylinder.gltf", make_double_sided_cylinder),
+        ("lamp_facing_sky.gltf", make_lamp_facing_sky),
+        ("curved_objects.gltf", make_curved_objects),
     ):
         path = os.path.join(HERE, name)
         make(path)  # writes the file, reads it back and checks it (raises AssertionError on failure)

@@ -12,8 +12,8 @@ packages=(
   catch2 libcli11-dev libfmt-dev
   # The ray-casting peer engine of bench/ (optional in CMake, installed here so CI builds it).
   libembree-dev
-  # tests/fuzz: the loader's libFuzzer target (clang, and the runtime of libFuzzer and the
-  # sanitizers, which clang only recommends).
+  # tests/fuzz: the libFuzzer targets of the loader and the bake (clang, and the runtime of
+  # libFuzzer and the sanitizers, which clang only recommends).
   clang libclang-rt-dev
   # bench/plot.py: PNG plots from the benchmark's JSON.
   python3 python3-matplotlib

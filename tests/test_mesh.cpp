@@ -358,6 +358,33 @@ TEST_CASE("element reflectance interpolates the source triangle's vertex colours
     }
 }
 
+TEST_CASE("a needle triangle a billionth as wide as it is long keeps a finite reflectance", "[mesh]") {
+    // Kept by the mesher (its area is 5e-10 of its longest edge squared, above the 1e-12 cut), a
+    // needle used to get NaN barycentric weights, a NaN reflectance, and a bake that failed with
+    // "the solution has a non-finite value" (found by the random-scene fuzzer). Its elements'
+    // reflectance must interpolate its corners': within their range, and red at the red end.
+    for (const double width : {1e-9, 1e-7, 1e-11}) {
+        CAPTURE(width);
+        Triangle t = tri({0, 0, 0}, {1, 0, 0}, {1, width, 0});
+        t.rho = {dvec3(0.9, 0.1, 0.1), dvec3(0.1, 0.9, 0.1), dvec3(0.1, 0.1, 0.9)};
+        const Mesh m = build(scene_of({t}), {0.25, 0.125});
+        REQUIRE(m.dropped_triangles == 0);
+        REQUIRE(!m.elements.empty());
+        const Element* nearest = nullptr;
+        for (const Element& e : m.elements) {
+            for (int c = 0; c < 3; ++c) {
+                CHECK(std::isfinite(e.rho[c]));
+                CHECK(e.rho[c] >= 0.1 - 1e-12);
+                CHECK(e.rho[c] <= 0.9 + 1e-12);
+            }
+            if (!nearest || e.centroid.x < nearest->centroid.x) nearest = &e;
+        }
+        // The element at the red corner (x = 0) is redder than green or blue.
+        CHECK(nearest->rho.x > nearest->rho.y);
+        CHECK(nearest->rho.x > nearest->rho.z);
+    }
+}
+
 TEST_CASE("attributes: emission, indices, node and material, trapezoid area centroid", "[mesh]") {
     Material dark;
     Material lamp;

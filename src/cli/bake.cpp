@@ -15,6 +15,7 @@
 #include <fstream>
 #include <functional>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <system_error>
 #include <vector>
@@ -69,6 +70,35 @@ private:
     formfactor::Engine& inner_;
     double seconds_ = 0.0;
 };
+
+// Shows every shot of the engine it wraps to an observer (BakeOptions::on_shot).
+class ObservedEngine final : public formfactor::Engine {
+public:
+    using Observer = std::function<void(const formfactor::ShotResult&)>;
+    ObservedEngine(std::unique_ptr<formfactor::Engine> inner, Observer observer)
+        : inner_(std::move(inner)), observer_(std::move(observer)) {}
+    std::string name() const override { return inner_->name(); }
+    void shoot(std::uint32_t patch, std::uint64_t shot, formfactor::ShotResult& out) override {
+        inner_->shoot(patch, shot, out);
+        observer_(out);
+    }
+    void shoot_batch(const std::vector<formfactor::ShotRequest>& shots,
+                     std::vector<formfactor::ShotResult>& out) override {
+        inner_->shoot_batch(shots, out);
+        for (const formfactor::ShotResult& r : out) observer_(r);
+    }
+    const std::vector<std::int32_t>* last_ids(std::size_t i) const override { return inner_->last_ids(i); }
+
+private:
+    std::unique_ptr<formfactor::Engine> inner_;
+    Observer observer_;
+};
+
+std::unique_ptr<formfactor::Engine> observed(std::unique_ptr<formfactor::Engine> engine,
+                                             const ObservedEngine::Observer& observer) {
+    if (!observer) return engine;
+    return std::make_unique<ObservedEngine>(std::move(engine), observer);
+}
 
 // A bake stages its files in DIR/.hemirad-tmp-<pid> until all of them exist.
 constexpr char kStagingPrefix[] = ".hemirad-tmp-";
@@ -554,10 +584,10 @@ void run_bake(const BakeOptions& options) {
     // A refined mesh's engine raises the hemicube's resolution with the level, so that children
     // cover as many cells as their parents did.
     const auto make_engine = [&](const mesh::Mesh& m, int level) -> std::unique_ptr<formfactor::Engine> {
-        if (!plan.occlusion.on) return std::make_unique<formfactor::UnoccludedEngine>(m);
+        if (!plan.occlusion.on) return observed(std::make_unique<formfactor::UnoccludedEngine>(m), o.on_shot);
         formfactor::Settings s = ff_settings;
         s.hemicube = solve::regather_hemicube(ff_settings.hemicube, level);
-        return std::make_unique<formfactor::NearFieldEngine>(m, engine_like(choice, m, s));
+        return observed(std::make_unique<formfactor::NearFieldEngine>(m, engine_like(choice, m, s)), o.on_shot);
     };
 
     // A checkpoint resumes only the bake it was made by: the same mesh and the settings that
@@ -597,8 +627,9 @@ void run_bake(const BakeOptions& options) {
     const auto solve_and_refine = [&] {
         if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({}), {} solver\n", choice.id, choice.name, solver_name);
         std::unique_ptr<formfactor::Engine> base_engine =
-            plan.occlusion.on ? std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice.engine))
-                              : make_engine(mesh, 0);
+            plan.occlusion.on
+                ? observed(std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice.engine)), o.on_shot)
+                : make_engine(mesh, 0);
         TimedEngine engine(*base_engine);
 
         t0 = Clock::now();

@@ -3,11 +3,16 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <ostream>
 #include <stdexcept>
 #include <string>
 
 #include "core/quality.h"
+
+namespace hemirad::formfactor {
+struct ShotResult;
+}
 
 namespace hemirad::cli {
 
@@ -42,6 +47,9 @@ struct BakeOptions {
     bool quiet = false;
     bool progress = false;                       // draw a progress line (a TTY and not --quiet)
     const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT, SIGTERM or SIGHUP
+    // Called with every shot the solve and refinement's re-gather take, as the solver sees it
+    // (near-field corrected), so tests and the fuzzer can check what the engines return.
+    std::function<void(const formfactor::ShotResult&)> on_shot;
 };
 
 // Thrown when the user interrupts a bake; nothing has been written (or it was removed).

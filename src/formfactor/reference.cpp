@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "formfactor/clip.h"
+#include "hemicube_types.h"
 
 namespace hemirad::formfactor {
 namespace {
@@ -82,6 +83,9 @@ ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& setting
     depth_.assign(delta_.cells(), 0.0);
     owner_.assign(delta_.cells(), -1);
     back_.assign(delta_.cells(), 0);
+    fixed_.resize(delta_.cells());
+    for (std::size_t c = 0; c < fixed_.size(); ++c)
+        fixed_[c] = static_cast<std::int64_t>(std::llround(std::ldexp(delta_.table()[c], HR_FIXED_SHIFT)));
 }
 
 void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
@@ -182,20 +186,28 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
         }
     }
 
-    out.F.assign(mesh_.elements.size(), 0.0);
-    out.blocked = 0.0;
-    const auto& table = delta_.table();
+    // The cells' delta form factors are summed in 64-bit fixed point, the layout header's unit, as
+    // the kernels sum them: integer addition does not depend on the order, so an engine that gives
+    // the same cells gives the same form factors, bit for bit. (Summed in double precision they
+    // differed in the last bits, and the progressive solver's pick between two patches of nearly
+    // equal flux, as a symmetric scene has, turned that into a different bake.)
+    const std::size_t elements = mesh_.elements.size();
+    sums_.assign(elements + 1, 0);
     for (std::size_t cell = 0; cell < owner_.size(); ++cell) {
         if (owner_[cell] < 0) {
             ids_[cell] = kEmpty;
         } else if (back_[cell]) {
             ids_[cell] = kBlocker;
-            out.blocked += table[cell];
+            sums_[elements] += fixed_[cell];
         } else {
             ids_[cell] = owner_[cell];
-            out.F[static_cast<std::size_t>(owner_[cell])] += table[cell];
+            sums_[static_cast<std::size_t>(owner_[cell])] += fixed_[cell];
         }
     }
+    const double unit = std::ldexp(1.0, -HR_FIXED_SHIFT);
+    out.F.resize(elements);
+    for (std::size_t k = 0; k < elements; ++k) out.F[k] = static_cast<double>(sums_[k]) * unit;
+    out.blocked = static_cast<double>(sums_[elements]) * unit;
 }
 
 }  // namespace hemirad::formfactor

@@ -43,6 +43,8 @@ private:
     std::vector<double> depth_;          // 1/d per cell, larger is nearer
     std::vector<std::int32_t> owner_;    // winning element per cell, −1 for none
     std::vector<char> back_;             // the winner is the back of a one-sided surface
+    std::vector<std::int64_t> fixed_;    // per cell, its delta form factor in 2^-HR_FIXED_SHIFT units
+    std::vector<std::int64_t> sums_;     // per element, then blocked: a shot's sums in those units
     std::size_t last_batch_ = 1;         // shots in the last batch: ids_ is its last
 
     bool above_base_plane(const mesh::Polygon& poly, const Frame& frame) const;

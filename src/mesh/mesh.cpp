@@ -296,14 +296,16 @@ std::vector<PatchCells> face_cells(const Grid& grid) {
     return cells;
 }
 
-// Barycentric coordinates of p (in the triangle's plane) with respect to triangle t.
+// Barycentric coordinates of p (in the triangle's plane) with respect to triangle t, as ratios
+// of cross products with the triangle's normal. (The Gram determinant d00·d11 − d01² that the
+// textbook formula divides by cancels to nothing, or below zero, for a needle a billionth as
+// wide as it is long, which the mesher keeps: its weights came out NaN.)
 dvec3 barycentric(const scene::Triangle& t, const dvec3& p) {
     const dvec3 e0 = t.p[1] - t.p[0], e1 = t.p[2] - t.p[0], e2 = p - t.p[0];
-    const double d00 = glm::dot(e0, e0), d01 = glm::dot(e0, e1), d11 = glm::dot(e1, e1);
-    const double d20 = glm::dot(e2, e0), d21 = glm::dot(e2, e1);
-    const double denom = d00 * d11 - d01 * d01;
-    const double v = (d11 * d20 - d01 * d21) / denom;
-    const double w = (d00 * d21 - d01 * d20) / denom;
+    const dvec3 n = glm::cross(e0, e1);
+    const double denom = glm::dot(n, n);
+    const double v = glm::dot(glm::cross(e2, e1), n) / denom;
+    const double w = glm::dot(glm::cross(e0, e2), n) / denom;
     return {1.0 - v - w, v, w};
 }
 
@@ -320,7 +322,10 @@ dvec3 rho_at(const Face& face, const dvec3& p) {
         }
     }
     w = glm::max(w, dvec3(0.0));
-    w /= (w.x + w.y + w.z);
+    const double total = w.x + w.y + w.z;
+    // Any weights that are not a convex combination (a point triangle, an overflow) give the
+    // vertices' mean: a reflectance must stay within the vertices' range, and finite.
+    w = total > 0.0 && std::isfinite(total) ? w / total : dvec3(1.0 / 3.0);
     return w.x * best->rho[0] + w.y * best->rho[1] + w.z * best->rho[2];
 }
 
