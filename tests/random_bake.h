@@ -178,7 +178,7 @@ inline void find_non_finite(const nlohmann::json& j, const std::string& where, s
 // The invariants of a finished bake in `out`: the five files; report.json's numbers finite; the
 // flux books balanced (emitted = absorbed + escaped + unshot to 1e-6 of emitted, each term
 // finite, emitted > 0, absorbed and escaped >= 0); a converged progressive solve below its
-// threshold, in its measure and in the unshot share of the flux; every mesh's radiosity and irradiance >= 0; baked.gltf loads (with hemirad's own
+// threshold; every mesh's radiosity and irradiance >= 0; baked.gltf loads (with hemirad's own
 // loader too) and its COLOR_0 is finite and >= 0.
 inline std::vector<std::string> check_bake_output(const std::filesystem::path& out) {
     namespace fs = std::filesystem;
@@ -201,14 +201,16 @@ inline std::vector<std::string> check_bake_output(const std::filesystem::path& o
         problems.push_back(fmt::format("the books do not balance: emitted {:.17g}, absorbed {:.17g} + escaped {:.17g} "
                                        "+ unshot {:.17g} = {:.17g}",
                                        emitted, absorbed, escaped, unshot, absorbed + escaped + unshot));
-    // A progressive solve converges only once what is left unshot is below the threshold (its
-    // measure, and the share of the emitted flux still unshot).
+    // A progressive solve converges only once its measure of what the unshot light can still
+    // change is below the threshold. (Not the unshot share of the emitted flux itself: light a
+    // patch will send to the sky, or the flux of a closed ρ = 0.999 room that a verified ambient
+    // term already stands for, may stay unshot; test_solver checks each rule on known answers.)
     const nlohmann::json& settings = report.at("settings");
     const double threshold = settings.at("threshold");
     if (settings.at("solver") == "progressive" && report.at("converged").get<bool>() &&
-        !(report.at("error").get<double>() <= threshold && e.at("unshot_fraction").get<double>() <= threshold))
-        problems.push_back(fmt::format("converged at error {} with {} of the flux unshot, above the threshold {}",
-                                       report.at("error").dump(), e.at("unshot_fraction").dump(), threshold));
+        !(report.at("error").get<double>() <= threshold))
+        problems.push_back(fmt::format("converged at error {}, above the threshold {}", report.at("error").dump(),
+                                       threshold));
     for (const nlohmann::json& m : report.at("meshes"))
         for (const char* key : {"radiosity", "irradiance"})
             for (const nlohmann::json& v : m.at(key))

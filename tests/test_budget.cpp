@@ -83,7 +83,7 @@ TEST_CASE("budget: a bake that cannot fit is refused before it starts, naming th
                     "--refine-levels", "0", "--max-memory", "600M"},
                    out, "--solver progressive would need about");
     // Malformed limits.
-    for (const std::string bad : {"lots", "-5G", "nanG", "0", "12Q"})
+    for (const std::string bad : {"lots", "-5G", "nanG", "inf", "0x10G", "0", "12Q", "1e999"})
         expect_refused(dir, {"bake", kCornellBox.string(), "-o", out.string(), "--max-memory", bad}, out,
                        "--max-memory " + bad + ":");
 }

@@ -346,6 +346,7 @@ struct Solution {
     double error = 0.0;
     double unshot_fraction = 0.0;
     int iterations = 0;  // Gauss–Seidel sweeps (matrix)
+    std::string convergence_rule;  // what "converged" rests on
     long resumed_from = -1;  // the passes or rows a --resume started from
 };
 
@@ -393,6 +394,7 @@ Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, c
     solution.error = solver.error_bound();
     solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
     solution.iterations = solver.iterations();
+    if (solution.converged) solution.convergence_rule = "error bound";
     return solution;
 }
 
@@ -435,6 +437,7 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
     solution.converged = solver.converged();
     solution.error = solver.error();
     solution.unshot_fraction = solver.unshot_fraction();
+    solution.convergence_rule = solver.convergence_rule();
     return solution;
 }
 
@@ -772,6 +775,7 @@ void run_bake(const BakeOptions& options) {
     report["passes"] = solution.passes;
     if (solution.resumed_from >= 0) report["resumed_from_pass"] = solution.resumed_from;
     report["converged"] = solution.converged;
+    if (solution.converged) report["converged_by"] = solution.convergence_rule;
     report["error"] = solution.error;
     if (solver_name == "matrix") report["iterations"] = solution.iterations;
     report["energy"] = {{"emitted", energy.emitted},

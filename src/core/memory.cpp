@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
+#include <regex>
 #include <sstream>
 #include <stdexcept>
 
@@ -66,14 +68,12 @@ std::string format_bytes(double bytes) {
 }
 
 double parse_bytes(const std::string& text) {
-    std::size_t used = 0;
-    double value = 0.0;
-    try {
-        value = std::stod(text, &used);
-    } catch (const std::exception&) {
-        throw std::invalid_argument("expected a size such as 8G, 512M or 1e9 (bytes)");
-    }
-    std::string unit = text.substr(used);
+    // A plain decimal number (digits, a point, an exponent: no sign, hex, nan or inf), then a unit.
+    static const std::regex kSize(R"(((?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)([A-Za-z]*))");
+    std::smatch match;
+    if (!std::regex_match(text, match, kSize)) throw std::invalid_argument("expected a size such as 8G, 512M or 1e9 (bytes)");
+    const double value = std::strtod(match[1].str().c_str(), nullptr);  // overflow gives inf, refused below
+    std::string unit = match[2].str();
     for (char& c : unit) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
     double scale = 0.0;
     if (unit.empty() || unit == "B") scale = 1.0;
@@ -83,7 +83,7 @@ double parse_bytes(const std::string& text) {
         if (unit == p || unit == p + "B") scale = std::pow(1e3, i + 1);
         if (unit == p + "IB" || unit == p + "I") scale = std::pow(1024.0, i + 1);
     }
-    if (scale == 0.0) throw std::invalid_argument("unknown unit '" + text.substr(used) + "' (K, M, G, T or KiB, MiB, GiB, TiB)");
+    if (scale == 0.0) throw std::invalid_argument("unknown unit '" + match[2].str() + "' (K, M, G, T or KiB, MiB, GiB, TiB)");
     const double bytes = value * scale;
     if (!std::isfinite(bytes) || !(bytes > 0.0)) throw std::invalid_argument("the size must be positive and finite");
     return bytes;

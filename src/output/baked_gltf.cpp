@@ -2,32 +2,17 @@
 #include <fmt/format.h>
 #include <tiny_gltf.h>
 
-#include <cstring>
 #include <system_error>
 
 #include "core/error.h"
 #include "output/output.h"
 #include "output/welded_mesh.h"
+#include "scene/gltf_views.h"
 
 namespace hemirad::output {
 namespace {
 
 namespace fs = std::filesystem;
-
-// Appends `size` bytes to buffer 0 and a bufferView over them; returns the view's index.
-// Every element type here is 4 bytes wide, so views stay 4-byte aligned as glTF requires.
-int add_view(tinygltf::Model& model, const void* data, std::size_t size, int target) {
-    std::vector<unsigned char>& bytes = model.buffers[0].data;
-    tinygltf::BufferView view;
-    view.buffer = 0;
-    view.byteOffset = bytes.size();
-    view.byteLength = size;
-    view.target = target;
-    bytes.resize(bytes.size() + size);
-    std::memcpy(bytes.data() + view.byteOffset, data, size);
-    model.bufferViews.push_back(view);
-    return static_cast<int>(model.bufferViews.size() - 1);
-}
 
 // A float VEC3 accessor over `values`; POSITION must carry min/max (glTF 2.0 §5.1.1).
 int add_vec3(tinygltf::Model& model, const std::vector<glm::dvec3>& values, bool unit_length, bool with_bounds) {
@@ -38,7 +23,7 @@ int add_vec3(tinygltf::Model& model, const std::vector<glm::dvec3>& values, bool
     }
     tinygltf::Accessor accessor;
     accessor.bufferView =
-        add_view(model, floats.data(), floats.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
+        scene::append_view(model, floats.data(), floats.size() * sizeof(glm::vec3), TINYGLTF_TARGET_ARRAY_BUFFER);
     accessor.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
     accessor.type = TINYGLTF_TYPE_VEC3;
     accessor.count = floats.size();
@@ -58,7 +43,7 @@ int add_vec3(tinygltf::Model& model, const std::vector<glm::dvec3>& values, bool
 int add_indices(tinygltf::Model& model, const std::vector<std::uint32_t>& indices) {
     tinygltf::Accessor accessor;
     accessor.bufferView =
-        add_view(model, indices.data(), indices.size() * sizeof(std::uint32_t), TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
+        scene::append_view(model, indices.data(), indices.size() * sizeof(std::uint32_t), TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
     accessor.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
     accessor.type = TINYGLTF_TYPE_SCALAR;
     accessor.count = indices.size();

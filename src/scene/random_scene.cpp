@@ -17,6 +17,7 @@
 #include <utility>
 
 #include "core/rng.h"
+#include "scene/gltf_views.h"
 
 namespace hemirad::scene {
 
@@ -381,19 +382,7 @@ struct Writer {
         model.buffers.emplace_back();
     }
 
-    int view(const void* data, std::size_t size, int target) {
-        std::vector<unsigned char>& bytes = model.buffers[0].data;
-        while (bytes.size() % 4) bytes.push_back(0);
-        tinygltf::BufferView v;
-        v.buffer = 0;
-        v.byteOffset = bytes.size();
-        v.byteLength = size;
-        v.target = target;
-        bytes.resize(bytes.size() + size);
-        if (size > 0) std::memcpy(bytes.data() + v.byteOffset, data, size);
-        model.bufferViews.push_back(v);
-        return int(model.bufferViews.size() - 1);
-    }
+    int view(const void* data, std::size_t size, int target) { return append_view(model, data, size, target); }
 
     int accessor(int view_index, int component, int type, std::size_t count, bool normalized = false) {
         tinygltf::Accessor a;

@@ -185,6 +185,12 @@ double Progressive::ambient_share() const {
     return share;
 }
 
+std::string Progressive::convergence_rule() const {
+    if (!converged_) return "";
+    if (sum(unshot_total()) <= 0.0 || ambient_share() <= settings_.threshold) return "unshot light";
+    return "a round without change";
+}
+
 double Progressive::unshot_fraction() const {
     const glm::dvec3 unshot_flux = unshot_total();
     const double emitted = mean(emitted_);

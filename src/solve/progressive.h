@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <istream>
 #include <ostream>
+#include <string>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -59,6 +60,9 @@ public:
     // left more than `threshold` of the unshot flux it started with unshot.
     double round_change() const { return round_change_; }
     double unshot_fraction() const;
+    // Which rule ended the solve: "unshot light" (the ambient share, or nothing left to shoot),
+    // "a round without change", or "" while not converged.
+    std::string convergence_rule() const;
 
     // Radiosity B = E + ρ·H and incident H per element; with `ambient`, the ambient term
     // (the unshot flux spread as if the scene were closed, with the measured reflectance
