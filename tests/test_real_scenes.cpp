@@ -52,6 +52,12 @@ void check_convergence_is_honest(const json& report) {
     CAPTURE(report.at("converged"), report.at("passes"), report.at("energy").at("unshot_fraction"), threshold);
     CHECK(report.at("converged").get<bool>());
     CHECK(report.at("energy").at("unshot_fraction").get<double>() <= threshold);
+    // Which rule ended the solve: the matrix's error bound, or one of the progressive solver's two.
+    const std::string by = report.value("converged_by", "");
+    if (report.at("settings").at("solver") == "matrix")
+        CHECK(by == "error bound");
+    else
+        CHECK((by == "unshot light" || by == "a round without change"));
 }
 
 // Form factor from a point to a parallel rectangle with one corner straight above (or below) it,
