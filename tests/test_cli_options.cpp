@@ -84,6 +84,7 @@ TEST_CASE("options: every number option refuses NaN, Inf, other spellings and va
         {"--patch-size", "0"},        {"--patch-size", "-1"},       {"--patch-size", "0.5m"},
         {"--patch-size", "1,5"},      {"--patch-size", "1e31"},     {"--element-size", "-0.1"},
         {"--threshold", "-0.001"},    {"--threshold", "1.5"},       {"--threshold", "1e-400"},
+        {"--threshold", "0"},
         {"--max-passes", "-1"},       {"--max-passes", "1e3"},      {"--max-passes", "99999999999999999999"},
         {"--batch", "0"},             {"--batch", "257"},           {"--batch", "0x10"},
         {"--seed", "-1"},             {"--seed", "18446744073709551616"}, {"--seed", "1.5"},

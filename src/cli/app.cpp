@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <signal.h>  // sigaction
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -122,9 +123,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "maximum element edge, scene units (default: patch size / the quality's elements a side)")
         ->transform(real_in(0.0, kLargestSize, true));
     bake.add_option("--threshold", o.threshold,
-                    "progressive: stop when the share of final flux not yet placed is below this; matrix: iterate to a "
-                    "residual of min(1e-4, T/100) (default: the quality's)")
-        ->transform(real_in(0.0, 1.0));
+                    "progressive: stop when the share of final flux not yet placed is below this; matrix: iterate until "
+                    "a bound on the error is below min(1e-4, T/100) (default: the quality's; 0 would never stop)")
+        ->transform(real_in(0.0, 1.0, true));
     bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
         ->transform(integer_from(0L))
         ->capture_default_str();
@@ -263,8 +264,14 @@ int run(int argc, char** argv) {
             run_bench(bench_command, std::cout);
             return 0;
         }
-        // SIGHUP (the terminal closed) is an interruption like Ctrl-C: clean up, exit 130.
-        for (const int signal : {SIGINT, SIGTERM, SIGHUP}) std::signal(signal, on_interrupt);
+        // SIGHUP (the terminal closed) is an interruption like Ctrl-C: clean up, exit 130. A signal
+        // the parent set to be ignored stays ignored (nohup for SIGHUP, a shell's background job
+        // for SIGINT): a bake run under nohup must survive the logout it was started to survive.
+        for (const int signal : {SIGINT, SIGTERM, SIGHUP}) {
+            struct sigaction old {};
+            if (sigaction(signal, nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
+            std::signal(signal, on_interrupt);
+        }
         bake_options.interrupted = &g_interrupted;
         bake_options.progress = !bake_options.quiet && isatty(fileno(stderr));
         run_bake(bake_options);
