@@ -64,7 +64,13 @@ TEST_CASE("budget: the estimate is within a factor of two of a real bake's peak 
         const double estimate = report.at("plan").at("memory").at("estimate").get<double>();
         CAPTURE(scene, estimate, m.peak_bytes, report.at("plan").at("memory").at("parts").dump());
         CHECK(estimate > 0.5 * m.peak_bytes);
-        CHECK(estimate < 2.0 * m.peak_bytes);
+        // The engine's buffers are host memory on a CPU device (PoCL), device memory on a GPU,
+        // where the estimate (which counts them either way) is then an over-estimate of the host's.
+        const json& device = report.at("device");
+        if (device.at("backend") != "opencl" || device.value("platform", "") == "Portable Computing Language")
+            CHECK(estimate < 2.0 * m.peak_bytes);
+        else
+            WARN("the engine ran on " << device.dump() << ": its buffers are not in the host's peak");
     }
 }
 
@@ -83,7 +89,7 @@ TEST_CASE("budget: a bake that cannot fit is refused before it starts, naming th
                     "--refine-levels", "0", "--max-memory", "600M"},
                    out, "--solver progressive would need about");
     // Malformed limits.
-    for (const std::string bad : {"lots", "-5G", "nanG", "inf", "0x10G", "0", "12Q", "1e999"})
+    for (const std::string bad : {"lots", "-5G", "nanG", "inf", "0x10G", "0", "0.5", "100K", "12Q", "1e999"})
         expect_refused(dir, {"bake", kCornellBox.string(), "-o", out.string(), "--max-memory", bad}, out,
                        "--max-memory " + bad + ":");
 }

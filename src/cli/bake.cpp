@@ -230,21 +230,26 @@ void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const 
 }
 
 // The memory a bake may use, and where that figure comes from (for messages and the report).
+// The solver and refinement are planned by `bytes`, which does not change from run to run (so
+// neither do the numbers a bake gives); without --max-memory, a bake that needs more than is
+// `available` at the moment is also refused rather than swapped or killed part-way.
 struct MemoryLimit {
     double bytes = 0.0;
     std::string source;
+    std::optional<double> available;  // without --max-memory: what is free now
 };
 
 MemoryLimit memory_limit_of(const std::string& option) {
     if (!option.empty()) {
         try {
-            return {parse_bytes(option), "--max-memory allows"};
+            return {parse_bytes(option), "--max-memory allows", std::nullopt};
         } catch (const std::invalid_argument& e) {
             throw InputError(fmt::format("--max-memory {}: {}", option, e.what()));
         }
     }
-    if (const std::optional<double> available = available_memory()) return {*available, "available on this machine"};
-    return {double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE)), "this machine has"};
+    const std::optional<double> machine = machine_memory();
+    return {machine ? *machine : double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE)), "this machine has",
+            available_memory()};
 }
 
 // Whether the hemicube engine --device picks may be an OpenCL one (whose buffers, on a CPU device,
@@ -542,7 +547,13 @@ void run_bake(const BakeOptions& options) {
             }
         }
         memory = estimate_memory(shape, solver_name);
-        if (memory.needed() <= memory_limit.bytes) return;
+        if (memory.needed() <= memory_limit.bytes) {
+            if (!memory_limit.available || memory.needed() <= *memory_limit.available) return;
+            throw InputError(fmt::format("{}: the bake would need about {} ({}), more than the {} available on this "
+                                         "machine now (of {} it has); free some, or give --max-memory to bake anyway",
+                                         o.scene, format_bytes(memory.needed()), memory.describe(),
+                                         format_bytes(*memory_limit.available), format_bytes(memory_limit.bytes)));
+        }
         std::string hint = fmt::format("a larger --patch-size or --element-size (now {:.4g} and {:.4g}) needs less",
                                        mesh_settings.patch_size, mesh_settings.element_size);
         if (solver_name == "matrix") {
@@ -765,6 +776,7 @@ void run_bake(const BakeOptions& options) {
     report["plan"] = {{"solver", {{"name", solver_name}, {"why", solver_why}}},
                       {"memory", {{"limit", memory_limit.bytes},
                                   {"limit_from", memory_limit.source},
+
                                   {"estimate", memory.total()},
                                   {"needed", memory.needed()},
                                   {"parts", [&] {
@@ -772,6 +784,7 @@ void run_bake(const BakeOptions& options) {
                                        for (const MemoryPart& p : memory.parts) parts[p.what] = p.bytes;
                                        return parts;
                                    }()}}}};
+    if (memory_limit.available) report["plan"]["memory"]["available"] = *memory_limit.available;  // without --max-memory
     report["passes"] = solution.passes;
     if (solution.resumed_from >= 0) report["resumed_from_pass"] = solution.resumed_from;
     report["converged"] = solution.converged;

@@ -11,12 +11,13 @@
 #include <regex>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 namespace hemirad {
 namespace {
 
 // The first number in a file ("max" and unreadable files give nullopt).
-std::optional<double> read_number(const char* file) {
+std::optional<double> read_number(const std::string& file) {
     std::ifstream in(file);
     std::string word;
     if (!(in >> word) || word.empty() || !std::isdigit(static_cast<unsigned char>(word[0]))) return std::nullopt;
@@ -27,30 +28,87 @@ std::optional<double> read_number(const char* file) {
     }
 }
 
-std::optional<double> meminfo_available() {
-    std::ifstream in("/proc/meminfo");
+// The value after `key` in a file of "key value" lines (/proc/meminfo in kB, memory.stat in bytes).
+std::optional<double> field(const std::string& file, const std::string& key) {
+    std::ifstream in(file);
     std::string line;
     while (std::getline(in, line)) {
         std::istringstream fields(line);
-        std::string key;
-        double kb = 0.0;
-        if (fields >> key >> kb && key == "MemAvailable:") return kb * 1024.0;
+        std::string name;
+        double value = 0.0;
+        if (fields >> name >> value && name == key) return value;
     }
     return std::nullopt;
 }
 
+std::optional<double> meminfo(const std::string& key) {
+    const std::optional<double> kb = field("/proc/meminfo", key);
+    return kb ? std::optional<double>(*kb * 1024.0) : std::nullopt;
+}
+
+// One cgroup's memory limit and what it holds that cannot be reclaimed (its usage less the
+// inactive file cache, as container runtimes count it: the page cache of files a bake or a build
+// read would otherwise look like memory in use).
+struct CgroupMemory {
+    std::optional<double> limit, used;
+};
+
+// The memory cgroups this process is in (v2, or v1's memory controller), itself and its ancestors
+// up to the mount's root, which is also the container's own cgroup where /proc/self/cgroup names
+// a path the mount does not show.
+std::vector<CgroupMemory> cgroups() {
+    std::vector<CgroupMemory> found;
+    const auto add = [&](const std::string& dir, bool v2) {
+        CgroupMemory c;
+        const std::optional<double> limit = read_number(dir + (v2 ? "/memory.max" : "/memory.limit_in_bytes"));
+        if (!limit || *limit > 1e18) return;  // "max", or v1's huge number for none
+        c.limit = limit;
+        const std::optional<double> usage = read_number(dir + (v2 ? "/memory.current" : "/memory.usage_in_bytes"));
+        const std::optional<double> inactive = field(dir + "/memory.stat", v2 ? "inactive_file" : "total_inactive_file");
+        if (usage) c.used = std::max(0.0, *usage - inactive.value_or(0.0));
+        found.push_back(c);
+    };
+    std::ifstream in("/proc/self/cgroup");
+    std::string line;
+    while (std::getline(in, line)) {
+        // "0::/path" (v2) or "N:controllers:/path" (v1, the one whose controllers include memory)
+        const std::size_t a = line.find(':'), b = a == std::string::npos ? a : line.find(':', a + 1);
+        if (b == std::string::npos) continue;
+        const std::string controllers = line.substr(a + 1, b - a - 1);
+        std::string path = line.substr(b + 1);
+        const bool v2 = controllers.empty();
+        bool memory = v2;
+        for (std::size_t k = 0; k <= controllers.size();) {
+            const std::size_t comma = std::min(controllers.find(',', k), controllers.size());
+            memory = memory || controllers.substr(k, comma - k) == "memory";
+            k = comma + 1;
+        }
+        if (!memory) continue;
+        const std::string root = v2 ? "/sys/fs/cgroup" : "/sys/fs/cgroup/memory";
+        while (!path.empty() && path != "/") {
+            add(root + path, v2);
+            path = path.substr(0, path.rfind('/'));
+        }
+        add(root, v2);
+    }
+    return found;
+}
+
 }  // namespace
 
+std::optional<double> machine_memory() {
+    std::optional<double> total = meminfo("MemTotal:");
+    for (const CgroupMemory& c : cgroups()) total = total ? std::min(*total, *c.limit) : *c.limit;
+    return total;
+}
+
 std::optional<double> available_memory() {
-    std::optional<double> available = meminfo_available();
-    const auto lower = [&](std::optional<double> limit, std::optional<double> used) {
-        if (!limit || !used || *limit > 1e18) return;  // no limit (v1 writes a huge number)
-        const double left = std::max(0.0, *limit - *used);
+    std::optional<double> available = meminfo("MemAvailable:");
+    for (const CgroupMemory& c : cgroups()) {
+        if (!c.used) continue;
+        const double left = std::max(0.0, *c.limit - *c.used);
         available = available ? std::min(*available, left) : left;
-    };
-    lower(read_number("/sys/fs/cgroup/memory.max"), read_number("/sys/fs/cgroup/memory.current"));
-    lower(read_number("/sys/fs/cgroup/memory/memory.limit_in_bytes"),
-          read_number("/sys/fs/cgroup/memory/memory.usage_in_bytes"));
+    }
     return available;
 }
 
@@ -85,7 +143,8 @@ double parse_bytes(const std::string& text) {
     }
     if (scale == 0.0) throw std::invalid_argument("unknown unit '" + match[2].str() + "' (K, M, G, T or KiB, MiB, GiB, TiB)");
     const double bytes = value * scale;
-    if (!std::isfinite(bytes) || !(bytes > 0.0)) throw std::invalid_argument("the size must be positive and finite");
+    if (!std::isfinite(bytes)) throw std::invalid_argument("the size must be finite");
+    if (!(bytes >= 1e6)) throw std::invalid_argument("the size must be at least 1M (1 MB): no bake fits in less");
     return bytes;
 }
 
