@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include <glm/glm.hpp>
 
@@ -15,6 +16,15 @@ namespace hemirad::scene {
 // are those wider or taller than kMaxImageEdge (a row of them is decoded at once).
 inline constexpr std::uint64_t kMaxImagePixels = std::uint64_t{1} << 30;  // 32768 × 32768
 inline constexpr int kMaxImageEdge = 65536;
+// The pixels of all the images one scene's textures use, together (a file naming one large image
+// in many textures decodes it once; one naming many large images is refused past this).
+inline constexpr std::uint64_t kMaxScenePixels = std::uint64_t{1} << 32;
+
+// An image as the file holds it, before decoding, or what is wrong with where it should be.
+struct EncodedImage {
+    std::vector<unsigned char> bytes;
+    std::string problem;
+};
 
 struct ImageMean {
     bool ok = false;

@@ -47,8 +47,10 @@ struct Loader {
     Scene& scene;
     std::set<std::string> warned;
     int default_material = -1;  // index in scene.materials once some primitive needs it
-    std::string base_dir;             // where the file's uris are resolved
-    std::map<int, ImageMean> images;  // what the image loader made of each image, by index
+    std::string base_dir;                // where the file's uris are resolved
+    std::map<int, EncodedImage> encoded;  // what tinygltf handed the image loader, by index
+    std::map<int, ImageMean> images;     // decoded when a material's texture first needs one
+    std::uint64_t decoded_pixels = 0;    // of every image decoded so far
 
     [[noreturn]] void fail(const std::string& problem) const { throw InputError(file + ": " + problem); }
     void warn(const std::string& problem) { scene.warnings.push_back(file + ": " + problem); }
@@ -116,6 +118,9 @@ std::string lowercase(std::string s) {
 constexpr int kMaxJsonDepth = 512;
 // A .gltf's JSON text (or a .glb's JSON chunk): parsed whole, at several times its size in memory.
 constexpr std::uint64_t kMaxJsonBytes = std::uint64_t{1} << 30;
+// A buffer or image file the scene names is read whole: at most this (a .glb's own length field is
+// 32 bits, and tinygltf takes an image's size as an int), checked before reading.
+constexpr std::uint64_t kMaxExternalFileBytes = std::uint64_t{1} << 32;
 constexpr std::size_t kGlbHeader = 12, kChunkHeader = 8;
 constexpr std::uint32_t kGlbMagic = 0x46546c67;  // "glTF", little-endian
 constexpr std::uint32_t kChunkJson = 0x4e4f534a;  // "JSON"
@@ -221,8 +226,7 @@ bool file_exists(const std::string& path, void*) {
 
 bool read_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
     try {
-        *out = read_regular_file(path, "'" + path + "' (a buffer or image the scene names)",
-                                 std::numeric_limits<std::uint64_t>::max());
+        *out = read_regular_file(path, "'" + path + "' (a buffer or image the scene names)", kMaxExternalFileBytes);
         return true;
     } catch (const InputError& e) {
         if (err) *err += std::string(e.what()) + "\n";
@@ -230,33 +234,31 @@ bool read_file(std::vector<unsigned char>* out, std::string* err, const std::str
     }
 }
 
-// What the image loader found for each image of the file, by index: the loader needs only each
-// texture's mean colour, and says what is wrong only for the textures a material uses.
+// What tinygltf handed the image loader for each image of the file, by index, kept encoded: the
+// loader needs only the mean colour of the images a material's texture uses, decodes each of
+// those once, and says what is wrong only with them.
 struct ImageDecoder {
     const tinygltf::Model* model = nullptr;  // being filled in by tinygltf: its buffers come before images
-    std::map<int, ImageMean> images;
+    std::map<int, EncodedImage> images;
 };
 
-// tinygltf's image callback: decodes with OpenImageIO (no size limit of its own stb), keeps the
-// mean and never fails the load, so that an image no material uses cannot stop a bake.
-bool decode_image(tinygltf::Image* image, const int index, std::string*, std::string*, int, int,
-                  const unsigned char* bytes, int size, void* user) {
+// tinygltf's image callback: keeps the bytes (decoding waits until a texture needs the image, so
+// images nothing uses, such as normal maps, cost no time) and never fails the load, so that an
+// image no material uses cannot stop a bake.
+bool keep_image(tinygltf::Image* image, const int index, std::string*, std::string*, int, int,
+                const unsigned char* bytes, int size, void* user) {
     auto& decoder = *static_cast<ImageDecoder*>(user);
-    ImageMean& mean = decoder.images[index];
+    EncodedImage& kept = decoder.images[index];
     if (image->bufferView >= 0) {  // tinygltf passes its bytes unchecked against the buffer
         const tinygltf::BufferView& view = decoder.model->bufferViews[std::size_t(image->bufferView)];
         const std::size_t buffer_size = decoder.model->buffers[std::size_t(view.buffer)].data.size();
         if (view.byteOffset > buffer_size || view.byteLength > buffer_size - view.byteOffset) {
-            mean.problem = fmt::format("bufferView {} (offset {}, length {}) runs past the end of buffer {} ({} bytes)",
+            kept.problem = fmt::format("bufferView {} (offset {}, length {}) runs past the end of buffer {} ({} bytes)",
                                        image->bufferView, view.byteOffset, view.byteLength, view.buffer, buffer_size);
             return true;
         }
     }
-    mean = decode_image_mean(bytes, size > 0 ? std::size_t(size) : 0);
-    image->width = mean.width;
-    image->height = mean.height;
-    image->component = mean.channels;
-    image->bits = mean.bits;
+    if (size > 0) kept.bytes.assign(bytes, bytes + size);
     return true;
 }
 
@@ -267,7 +269,7 @@ std::string base_dir(const std::string& file) {
 }
 
 tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector<std::string>& warnings,
-                      std::map<int, ImageMean>& images) {
+                      std::map<int, EncodedImage>& images) {
     const std::string ext = lowercase(file.extension().string());
     if (ext != ".gltf" && ext != ".glb") {
         throw InputError(name + ": not a glTF file (expected a .gltf or .glb extension)");
@@ -278,7 +280,7 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     gltf.SetFsCallbacks({&file_exists, &tinygltf::ExpandFilePath, &read_file, &tinygltf::WriteWholeFile, nullptr});
     tinygltf::Model model;
     ImageDecoder decoder{&model, {}};
-    gltf.SetImageLoader(&decode_image, &decoder);
+    gltf.SetImageLoader(&keep_image, &decoder);
     std::string err, warn;
     const bool ok = ext == ".glb"
                         ? gltf.LoadBinaryFromMemory(&model, &err, &warn, bytes.data(), unsigned(bytes.size()),
@@ -532,7 +534,24 @@ dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::s
     const std::string image = !img.uri.empty()      ? fmt::format("image {} '{}'", tex.source, img.uri)
                               : img.bufferView >= 0 ? fmt::format("image {} (bufferView {})", tex.source, img.bufferView)
                                                     : fmt::format("image {}", tex.source);
-    const auto decoded = L.images.find(tex.source);
+    auto decoded = L.images.find(tex.source);
+    if (decoded == L.images.end()) {
+        const auto kept = L.encoded.find(tex.source);
+        if (kept != L.encoded.end()) {
+            ImageMean mean;
+            if (!kept->second.problem.empty()) {
+                mean.problem = kept->second.problem;
+            } else {
+                mean = decode_image_mean(kept->second.bytes.data(), kept->second.bytes.size());
+                L.decoded_pixels += std::uint64_t(mean.width) * std::uint64_t(mean.height);
+                if (L.decoded_pixels > kMaxScenePixels)
+                    L.fail(fmt::format("{}: {}: the textures the scene's materials use hold more than {} pixels in all",
+                                       what, image, kMaxScenePixels));
+            }
+            L.encoded.erase(kept);  // decoded once; the bytes are no longer needed
+            decoded = L.images.emplace(tex.source, mean).first;
+        }
+    }
     if (decoded == L.images.end()) {
         // tinygltf could not read the file, so never gave its bytes to the decoder: say why.
         std::string problem = img.uri.empty() ? std::string("no image data")
@@ -919,9 +938,9 @@ Scene load(const std::filesystem::path& file) {
     Scene scene;
     scene.path = file;
     const std::string name = file.string();
-    std::map<int, ImageMean> images;
+    std::map<int, EncodedImage> images;
     const tinygltf::Model model = parse(file, name, scene.warnings, images);
-    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images)};
+    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0};
 
     // Converted in file order so a primitive's material index is also its Scene index.
     for (std::size_t i = 0; i < model.materials.size(); ++i) scene.materials.push_back(convert_material(L, int(i)));
