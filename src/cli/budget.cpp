@@ -9,6 +9,7 @@
 #include "core/memory.h"
 #include "formfactor/opencl_engine.h"
 #include "solve/matrix.h"
+#include "solve/refinement.h"
 
 namespace hemirad::cli {
 namespace {
@@ -18,7 +19,7 @@ constexpr double kRefinedGrowth = 2.0;
 // Per element of the progressive solver: incident light, the round's snapshot, and the two
 // per-element vectors its queries return (dvec3 each).
 constexpr double kProgressivePerElement = 4 * 24.0;
-constexpr double kProgressivePerPatch = 3 * 24.0 + 2 * 8.0;  // unshot, shot, snapshot; hit, round share
+constexpr double kProgressivePerPatch = 2 * 24.0 + 2 * 8.0;  // unshot, shot; hit share, round's unshot
 // Output: the welded mesh (about four vertices per element: position, normal, radiosity, index)
 // and the renderer's supersampled strip and image (3 × 3 samples of depth and colour per pixel).
 constexpr double kWeldedPerElement = 4 * 40.0;
@@ -84,7 +85,7 @@ MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
     }
     if (s.refine_levels > 0) {
         const double refined = E * kRefinedGrowth;
-        const int top = std::min(s.hemicube << std::min(s.refine_levels, 4), 2048);
+        const int top = solve::regather_hemicube(s.hemicube, s.refine_levels);
         m.parts.push_back({"refinement", refined * sizeof(mesh::Element) + engine_bytes(s, refined, top, 64) +
                                              refined * 2 * 24.0});
     }

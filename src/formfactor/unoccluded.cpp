@@ -136,12 +136,14 @@ void UnoccludedEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult
     // 1.4e-4 in a closed box, which 1/(1 − ρ) turns into 16% at ρ = 0.999), so the row is scaled
     // to this total where successive rules agree on it to kRowTolerance; otherwise it is only kept
     // from exceeding 1.
+    std::vector<const mesh::Polygon*> receivers;  // the patches in front of the shooter, once per shot
+    for (std::uint32_t p = 0; p < mesh_.patches.size(); ++p) {
+        const mesh::Patch& target = mesh_.patches[p];
+        if (p != patch && receives(target.centroid, target.normal)) receivers.push_back(&target.poly);
+    }
     const auto covered = [&](const glm::dvec3& x) {
         double sum = 0.0;
-        for (std::uint32_t p = 0; p < mesh_.patches.size(); ++p) {
-            const mesh::Patch& target = mesh_.patches[p];
-            if (p != patch && receives(target.centroid, target.normal)) sum += point_to_polygon(x, ni, target.poly);
-        }
+        for (const mesh::Polygon* poly : receivers) sum += point_to_polygon(x, ni, *poly);
         return sum;
     };
     const glm::dvec3* sv = shooter.poly.v.data();

@@ -77,7 +77,8 @@ double divisions_needed(double length, double size) {
 // The same as an int, for building the lattice.
 int divisions(double n) {
     if (!(n <= kMaxDivisions))
-        throw InputError(fmt::format("an edge needs {} divisions: the patch or element size is too small for the scene", n));
+        throw InputError(fmt::format("an edge needs {:.3g} divisions, more than {}: the patch or element size (--patch-size, "
+                                     "--element-size) is too small for the scene", n, kMaxDivisions));
     return static_cast<int>(n);
 }
 
@@ -501,6 +502,9 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
     check_settings(settings);
     Mesh mesh;
     const std::vector<Face> faces = make_faces(scene, mesh);
+    for (const Face& face : faces)
+        if (face.src[0]->material >= scene.materials.size())
+            throw InternalError(fmt::format("mesh: triangle material {} out of range", face.src[0]->material));
     if (before) {
         Counts counts;
         for (const Face& face : faces) {
@@ -512,10 +516,7 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         before(counts);
     }
     for (const Face& face : faces) {
-        const scene::Triangle& t0 = *face.src[0];
-        if (t0.material >= scene.materials.size())
-            throw InternalError(fmt::format("mesh: triangle material {} out of range", t0.material));
-        const scene::Material& mat = scene.materials[t0.material];
+        const scene::Material& mat = scene.materials[face.src[0]->material];
         const std::vector<PatchCells> cells = face_cells(grid_of(face.poly, settings));
         append_side(mesh, face, cells, mat, false);
         if (mat.double_sided) append_side(mesh, face, cells, mat, true);

@@ -75,18 +75,25 @@ struct Plane {
     std::size_t triangle;   // a triangle on it
 };
 
+// Pairs of coplanar triangles the overlap check may test before it assumes occlusion instead.
+constexpr double kMaxOverlapPairs = 5e7;
+
 // Two of the triangles (all in one plane with unit normal n) whose interiors overlap by more than
 // `tolerance` (a length), if any: the separating axis test on their edge normals, over the pairs
-// whose bounding boxes in the plane overlap (a sweep along the first axis).
+// whose bounding boxes in the plane overlap (a sweep along the first axis). Each pair the sweep
+// visits spends one of `budget`; once it is spent, `gave_up` is set and nullopt returned (a grid
+// of triangles aligned with the sweep's axis makes the sweep quadratic).
 std::optional<std::pair<std::size_t, std::size_t>> overlapping_pair(const Scene& scene,
                                                                       const std::vector<std::size_t>& triangles,
-                                                                      const glm::dvec3& n, double tolerance) {
+                                                                      const glm::dvec3& n, double tolerance,
+                                                                      double& budget, bool& gave_up) {
     if (triangles.size() < 2) return std::nullopt;
     const glm::dvec3 u = glm::normalize(glm::cross(std::abs(n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0), n));
     const glm::dvec3 v = glm::cross(n, u);
     struct Flat {
         std::array<glm::dvec2, 3> p;
-        double lo, hi;  // along u
+        double lo, hi;      // along u
+        double v_lo, v_hi;  // along v
         std::size_t triangle;
     };
     std::vector<Flat> flat;
@@ -96,6 +103,8 @@ std::optional<std::pair<std::size_t, std::size_t>> overlapping_pair(const Scene&
         for (int k = 0; k < 3; ++k) f.p[k] = {glm::dot(scene.triangles[t].p[k], u), glm::dot(scene.triangles[t].p[k], v)};
         f.lo = std::min({f.p[0].x, f.p[1].x, f.p[2].x});
         f.hi = std::max({f.p[0].x, f.p[1].x, f.p[2].x});
+        f.v_lo = std::min({f.p[0].y, f.p[1].y, f.p[2].y});
+        f.v_hi = std::max({f.p[0].y, f.p[1].y, f.p[2].y});
         f.triangle = t;
         flat.push_back(f);
     }
@@ -119,10 +128,16 @@ std::optional<std::pair<std::size_t, std::size_t>> overlapping_pair(const Scene&
         return false;
     };
     for (std::size_t i = 0; i < flat.size(); ++i)
-        for (std::size_t j = i + 1; j < flat.size() && flat[j].lo < flat[i].hi - tolerance; ++j)
+        for (std::size_t j = i + 1; j < flat.size() && flat[j].lo < flat[i].hi - tolerance; ++j) {
+            if (--budget < 0.0) {
+                gave_up = true;
+                return std::nullopt;
+            }
+            if (flat[j].v_lo >= flat[i].v_hi - tolerance || flat[i].v_lo >= flat[j].v_hi - tolerance) continue;
             if (!separated(flat[i], flat[j]) && !separated(flat[j], flat[i]))
                 return std::make_pair(std::min(flat[i].triangle, flat[j].triangle),
                                       std::max(flat[i].triangle, flat[j].triangle));
+        }
     return std::nullopt;
 }
 
@@ -242,8 +257,14 @@ EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
                                            vec(v.p), node_name(scene, v.triangle), v.triangle, depth, plane.triangle,
                                            node_name(scene, plane.triangle)));
     }
+    double pair_budget = kMaxOverlapPairs;
     for (std::size_t g = 0; g < coplanar.size(); ++g) {
-        const auto overlap = overlapping_pair(scene, coplanar[g], planes[g].n, tolerance);
+        bool gave_up = false;
+        const auto overlap = overlapping_pair(scene, coplanar[g], planes[g].n, tolerance, pair_budget, gave_up);
+        if (gave_up)
+            return automatic(true, fmt::format("the scene's coplanar triangles are too many to check for overlaps (over "
+                                               "{:g} pairs), so occlusion is assumed",
+                                               kMaxOverlapPairs));
         if (!overlap) continue;
         return automatic(true, fmt::format("triangle {} of node '{}' and triangle {} of node '{}' overlap in one plane, "
                                            "facing the same way (a duplicated face or a decal), so only one of them can "

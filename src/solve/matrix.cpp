@@ -238,12 +238,12 @@ void Matrix::gauss_seidel() {
     std::vector<double> area(n);
     for (std::size_t a = 0; a < n; ++a) area[a] = mesh_.patches[active_[a]].area;
     double q = 0.0;
-    for (std::size_t c = 0; c < static_cast<std::size_t>(C); ++c)
-        for (std::size_t a = 0; a < n; ++a) {
-            double column = 0.0;
-            for (std::size_t p = 0; p < n; ++p) column += area[p] * K[c][p * n + a];
-            q = std::max(q, column / area[a]);
-        }
+    for (std::size_t c = 0; c < static_cast<std::size_t>(C); ++c) {
+        std::vector<double> column(n, 0.0);  // Σ_p A_p K_pa, summed row by row (K is row-major)
+        for (std::size_t p = 0; p < n; ++p)
+            for (std::size_t a = 0; a < n; ++a) column[a] += area[p] * K[c][p * n + a];
+        for (std::size_t a = 0; a < n; ++a) q = std::max(q, column[a] / area[a]);
+    }
     contraction_ = q;
     const auto bound_now = [&]() {
         double worst = 0.0;

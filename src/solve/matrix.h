@@ -54,8 +54,9 @@ public:
 
     // Gauss–Seidel sweeps expected to bring the error bound to `tolerance` where K's norm is q
     // (at most the largest reflectance): the bound starts near 1 / (1 − q) times the residual,
-    // and a sweep shrinks it by about q², the square of Jacobi's rate q (as Young's theorem has it
-    // for consistently ordered systems), so ln(tolerance (1 − q)) / (2 ln q); infinite for q >= 1.
+    // and a sweep shrinks it by about q², the square of Jacobi's rate q (the rate Young's theorem
+    // gives for consistently ordered systems, which K is not: a model, checked against the solver's
+    // own sweeps in test_budget), so ln(tolerance (1 − q)) / (2 ln q); infinite for q >= 1.
     static double expected_sweeps(double q, double tolerance);
 
     // Computes the rows not yet computed (calling `progress(rows_done, rows_total)` after each
