@@ -31,8 +31,10 @@ wall, cpu = runs[len(runs) // 2]
 c = report["counts"]
 solver = report["settings"]["solver"]
 shots = f'{report["passes"]} {"rows" if solver == "matrix" else "passes"}'
+engine = {"opencl": "OpenCL", "ref": "reference", "analytic": "exact form factors"}.get(report["device"]["backend"],
+                                                                                       report["device"]["backend"])
 print(f'| {label} | {c["patches"]} / {c["elements_before_refinement"]} → {c["elements"]} | {solver}, {shots} '
-      f'({report["device"]["backend"]}) | {wall:.1f} s | {cpu:.1f} s |')
+      f'({engine}) | {wall:.1f} s | {cpu:.1f} s |')
 PY
 }
 row "Cornell box, default settings" scenes/cornell_box.gltf

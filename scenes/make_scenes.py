@@ -9,15 +9,22 @@ writes, next to this script:
                        "Cornell Box Data" (https://www.graphics.cornell.edu/online/box/data.html)
     closed_room.gltf   a closed 4 m x 2.5 m x 5 m room with a ceiling panel light and a cube
     empty_room.gltf    the same room, empty and grey, its light flush with the ceiling
+    double_sided_cylinder.gltf  a 168-triangle double-sided emissive cylinder under rotated and
+                       scaled nodes, in a closed grey room
+    lamp_facing_sky.gltf  a two-sided lamp whose brighter side faces the open sky, 1 m above a floor
+    curved_objects.gltf   a double-sided vertex-coloured torus and a sphere under mirroring node
+                       chains, in the closed room
 
 Python 3 standard library only; the output is byte-for-byte deterministic.
 
 Conventions (see DESIGN.md): glTF 2.0, Y-up, a triangle's front is its counter-clockwise
-side, surfaces are one-sided (doubleSided false), emission = emissiveFactor x
-KHR_materials_emissive_strength, reflectance = baseColorFactor.rgb.
+side, emission = emissiveFactor x KHR_materials_emissive_strength, reflectance =
+baseColorFactor.rgb (x COLOR_0 where a mesh has vertex colours). The rooms' surfaces are
+one-sided (doubleSided false); the cylinder and the torus are double-sided, and the lamp facing
+the sky is two one-sided quads back to back, one per emission.
 
-Every surface is a quad written as two indexed triangles (0,1,2) and (0,2,3) sharing the
-diagonal 0-2. The winding is computed, not trusted: each quad is flipped if needed so its
+Every flat surface is a quad written as two indexed triangles (0,1,2) and (0,2,3) sharing the
+diagonal 0-2; the curved objects are tessellated. The winding is computed, not trusted: each quad is flipped if needed so its
 front faces into the room/box (or out of a block), and after writing, the file is read back
 and every triangle is checked again.
 """

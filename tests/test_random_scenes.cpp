@@ -139,6 +139,42 @@ TEST_CASE("random scenes: the reference and OpenCL engines give the same form fa
     }
 }
 
+namespace {
+
+// "Converged" must mean the answer is close to the one shooting on gives: a progressive bake that
+// converged at threshold t is baked again with convergence forced off (shooting on until 1e-6 is
+// left), and the flux-weighted difference of the meshes' incident light, Σ|ΔH|A / ΣHA per
+// channel, must be within 3 t: the measure the solver stops on is a share of that light. Bakes
+// the max-passes cap stopped again are not compared.
+void check_converged_answer(const test::RandomBake& bake, const std::filesystem::path& dir, int& checked) {
+    const nlohmann::json report = nlohmann::json::parse(test::read_file_text(std::filesystem::path(bake.options.output) / "report.json"));
+    if (report.at("settings").at("solver") != "progressive" || !report.at("converged").get<bool>()) return;
+    if (bake.options.effects.find("convergence") != std::string::npos) return;
+    cli::BakeOptions full = bake.options;
+    full.effects = full.effects.empty() ? "convergence=off" : full.effects + ",convergence=off";
+    full.max_passes = 20000;
+    full.output = (dir / "out_full").string();
+    full.on_shot = nullptr;
+    REQUIRE_NOTHROW(cli::run_bake(full));
+    const nlohmann::json shot_on = nlohmann::json::parse(test::read_file_text(std::filesystem::path(full.output) / "report.json"));
+    if (!shot_on.at("converged").get<bool>()) return;
+    const double threshold = report.at("settings").at("threshold");
+    for (int c = 0; c < 3; ++c) {
+        double difference = 0.0, total = 0.0;
+        for (std::size_t m = 0; m < report.at("meshes").size(); ++m) {
+            const double area = report["meshes"][m].at("area");
+            const double a = report["meshes"][m].at("irradiance").at(c), b = shot_on["meshes"][m].at("irradiance").at(c);
+            difference += std::abs(a - b) * area;
+            total += b * area;
+        }
+        CAPTURE(c, difference, total, threshold, report.at("converged_by"), report.at("passes"), shot_on.at("passes"));
+        CHECK(difference <= 3.0 * threshold * total + 1e-12);
+    }
+    ++checked;
+}
+
+}  // namespace
+
 TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with every invariant and the same bits",
           "[random]") {
     // Each seed: a scene and small settings (random_bake.h), baked through run_bake as the CLI
@@ -146,7 +182,7 @@ TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with
     // complete and finite with balanced books; the OpenCL bake must be the reference's, bit for bit.
     const bool opencl = !ocl::list_devices().empty();
     if (!opencl) WARN("no OpenCL device: the reference engine only");
-    int baked = 0, refused = 0;
+    int baked = 0, refused = 0, converged_checks = 0;
     for (std::uint64_t seed = 1; seed <= 30; ++seed) {
         test::ScratchDir dir("hemirad-random-bake");
         scene::Choices c = scene::Choices::from_seed(seed);
@@ -170,6 +206,7 @@ TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with
         const std::vector<std::string> problems = test::check_bake_output(bake.options.output);
         INFO("outputs: " << joined(problems));
         CHECK(problems.empty());
+        check_converged_answer(bake, dir.path(), converged_checks);
 
         if (!opencl) continue;
         test::ShotChecker cl_shots;
@@ -184,5 +221,6 @@ TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with
         CHECK(differences.empty());
     }
     CHECK(baked >= 20);
+    CHECK(converged_checks >= 5);  // progressive bakes that converged and were shot on to compare
     (void)refused;
 }

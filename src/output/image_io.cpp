@@ -1,4 +1,4 @@
-// Image files: linear half-float EXR, tone-mapped sRGB PNG, and the exposure that suits them.
+// Image files: linear 32-bit float EXR, tone-mapped sRGB PNG, and the exposure that suits them.
 #include <OpenImageIO/imageio.h>
 #include <fmt/format.h>
 

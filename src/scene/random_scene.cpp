@@ -33,8 +33,13 @@ Choices Choices::from_seed(std::uint64_t seed) {
     return Choices(std::move(bytes));
 }
 
+Choices::Choices(std::vector<std::uint8_t> bytes) : bytes_(std::move(bytes)) {
+    tail_seed_ = mix64(bytes_.size());
+    for (const std::uint8_t b : bytes_) tail_seed_ = mix64(tail_seed_ ^ b);
+}
+
 std::uint8_t Choices::byte() {
-    const std::uint8_t b = next_ < bytes_.size() ? bytes_[next_] : 0;
+    const std::uint8_t b = next_ < bytes_.size() ? bytes_[next_] : std::uint8_t(mix64(tail_seed_ + next_));
     ++next_;
     return b;
 }

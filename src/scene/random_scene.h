@@ -20,8 +20,10 @@ namespace hemirad::scene {
 // bytes give the same choices on every machine (no floating point in the expansion).
 class Choices {
 public:
-    explicit Choices(std::vector<std::uint8_t> bytes) : bytes_(std::move(bytes)) {}
-    Choices(const std::uint8_t* data, std::size_t size) : bytes_(data, data + size) {}
+    // Past the end of `bytes`, further bytes come from a SplitMix64 stream seeded by a hash of
+    // them (not zeros, which made chance(p) true for every p once a short input ran out).
+    explicit Choices(std::vector<std::uint8_t> bytes);
+    Choices(const std::uint8_t* data, std::size_t size) : Choices(std::vector<std::uint8_t>(data, data + size)) {}
     // kSeedBytes bytes of SplitMix64 from `seed`.
     static Choices from_seed(std::uint64_t seed);
     static constexpr std::size_t kSeedBytes = 8192;
@@ -33,11 +35,12 @@ public:
     double log_uniform(double lo, double hi);  // lo · (hi / lo)^unit(); lo, hi > 0
     bool chance(double p);                     // unit() < p
 
-    std::size_t consumed() const { return next_; }  // bytes read so far, zeros included
+    std::size_t consumed() const { return next_; }  // bytes read so far, the stream's included
 
 private:
     std::uint8_t byte();
     std::vector<std::uint8_t> bytes_;
+    std::uint64_t tail_seed_ = 0;  // a hash of bytes_
     std::size_t next_ = 0;
 };
 

@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (tests/fuzz: fuzz_loader, fuzz_bake) with clang, AddressSanitizer
 # and UBSan in a CMake build of their own (-DHEMIRAD_FUZZ=ON, WORK_DIR/build, shared: the first
-# test there builds it while the others wait on a lock), then fuzzes one target for a bounded time
-# from a fixed seed and a fresh seed corpus:
+# test there builds it while the others wait on a lock), then fuzzes one target for a fixed number
+# of inputs from a fixed seed and a fresh seed corpus (so a run does not depend on the machine's
+# speed), with a time limit only as a safety cap:
 #   loader  the scene loader, from the malformed-scene corpus (tests/corpus) and the bundled scenes;
 #   bake    the whole bake of generated scenes (fuzz_bake.cpp), from 16 seeded inputs.
 # Exit 0: nothing found; 1: a finding (the input is saved in WORK_DIR/TARGET/findings and the
 # report printed) or a build failure; 77: no clang with libFuzzer here (CTest reports a skip).
-#   run_fuzz.sh loader|bake SOURCE_DIR WORK_DIR SECONDS
+#   run_fuzz.sh loader|bake SOURCE_DIR WORK_DIR RUNS MAX_SECONDS
 set -uo pipefail
-target=$1 src=$2 work=$3 seconds=${4:-60}
+target=$1 src=$2 work=$3 runs=${4:-1000} seconds=${5:-600}
 case "$target" in loader|bake) ;; *) echo "run_fuzz: unknown target '$target' (loader or bake)"; exit 2 ;; esac
 cxx=$(command -v clang++ || command -v clang++-14 || true)
 if [ -z "$cxx" ]; then echo "run_fuzz: no clang++: skipped"; exit 77; fi
@@ -36,14 +37,14 @@ start=$(date +%s)
   cmake -S "$src" -B "$build" "${generator[@]}" -DCMAKE_CXX_COMPILER="$cxx" "${launcher[@]}" \
     -DHEMIRAD_FUZZ=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only" \
     && cmake --build "$build" --target fuzz_loader fuzz_bake -j 2
-) 9> "$work/build.lock" > "$work/build.log" 2>&1
-if [ $? -ne 0 ]; then echo "run_fuzz: the fuzz targets do not build:"; tail -n 60 "$work/build.log"; exit 1; fi
+) 9> "$work/build.lock" > "$work/build-$target.log" 2>&1  # one log per target: the other may wait on the lock
+if [ $? -ne 0 ]; then echo "run_fuzz: the fuzz targets do not build:"; tail -n 60 "$work/build-$target.log"; exit 1; fi
 echo "run_fuzz: fuzz targets built or up to date in $(( $(date +%s) - start )) s"
 
 run="$work/$target"
 rm -rf "$run/corpus"
 mkdir -p "$run/corpus" "$run/findings"
-args=(-seed=1 -max_total_time="$seconds" -print_final_stats=1 -artifact_prefix="$run/findings/")
+args=(-seed=1 -runs="$runs" -max_total_time="$seconds" -print_final_stats=1 -artifact_prefix="$run/findings/")
 case "$target" in
   loader)
     cp "$src"/tests/corpus/*.gltf "$src"/tests/corpus/*.glb "$src"/scenes/*.gltf "$run/corpus/"
@@ -77,4 +78,8 @@ if [ $status -ne 0 ]; then
   echo "run_fuzz: finding(s) in $run/findings:"; ls -l "$run/findings"
   exit 1
 fi
-echo "run_fuzz: nothing found in $seconds s"
+done_line=$(grep -E "^Done [0-9]+ runs" "$run/fuzz.log" | tail -n 1)
+echo "run_fuzz: nothing found (${done_line:-no summary}; asked for $runs runs within $seconds s)"
+if [ -n "$done_line" ] && [ "$(echo "$done_line" | awk '{print $2}')" -lt "$runs" ]; then
+  echo "run_fuzz: warning: the time cap ended the run before its $runs inputs: on this machine the run depends on its speed"
+fi
