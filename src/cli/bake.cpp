@@ -776,7 +776,6 @@ void run_bake(const BakeOptions& options) {
     report["plan"] = {{"solver", {{"name", solver_name}, {"why", solver_why}}},
                       {"memory", {{"limit", memory_limit.bytes},
                                   {"limit_from", memory_limit.source},
-
                                   {"estimate", memory.total()},
                                   {"needed", memory.needed()},
                                   {"parts", [&] {
