@@ -859,7 +859,7 @@ void run_bake(const BakeOptions& options) {
     if (!o.quiet)
         std::cerr << fmt::format("hemirad: {}, {} elements, wrote {}/report.json, baked.gltf, render.exr, render.png\n",
                                  solver_name == "matrix"
-                                     ? fmt::format("{} form-factor rows, {} sweeps, residual {:.2e}", solution.passes,
+                                     ? fmt::format("{} form-factor rows, {} sweeps, error bound {:.2e}", solution.passes,
                                                    solution.iterations, solution.error)
                                      : fmt::format("{} passes, error {:.2e}", solution.passes, solution.error),
                                  mesh.elements.size(), o.output);
