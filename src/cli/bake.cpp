@@ -517,14 +517,11 @@ void run_bake(const BakeOptions& options) {
     BakeShape shape;
     shape.hemicube = o.hemicube;
     shape.batch = o.batch;
-    shape.matrix_batch = matrix_settings.batch;
-    shape.grey = !plan.colour.on;
-    shape.direct_only = direct_only;
+    shape.matrix = matrix_settings;
     shape.opencl = plan.occlusion.on && may_use_opencl(o.device);
     shape.fallback_copy = shape.opencl && o.device == "auto";
     for (const scene::Triangle& t : scene.triangles)
         for (const glm::dvec3& rho : t.rho) shape.max_reflectance = std::max({shape.max_reflectance, rho.x, rho.y, rho.z});
-    shape.tolerance = matrix_settings.tolerance;
     shape.refine_levels = plan.refinement.on ? o.refine_levels : 0;
     shape.pixels = double(width) * double(height);
     std::string solver_name = o.solver, solver_why = "--solver " + o.solver;

@@ -14,7 +14,7 @@
 namespace hemirad::cli {
 namespace {
 
-// Refinement is taken to double the elements (the Cornell box: 8316 → 15231).
+// Refinement is taken to double the elements (the Cornell box: 8316 → 15204).
 constexpr double kRefinedGrowth = 2.0;
 // Per element of the progressive solver: incident light, the round's snapshot, and the two
 // per-element vectors its queries return (dvec3 each).
@@ -34,6 +34,10 @@ constexpr double kPassSecondsPerElement = 1.7e-7;
 constexpr double kSweepSecondsPerEntry = 1e-9;
 constexpr double kRowSecondsPerElement = 3e-9;
 constexpr double kProgressiveRounds = 3.0;
+
+bool direct_only(const BakeShape& s) { return !s.matrix.interreflection; }
+
+double expected_sweeps(const BakeShape& s) { return solve::Matrix::expected_sweeps(s.max_reflectance, s.matrix.tolerance); }
 
 double engine_bytes(const BakeShape& s, double elements, int hemicube, double shots) {
     if (!s.opencl) return 3.0 * hemicube * hemicube * 17.0 + elements * sizeof(double);  // reference: cells, one F
@@ -72,13 +76,9 @@ MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
     MemoryEstimate m;
     m.parts.push_back({"mesh", mesh * (s.fallback_copy ? 2.0 : 1.0)});
     const bool matrix = solver == "matrix";
-    m.parts.push_back({"engine", engine_bytes(s, E, s.hemicube, matrix ? s.matrix_batch : s.batch)});
+    m.parts.push_back({"engine", engine_bytes(s, E, s.hemicube, matrix ? s.matrix.batch : s.batch)});
     if (matrix) {
-        solve::MatrixSettings ms;
-        ms.grey = s.grey;
-        ms.interreflection = !s.direct_only;
-        ms.batch = s.matrix_batch;
-        m.parts.push_back({"matrix", solve::Matrix::estimate_bytes(P, E, ms)});
+        m.parts.push_back({"matrix", solve::Matrix::estimate_bytes(P, E, s.matrix)});
     } else {
         m.parts.push_back({"solver", E * kProgressivePerElement + P * kProgressivePerPatch +
                                          std::max(1, s.batch) * E * sizeof(double)});
@@ -104,11 +104,11 @@ double refinement_room(const BakeShape& s, const std::string& solver, double lim
 
 SolverTimes expected_times(const BakeShape& s) {
     const double E = s.counts.elements, P = s.counts.patches;
-    const double channels = s.grey ? 1.0 : 3.0;
+    const double channels = s.matrix.grey ? 1.0 : 3.0;
     // A shot's time grows with the elements it sets up and the cells it draws.
     const double shot = kShotSeconds * (0.5 + 0.5 * E / 8316.0) * std::max(1.0, double(s.hemicube) * s.hemicube / (256.0 * 256.0));
     SolverTimes t;
-    const double sweeps = s.direct_only ? 0.0 : solve::Matrix::expected_sweeps(s.max_reflectance, s.tolerance);
+    const double sweeps = direct_only(s) ? 0.0 : expected_sweeps(s);
     t.matrix = P * (shot + E * kRowSecondsPerElement) + sweeps * channels * P * P * kSweepSecondsPerEntry;
     t.progressive = kProgressiveRounds * P * (shot + E * kPassSecondsPerElement);
     return t;
@@ -120,19 +120,19 @@ SolverChoice choose_solver(const BakeShape& s, double limit) {
         return {"progressive", fmt::format("the matrix solver would need about {} ({} patches), more than half of the "
                                            "{} the bake may use",
                                            format_bytes(with_matrix), s.counts.patches, format_bytes(limit))};
-    if (s.direct_only) return {"matrix", "direct light only is the emitters' rows"};
+    if (direct_only(s)) return {"matrix", "direct light only is the emitters' rows"};
     const SolverTimes t = expected_times(s);
     if (t.matrix <= t.progressive)
         return {"matrix", fmt::format("expected faster than progressive shooting ({:.3g} s against {:.3g} s: {} rows, "
                                       "{:.0f} Gauss-Seidel sweeps at reflectance up to {:.3g}) and it fits in memory "
                                       "({} of {})",
                                       t.matrix, t.progressive, s.counts.patches,
-                                      solve::Matrix::expected_sweeps(s.max_reflectance, s.tolerance),
+                                      expected_sweeps(s),
                                       s.max_reflectance, format_bytes(with_matrix), format_bytes(limit))};
     return {"progressive", fmt::format("expected faster than the matrix solver ({:.3g} s against {:.3g} s: "
                                        "{:.3g} Gauss-Seidel sweeps at reflectance up to {:.3g})",
                                        t.progressive, t.matrix,
-                                       solve::Matrix::expected_sweeps(s.max_reflectance, s.tolerance),
+                                       expected_sweeps(s),
                                        s.max_reflectance)};
 }
 

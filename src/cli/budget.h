@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "mesh/mesh.h"
+#include "solve/matrix.h"
 
 namespace hemirad::cli {
 
@@ -14,13 +15,12 @@ struct BakeShape {
     mesh::Counts counts;        // of the mesh as built (before refinement)
     int hemicube = 256;         // N
     int batch = 1;              // progressive shots per engine call
-    int matrix_batch = 64;      // matrix rows per engine call
-    bool grey = false;          // one channel
-    bool direct_only = false;   // interreflection off: the emitters' rows only
+    // The matrix solver's settings as the bake would use them: rows per engine call, one channel
+    // (grey), direct light only (!interreflection), the tolerance of its error bound.
+    solve::MatrixSettings matrix;
     bool opencl = false;        // an OpenCL engine (on a CPU, its buffers are host memory)
     bool fallback_copy = false; // auto chose OpenCL: the mesh as built is kept for a restart on the reference
     double max_reflectance = 0.0;
-    double tolerance = 1e-4;    // the matrix solver's error bound
     int refine_levels = 2;
     double pixels = 640.0 * 480.0;  // of render.exr/.png
 };

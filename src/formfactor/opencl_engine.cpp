@@ -392,10 +392,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
 
     cl::Context& cl_context = context.context();
     cl::CommandQueue& queue = context.queue();
-    // Most records cover a tile or two; a shot that needs more grows the lists and reruns.
     list_capacity_ = tuning.list_capacity > 0
                          ? tuning.list_capacity
-                         : static_cast<std::uint32_t>(std::max<std::size_t>(1u << 16, 4 * record_slots()));
+                         : static_cast<std::uint32_t>(initial_list_entries(double(record_slots())));
     try {
         elements_ = upload(cl_context, queue, elements);
         element_lanes_ = upload(cl_context, queue, element_lanes);
@@ -462,7 +461,7 @@ double OpenCLEngine::shot_bytes(double elements, int hemicube) {
     // As allocate_batch sizes them: records and boxes, the initial lists, the ids (device and
     // host), the sums (device and host).
     const double records = std::max(1.0, elements * kFaces);
-    const double lists = std::max(double(1u << 16), 4.0 * records);
+    const double lists = initial_list_entries(records);
     const double cells = 3.0 * double(hemicube) * double(hemicube);
     return records * double(sizeof(HrRecord) + sizeof(HrBox)) + lists * sizeof(hr_uint) +
            2.0 * cells * sizeof(hr_int) + 2.0 * (elements + 2.0) * sizeof(hr_long);

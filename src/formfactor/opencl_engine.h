@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -146,6 +147,9 @@ private:
 
     std::size_t raster_group_size() const;
     std::size_t record_slots() const;      // per shot
+    // The per-tile list entries a shot starts with, for `records` record slots: most records cover
+    // a tile or two (a shot that needs more grows the lists and reruns).
+    static double initial_list_entries(double records) { return std::max(double(1u << 16), 4.0 * records); }
     std::size_t setup_groups() const;      // work-groups of setup and scatter: a work-item per patch or lane group
     std::size_t cluster_elements() const;  // elements per cluster (a setup work-group's, lanes setup)
     std::size_t counter_entries() const;   // per shot: tile counters of every copy
