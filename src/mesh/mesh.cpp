@@ -82,6 +82,13 @@ int divisions(double n) {
     return static_cast<int>(n);
 }
 
+// A face's fine lattice (patches × elements along a side) must stay within kMaxDivisions too.
+void check_fine_divisions(double n) {
+    if (n > kMaxDivisions)
+        throw InputError(fmt::format("the element size (--element-size) is too small for the scene (over {} elements "
+                                     "along a face's side)", kMaxDivisions));
+}
+
 bool lex_less(const dvec3& a, const dvec3& b) {
     if (a.x != b.x) return a.x < b.x;
     if (a.y != b.y) return a.y < b.y;
@@ -206,8 +213,8 @@ Grid grid_of(const Polygon& face, const Settings& s) {
 std::vector<PatchCells> quad_cells(const Grid& grid) {
     const Polygon& q = grid.poly;
     const int nu = divisions(grid.nu), nv = divisions(grid.nv), mu = divisions(grid.mu), mv = divisions(grid.mv);
-    if (double(nu) * mu > kMaxDivisions || double(nv) * mv > kMaxDivisions)
-        throw InputError("the element size is too small for the scene (over 32768 elements along a face's side)");
+    check_fine_divisions(double(nu) * mu);
+    check_fine_divisions(double(nv) * mv);
 
     const Lattice g = quad_lattice(q, nu * mu, nv * mv);
     auto cell = [&g](int i0, int j0, int i1, int j1) {
@@ -277,8 +284,7 @@ std::vector<PatchCells> face_cells(const Grid& grid) {
         return cells;
     }
     const int n = divisions(grid.nu), m = divisions(grid.mu);
-    if (double(n) * m > kMaxDivisions)
-        throw InputError("the element size is too small for the scene (over 32768 elements along a face's side)");
+    check_fine_divisions(double(n) * m);
 
     const Lattice g = triangle_lattice(grid.poly, n * m);
     std::vector<PatchCells> cells;
