@@ -132,8 +132,9 @@ public:
     void operator()(const formfactor::ShotResult& r) {
         ++shots_;
         double sum = 0.0;
-        for (std::size_t k = 0; k < r.F.size(); ++k) {
-            const double f = r.F[k];
+        for (std::size_t i = 0; i < r.size(); ++i) {
+            const double f = r.F[i];
+            const std::uint32_t k = r.element[i];
             if (!std::isfinite(f) || f < 0.0) {
                 note(fmt::format("shot {}: F[{}] = {}", shots_, k, f));
                 return;

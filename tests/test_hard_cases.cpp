@@ -382,13 +382,14 @@ TEST_CASE("hard cases: perpendicular squares sharing an edge and the right-angle
             engine->shoot(p, 5000 + p, r);
             const std::uint32_t other = 1 - shooter.node;
             long bad = 0, unseen = 0, edge_receivers = 0;
+            const std::vector<double> F = r.dense(m.elements.size());
             for (std::size_t k = 0; k < m.elements.size(); ++k) {
                 const mesh::Element& e = m.elements[k];
-                if (!(std::isfinite(r.F[k]) && r.F[k] >= 0.0)) ++bad;
+                if (!(std::isfinite(F[k]) && F[k] >= 0.0)) ++bad;
                 const double off_edge = e.node == 0 ? e.centroid.y : e.centroid.z;
                 if (e.node == other && off_edge < 0.125) {
                     ++edge_receivers;
-                    if (!(r.F[k] > 0.0)) ++unseen;
+                    if (!(F[k] > 0.0)) ++unseen;
                 }
             }
             CAPTURE(p, bad, unseen);
@@ -566,10 +567,11 @@ TEST_CASE("hard cases: geometry exactly on the hemicube's face boundaries is cou
             formfactor::ShotResult r;
             engine.shoot(0, shot, r);
             double sum = 0.0, inner = 0.0;
-            for (std::size_t k = 0; k < r.F.size(); ++k) {
-                sum += r.F[k];
+            for (std::size_t i = 0; i < r.size(); ++i) {
+                const std::uint32_t k = r.element[i];
+                sum += r.F[i];
                 const glm::dvec3 c = frame.to_local(m.elements[k].centroid);
-                if (m.elements[k].node == 1 && std::abs(c.x) < 1.0 && std::abs(c.y) < 1.0) inner += r.F[k];
+                if (m.elements[k].node == 1 && std::abs(c.x) < 1.0 && std::abs(c.y) < 1.0) inner += r.F[i];
             }
             CAPTURE(a, shot, sum, r.blocked);
             CHECK(r.blocked == 0.0);

@@ -53,7 +53,8 @@ RowErrors wall_errors(const mesh::Mesh& m, formfactor::Engine& engine) {
         engine.shoot(p, shot++, r);
         weighted += m.patches[p].area * test::node_form_factor(m, r, 1);
         floor_area += m.patches[p].area;
-        for (std::size_t k = 0; k < H.size(); ++k) H[k] += r.F[k] * m.patches[p].area / m.elements[k].area;
+        for (std::size_t i = 0; i < r.size(); ++i)
+            H[r.element[i]] += r.F[i] * m.patches[p].area / m.elements[r.element[i]].area;
     }
     RowErrors out;
     out.area_ff = weighted / floor_area;

@@ -30,8 +30,8 @@ scene::Scene needle_box(int needles) {
 
 double node_form_factor(const mesh::Mesh& m, const formfactor::ShotResult& r, std::uint32_t node) {
     double f = 0.0;
-    for (std::size_t k = 0; k < m.elements.size(); ++k)
-        if (m.elements[k].node == node) f += r.F[k];
+    for (std::size_t i = 0; i < r.size(); ++i)
+        if (m.elements[r.element[i]].node == node) f += r.F[i];
     return f;
 }
 

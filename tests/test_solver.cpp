@@ -1,11 +1,13 @@
 // Progressive shooting against analytic answers: furnaces, flux balance, parallel squares.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
+#include "solve/max_tree.h"
 #include "solve/progressive.h"
 #include "test_scenes.h"
 
@@ -166,5 +168,53 @@ TEST_CASE("progressive: a lamp whose brighter side faces the open sky does not e
         // lower side has shot (else a third of the emitted flux would be unshot), and of the 0.1
         // the floor reflects (a thirtieth of the 3 emitted) little is left.
         CHECK(solver.unshot_fraction() <= 0.01);
+    }
+}
+
+TEST_CASE("the max-tree picks what a scan of every key picks, ties to the lower index, through updates") {
+    std::uint64_t state = 12345;
+    const auto next = [&state] {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return state >> 33;
+    };
+    for (const std::size_t n : {1u, 2u, 3u, 7u, 64u, 1000u}) {
+        std::vector<double> keys(n);
+        for (double& k : keys) k = double(next() % 8);  // few distinct values: many ties
+        solve::MaxTree tree(keys);
+        for (int step = 0; step < 3000; ++step) {
+            const std::size_t want = std::size_t(std::max_element(keys.begin(), keys.end()) - keys.begin());
+            REQUIRE(tree.top() == want);
+            const std::size_t i = next() % n;
+            keys[i] = step % 5 == 0 ? -1.0 : double(next() % 8);
+            tree.set(i, keys[i]);
+        }
+    }
+    CHECK(solve::MaxTree{}.top() == 0);  // empty: size()
+}
+
+TEST_CASE("the solver's running sums match the ambient share and unshot flux recomputed from its state") {
+    scene::Scene s;
+    const std::uint32_t wall = test::add_material(s, {0.6, 0.5, 0.4}, {0, 0, 0});
+    const std::uint32_t light = test::add_material(s, {0.2, 0.2, 0.2}, {5, 4, 3});
+    s = test::closed_box({1.0, 0.8, 1.2}, [&](int face) { return face == 3 ? light : wall; }, s);
+    const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
+    formfactor::ReferenceEngine engine(m, {32, 3});
+    solve::Settings settings;
+    settings.threshold = 1e-9;
+    settings.batch = 3;
+    solve::Progressive solver(m, engine, settings);
+    for (int pass = 0; pass < 40 && solver.step(); ++pass) {
+        const std::vector<glm::dvec3> H = solver.irradiance(/*ambient=*/false);
+        const glm::dvec3 amb = solver.ambient();
+        glm::dvec3 ambient_flux{0.0}, total{0.0};
+        for (std::size_t k = 0; k < H.size(); ++k) {
+            ambient_flux += amb * m.elements[k].area;
+            total += (H[k] + amb) * m.elements[k].area;
+        }
+        double share = 0.0;
+        for (int c = 0; c < 3; ++c) share = std::max(share, ambient_flux[c] / total[c]);
+        REQUIRE_THAT(solver.ambient_share(), WithinRel(share, 1e-12));
+        const solve::Energy e = solver.energy();
+        REQUIRE_THAT(e.emitted, WithinRel(e.absorbed + e.escaped + e.unshot, 1e-12));
     }
 }

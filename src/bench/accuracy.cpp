@@ -97,8 +97,8 @@ double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine) {
         if (m.patches[p].node != 0) continue;
         engine.shoot(p, p, shot);
         double to_receiver = 0.0;
-        for (std::size_t k = 0; k < m.elements.size(); ++k)
-            if (m.elements[k].node == 1) to_receiver += shot.F[k];
+        for (std::size_t i = 0; i < shot.size(); ++i)
+            if (m.elements[shot.element[i]].node == 1) to_receiver += shot.F[i];
         weighted += m.patches[p].area * to_receiver;
         shooter_area += m.patches[p].area;
     }

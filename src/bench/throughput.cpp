@@ -125,11 +125,11 @@ Stats stats(std::vector<double> v) {
 ShotDifference shot_difference(const formfactor::ShotResult& got, const formfactor::ShotResult& want) {
     ShotDifference d;
     d.l1 = std::abs(got.blocked - want.blocked);
-    for (std::size_t k = 0; k < want.F.size(); ++k) {
-        const double diff = std::abs(got.F[k] - want.F[k]);
+    formfactor::for_each_in_union(got, want, [&d](std::uint32_t, double g, double w) {
+        const double diff = std::abs(g - w);
         d.max_abs = std::max(d.max_abs, diff);
         d.l1 += diff;
-    }
+    });
     return d;
 }
 

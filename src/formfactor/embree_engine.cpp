@@ -227,16 +227,17 @@ void EmbreeEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& ou
         cast(0);
     }
     // The threads' sums added in thread order: the same bits run after run.
-    out.F.assign(impl_->mesh.elements.size(), 0.0);
+    std::vector<double> F(impl_->mesh.elements.size(), 0.0);
     out.blocked = 0.0;
     for (unsigned t = 0; t < threads_; ++t) {
         for (std::uint32_t k : touched_[t]) {
-            out.F[k] += sums_[t][k];
+            F[k] += sums_[t][k];
             sums_[t][k] = 0.0;
         }
         touched_[t].clear();
         out.blocked += blocked[t];
     }
+    out.assign_nonzero(F.data(), F.size(), [](double f) { return f; });
 }
 
 }  // namespace hemirad::formfactor

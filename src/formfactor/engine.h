@@ -1,5 +1,5 @@
-// FormFactorEngine: shoot(patch) → F[patch → element] for every element of the mesh, one shot
-// or a batch of shots at a time. Implemented by the scalar reference hemicube, the OpenCL
+// FormFactorEngine: shoot(patch) → the sparse row F[patch → element] over the elements it
+// reaches, one shot or a batch of shots at a time. Implemented by the scalar reference hemicube, the OpenCL
 // engine, and decorators (near field, verification).
 #pragma once
 
@@ -17,13 +17,63 @@ struct Settings {
     std::uint64_t seed = 1;   // drives the per-shot rotation of the hemicube about the normal
 };
 
-// What one shot sees. F has one entry per element (zero where unseen). `blocked` is the part
-// of the hemisphere covered by the backs of one-sided surfaces (opaque, absorbing); the rest,
-// 1 − ΣF − blocked, escapes the scene.
+// What one shot sees, as a sparse row: the elements it reaches, ascending, with their form
+// factors (F[i] for element[i]; every unlisted element has F = 0). A pass costs what the shot
+// touched, not the mesh: engines list only elements they reached, solvers walk only the list.
+// `blocked` is the part of the hemisphere covered by the backs of one-sided surfaces (opaque,
+// absorbing); the rest, 1 − ΣF − blocked, escapes the scene.
 struct ShotResult {
+    std::vector<std::uint32_t> element;
     std::vector<double> F;
     double blocked = 0.0;
+
+    void clear() {
+        element.clear();
+        F.clear();
+        blocked = 0.0;
+    }
+    std::size_t size() const { return element.size(); }
+    void push(std::uint32_t k, double f) {
+        element.push_back(k);
+        F.push_back(f);
+    }
+    double sum() const {
+        double s = 0.0;
+        for (const double f : F) s += f;
+        return s;
+    }
+    // One entry per element of a mesh of `elements` (for tests and comparisons).
+    std::vector<double> dense(std::size_t elements) const {
+        std::vector<double> out(elements, 0.0);
+        for (std::size_t i = 0; i < element.size(); ++i) out[element[i]] = F[i];
+        return out;
+    }
+    // The row of a dense per-element array: its nonzero entries.
+    template <class Value, class Scale>
+    void assign_nonzero(const Value* values, std::size_t elements, Scale scale) {
+        element.clear();
+        F.clear();
+        for (std::size_t k = 0; k < elements; ++k)
+            if (values[k] != Value(0)) push(static_cast<std::uint32_t>(k), scale(values[k]));
+    }
+    bool operator==(const ShotResult& o) const { return element == o.element && F == o.F && blocked == o.blocked; }
+    bool operator!=(const ShotResult& o) const { return !(*this == o); }
 };
+
+// Walks the union of two rows' elements, ascending: fn(element, F in a, F in b), 0 where a row
+// does not list the element.
+template <class Fn>
+void for_each_in_union(const ShotResult& a, const ShotResult& b, Fn fn) {
+    std::size_t i = 0, j = 0;
+    while (i < a.size() || j < b.size()) {
+        const std::uint32_t ka = i < a.size() ? a.element[i] : UINT32_MAX;
+        const std::uint32_t kb = j < b.size() ? b.element[j] : UINT32_MAX;
+        const std::uint32_t k = ka < kb ? ka : kb;
+        const double fa = ka == k ? a.F[i++] : 0.0;
+        const double fb = kb == k ? b.F[j++] : 0.0;
+        fn(k, fa, fb);
+    }
+}
 
 // One shot of a batch: the shooter and the global shot counter.
 struct ShotRequest {

@@ -32,28 +32,33 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     // measured hit fraction (to which the ambient term is very sensitive as ρ → 1) rely on it.
     double near_before = 0.0, near_after = 0.0, far = 0.0;
     near_.clear();
-    for (std::size_t k = 0; k < out.F.size(); ++k) {
-        if (out.F[k] == 0.0) continue;  // unseen: occluded, behind, or coplanar
-        const mesh::Element& e = mesh_.elements[k];
+    for (std::size_t i = 0; i < out.size(); ++i) {
+        if (out.F[i] == 0.0) continue;  // unseen: occluded, behind, or coplanar
+        const mesh::Element& e = mesh_.elements[out.element[i]];
         const glm::dvec3 d = e.centroid - shooter.centroid;
         // What the hemicube would have measured with nothing in the way, from the same point.
         const double unoccluded = glm::dot(d, d) < reach2 ? point_to_polygon(shooter.centroid, shooter.normal, e.poly) : 0.0;
-        const double visible = out.F[k] / unoccluded;  // not clamped: aliasing noise stays unbiased
+        const double visible = out.F[i] / unoccluded;  // not clamped: aliasing noise stays unbiased
         if (!(unoccluded > 0.0) || !std::isfinite(visible)) {  // seen only by aliasing (F / 1e-310 is inf)
-            far += out.F[k];
+            far += out.F[i];
             continue;
         }
-        near_before += out.F[k];
-        out.F[k] = visible * point_to_polygon(e.centroid, e.normal, shooter.poly) * e.area / shooter.area;
-        near_after += out.F[k];
-        near_.push_back(k);
+        near_before += out.F[i];
+        out.F[i] = visible * point_to_polygon(e.centroid, e.normal, shooter.poly) * e.area / shooter.area;
+        near_after += out.F[i];
+        near_.push_back(i);
     }
     const double far_scale = far > 0.0 ? (far + near_before - near_after) / far : -1.0;
     if (far_scale >= 0.0) {
-        for (std::size_t k = 0; k < out.F.size(); ++k)
-            if (out.F[k] != 0.0 && !std::binary_search(near_.begin(), near_.end(), k)) out.F[k] *= far_scale;
+        for (std::size_t i = 0, n = 0; i < out.size(); ++i) {
+            if (n < near_.size() && near_[n] == i) {
+                ++n;
+                continue;
+            }
+            if (out.F[i] != 0.0) out.F[i] *= far_scale;
+        }
     } else if (near_after > 0.0) {
-        for (std::size_t k : near_) out.F[k] *= near_before / near_after;
+        for (std::size_t i : near_) out.F[i] *= near_before / near_after;
     }
 }
 

@@ -646,16 +646,17 @@ void OpenCLEngine::shoot_fitting(const std::vector<ShotRequest>& shots, std::vec
     const double unit = std::ldexp(1.0, -HR_FIXED_SHIFT);
     for (std::size_t i = 0; i < shots.size(); ++i) {
         const hr_long* sums = sums_host_.data() + i * sum_stride();
-        if (tuning_.setup_lanes) {  // only the clusters set up hold sums; the rest see nothing
-            out[i].F.assign(elements, 0.0);
+        const auto fixed_to_double = [unit](hr_long s) { return static_cast<double>(s) * unit; };
+        if (tuning_.setup_lanes) {  // only the clusters set up hold sums (ascending); the rest see nothing
+            out[i].clear();
             for (std::uint32_t c : shot_clusters_[i]) {
-                const std::size_t end = std::min(elements, (c + std::size_t{1}) * cluster_elements());
-                for (std::size_t k = c * cluster_elements(); k < end; ++k)
-                    out[i].F[k] = static_cast<double>(sums[k]) * unit;
+                const std::size_t first = c * cluster_elements();
+                const std::size_t end = std::min(elements, first + cluster_elements());
+                for (std::size_t k = first; k < end; ++k)
+                    if (sums[k] != 0) out[i].push(static_cast<std::uint32_t>(k), fixed_to_double(sums[k]));
             }
         } else {
-            out[i].F.resize(elements);
-            for (std::size_t k = 0; k < elements; ++k) out[i].F[k] = static_cast<double>(sums[k]) * unit;
+            out[i].assign_nonzero(sums, elements, fixed_to_double);
         }
         out[i].blocked = static_cast<double>(sums[elements]) * unit;
         if (launches_ > fault_.wrong_after && !out[i].F.empty())  // HEMIRAD_FAULT: what a broken device might return

@@ -205,8 +205,7 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
         }
     }
     const double unit = std::ldexp(1.0, -HR_FIXED_SHIFT);
-    out.F.resize(elements);
-    for (std::size_t k = 0; k < elements; ++k) out.F[k] = static_cast<double>(sums_[k]) * unit;
+    out.assign_nonzero(sums_.data(), elements, [unit](std::int64_t s) { return static_cast<double>(s) * unit; });
     out.blocked = static_cast<double>(sums_[elements]) * unit;
 }
 

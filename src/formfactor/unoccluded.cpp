@@ -96,8 +96,7 @@ double cell_mean(const glm::dvec3* v, int n, const glm::dvec3& centroid, int q, 
 
 void UnoccludedEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
     (void)shot;
-    out.F.assign(receivers_.size(), 0.0);
-    out.blocked = 0.0;
+    out.clear();
     const mesh::Patch& shooter = mesh_.patches[patch];
     if (!(shooter.area > 0.0)) return;
     const glm::dvec3 ni = shooter.normal;
@@ -124,8 +123,10 @@ void UnoccludedEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult
         if (r.patch == patch || !receives(r.centroid, r.normal)) continue;
         const int q = subdivisions(glm::length(r.centroid - shooter.centroid), std::max(r.size, si));
         const double mean = cell_mean(r.v, r.n, r.centroid, q, [&](const glm::dvec3& x) { return at(x, r.normal); });
-        out.F[j] = r.area * inv_area * mean;
-        row += out.F[j];
+        const double f = r.area * inv_area * mean;
+        if (f == 0.0) continue;
+        out.push(static_cast<std::uint32_t>(j), f);
+        row += f;
     }
 
     // The row's total, from the shooter's side: at every point x of the shooter, Lambert's factors

@@ -3,31 +3,33 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include <fmt/core.h>
 
 namespace hemirad::formfactor {
 
 std::string compare_shot(const ShotResult& got, const ShotResult& want, VerifySummary* summary) {
-    if (got.F.size() != want.F.size())
-        return fmt::format("{} form factors where the reference has {}", got.F.size(), want.F.size());
-    for (std::size_t k = 0; k <= got.F.size(); ++k) {
-        // k == size stands for the blocked share, checked like any element.
-        const double g = k < got.F.size() ? got.F[k] : got.blocked;
-        const double w = k < want.F.size() ? want.F[k] : want.blocked;
+    // Every element either row lists (F = 0 where the other lacks it), then the blocked share,
+    // checked like any element; the first failure is reported.
+    std::string failure;
+    const auto check = [&](std::int64_t element, double g, double w) {  // element −1: the blocked share
         const double abs_error = std::abs(g - w);
         if (summary) {
             summary->max_abs_error = std::max(summary->max_abs_error, abs_error);
             if (std::abs(w) > VerifyingEngine::kAbsoluteTolerance)
                 summary->max_rel_error = std::max(summary->max_rel_error, abs_error / std::abs(w));
         }
-        if (abs_error > VerifyingEngine::kAbsoluteTolerance + VerifyingEngine::kRelativeTolerance * std::abs(w)) {
-            const std::string what = k < got.F.size() ? fmt::format("element {}", k) : std::string("the blocked share");
-            return fmt::format("{} has F = {:.9g}, the reference says {:.9g} (|error| {:.3g} > {:g} + {:g}·F)", what, g,
-                               w, abs_error, VerifyingEngine::kAbsoluteTolerance, VerifyingEngine::kRelativeTolerance);
-        }
-    }
-    return {};
+        if (failure.empty() &&
+            abs_error > VerifyingEngine::kAbsoluteTolerance + VerifyingEngine::kRelativeTolerance * std::abs(w))
+            failure = fmt::format("{} has F = {:.9g}, the reference says {:.9g} (|error| {:.3g} > {:g} + {:g}·F)",
+                                  element < 0 ? std::string("the blocked share") : fmt::format("element {}", element), g, w, abs_error, VerifyingEngine::kAbsoluteTolerance,
+                                  VerifyingEngine::kRelativeTolerance);
+        return failure.empty();
+    };
+    for_each_in_union(got, want, [&](std::uint32_t k, double g, double w) { check(k, g, w); });
+    check(-1, got.blocked, want.blocked);
+    return failure;
 }
 
 VerifyingEngine::VerifyingEngine(std::unique_ptr<Engine> engine, std::unique_ptr<Engine> reference, long every)

@@ -133,15 +133,13 @@ bool Matrix::shoot_rows(const std::function<void(long, long)>& progress) {
         for (std::size_t k = 0; k < requests.size(); ++k) {
             const formfactor::ShotResult& shot = results[k];
             Row& row = rows_[requests[k].patch];
-            const auto nonzero = static_cast<std::size_t>(
-                std::count_if(shot.F.begin(), shot.F.end(), [](double f) { return f != 0.0; }));
-            row.element.reserve(nonzero);
-            row.F.reserve(nonzero);
-            for (std::size_t j = 0; j < shot.F.size(); ++j) {
-                if (shot.F[j] == 0.0) continue;
-                row.element.push_back(static_cast<std::uint32_t>(j));
-                row.F.push_back(shot.F[j]);
-                row.f_sum += shot.F[j];
+            row.element.reserve(shot.size());
+            row.F.reserve(shot.size());
+            for (std::size_t i = 0; i < shot.size(); ++i) {
+                if (shot.F[i] == 0.0) continue;
+                row.element.push_back(shot.element[i]);
+                row.F.push_back(shot.F[i]);
+                row.f_sum += shot.F[i];
             }
             row.blocked = shot.blocked;
             row.shot = true;

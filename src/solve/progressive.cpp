@@ -35,6 +35,8 @@ Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, con
         rho_area += e.rho * e.area;
     }
     if (total_area_ > 0.0) rho_area_mean_ = rho_area / total_area_;
+    is_touched_.assign(mesh.patches.size(), false);
+    recompute_sums();
     start_round(irradiance(/*ambient=*/true));
     round_change_ = std::numeric_limits<double>::infinity();
     update_convergence();
@@ -54,35 +56,42 @@ bool Progressive::done() const {
     return converged_ || (settings_.max_passes > 0 && passes_ >= settings_.max_passes);
 }
 
+double Progressive::flux_key(std::size_t patch) const { return sum(unshot_[patch]) * mesh_.patches[patch].area; }
+
+void Progressive::recompute_sums() {
+    incident_flux_ = unshot_flux_ = landing_ = glm::dvec3(0.0);
+    for (std::size_t k = 0; k < H_.size(); ++k) incident_flux_ += H_[k] * mesh_.elements[k].area;
+    std::vector<double> keys(unshot_.size());
+    for (std::size_t p = 0; p < unshot_.size(); ++p) {
+        unshot_flux_ += unshot_[p] * mesh_.patches[p].area;
+        landing_ += hit_[p] * unshot_[p] * mesh_.patches[p].area;
+        keys[p] = flux_key(p);
+    }
+    pick_.reset(std::move(keys));
+}
+
 bool Progressive::step() {
     if (done()) return false;
 
-    // The patches with the most unshot flux; ties go to the lower index.
-    std::vector<double> flux(unshot_.size());
-    std::vector<std::size_t> order;
-    for (std::size_t p = 0; p < unshot_.size(); ++p) {
-        flux[p] = sum(unshot_[p]) * mesh_.patches[p].area;
-        if (flux[p] > 0.0) order.push_back(p);
+    // The patches with the most unshot flux, most first; ties go to the lower index. Each is taken
+    // off the tree while the next is found, then put back: apply() updates it when it shoots.
+    long count = std::max(1, settings_.batch);
+    if (settings_.max_passes > 0) count = std::min(count, settings_.max_passes - passes_);
+    std::vector<formfactor::ShotRequest> requests;
+    while (static_cast<long>(requests.size()) < count) {
+        const std::size_t best = pick_.top();
+        if (best >= pick_.size() || !(pick_.key(best) > 0.0)) break;
+        requests.push_back({static_cast<std::uint32_t>(best), static_cast<std::uint64_t>(passes_) + requests.size()});
+        pick_.set(best, -1.0);
     }
-    if (order.empty()) {
+    for (const formfactor::ShotRequest& r : requests) pick_.set(r.patch, flux_key(r.patch));
+    if (requests.empty()) {
         converged_ = true;
         return false;
     }
-    long count = std::min<long>(std::max(1, settings_.batch), static_cast<long>(order.size()));
-    if (settings_.max_passes > 0) count = std::min(count, settings_.max_passes - passes_);
-    const auto more_flux = [&](std::size_t a, std::size_t b) {
-        return flux[a] > flux[b] || (flux[a] == flux[b] && a < b);
-    };
-    std::partial_sort(order.begin(), order.begin() + count, order.end(), more_flux);
-
-    std::vector<formfactor::ShotRequest> requests;
-    for (long i = 0; i < count; ++i)
-        requests.push_back({static_cast<std::uint32_t>(order[static_cast<std::size_t>(i)]),
-                            static_cast<std::uint64_t>(passes_ + i)});
     engine_.shoot_batch(requests, batch_results_);
     // In order; a batch cut short by convergence leaves the rest unshot, the books exact.
-    for (long i = 0; i < count && !done(); ++i)
-        apply(order[static_cast<std::size_t>(i)], batch_results_[static_cast<std::size_t>(i)]);
+    for (std::size_t i = 0; i < requests.size() && !done(); ++i) apply(requests[i].patch, batch_results_[i]);
     return true;
 }
 
@@ -90,6 +99,8 @@ void Progressive::apply(std::size_t best, const formfactor::ShotResult& shot) {
     const mesh::Patch& shooter = mesh_.patches[best];
     const glm::dvec3 u = unshot_[best];
     const glm::dvec3 flux = u * shooter.area;
+    landing_ -= hit_[best] * flux;
+    unshot_flux_ -= flux;
     unshot_[best] = glm::dvec3(0.0);
     shot_[best] += u;
     round_unshot_[best] = 0.0;  // what it held at the round's start has now been shot
@@ -97,22 +108,37 @@ void Progressive::apply(std::size_t best, const formfactor::ShotResult& shot) {
     // ΔH_j = ΔB_i F_ij A_i / A_j; what element j reflects, ρ_j ΔH_j A_j, joins its patch's pool.
     glm::dvec3 reflected{0.0};
     double f_sum = 0.0;
-    for (std::size_t k = 0; k < shot.F.size(); ++k) {
-        const double f = shot.F[k];
+    touched_.clear();
+    for (std::size_t i = 0; i < shot.size(); ++i) {
+        const double f = shot.F[i];
         if (f == 0.0) continue;
-        const mesh::Element& e = mesh_.elements[k];
-        const glm::dvec3 received = flux * f;  // flux arriving at element k
-        H_[k] += received / e.area;
+        const mesh::Element& e = mesh_.elements[shot.element[i]];
+        const glm::dvec3 received = flux * f;  // flux arriving at the element
+        H_[shot.element[i]] += received / e.area;
+        incident_flux_ += received;
         const glm::dvec3 back = e.rho * received;
         const mesh::Patch& parent = mesh_.patches[e.patch];
         unshot_[e.patch] += back / parent.area;
+        unshot_flux_ += back;
+        landing_ += hit_[e.patch] * back;
+        if (!is_touched_[e.patch]) {
+            is_touched_[e.patch] = true;
+            touched_.push_back(e.patch);
+        }
         absorbed_ += received - back;
         reflected += back;
         f_sum += f;
     }
     absorbed_ += flux * shot.blocked;
     escaped_ += flux * (1.0 - f_sum - shot.blocked);  // may be −1e-16: books stay exact
-    hit_[best] = std::clamp(f_sum + shot.blocked, 0.0, 1.0);
+    const double hit = std::clamp(f_sum + shot.blocked, 0.0, 1.0);
+    landing_ += (hit - hit_[best]) * unshot_[best] * shooter.area;  // light its own elements sent back
+    hit_[best] = hit;
+    pick_.set(best, flux_key(best));
+    for (const std::uint32_t p : touched_) {
+        is_touched_[p] = false;
+        pick_.set(p, flux_key(p));
+    }
 
     // Recent reflectance of the scene, flux-weighted, forgetting over about one round of patches.
     const double keep = 1.0 - 1.0 / std::max<double>(16.0, static_cast<double>(mesh_.patches.size()));
@@ -140,15 +166,14 @@ glm::dvec3 Progressive::ambient() const {
     // ρ_eff). A share measured on other patches' shots is not used for a patch's own light: a
     // lamp's side facing the open sky says nothing of its side facing the floor.
     if (total_area_ <= 0.0) return glm::dvec3(0.0);
-    glm::dvec3 landing{0.0};
-    for (std::size_t p = 0; p < unshot_.size(); ++p) landing += hit_[p] * unshot_[p] * mesh_.patches[p].area;
-    return landing / total_area_ / (glm::dvec3(1.0) - effective_reflectance());
+    return glm::max(landing_, glm::dvec3(0.0)) / total_area_ / (glm::dvec3(1.0) - effective_reflectance());
 }
 
 void Progressive::update_convergence() {
     // A round is one pass per patch: by then every patch that holds light has had its turn.
     const long round = std::max<long>(1, static_cast<long>(mesh_.patches.size()));
     if (passes_ - snapshot_pass_ >= round) {
+        recompute_sums();
         std::vector<glm::dvec3> now = irradiance(/*ambient=*/true);
         glm::dvec3 change{0.0}, total{0.0};
         for (std::size_t k = 0; k < now.size(); ++k) {
@@ -166,28 +191,28 @@ void Progressive::update_convergence() {
         if (left > settings_.threshold * round_held_) round_change_ = std::numeric_limits<double>::infinity();
         start_round(std::move(now));
     }
-    converged_ = sum(unshot_total()) <= 0.0 || error() <= settings_.threshold;
+    converged_ = nothing_unshot() || error() <= settings_.threshold;
 }
 
 double Progressive::ambient_share() const {
     // Incident light, not radiosity: with ρ = 0 radiosity is just E, yet the irradiance the
     // report gives still needs every lamp shot. Flux-weighted per channel.
-    const glm::dvec3 amb = ambient();
-    glm::dvec3 ambient_flux{0.0}, total{0.0};
-    for (std::size_t k = 0; k < mesh_.elements.size(); ++k) {
-        const double area = mesh_.elements[k].area;
-        ambient_flux += amb * area;
-        total += (H_[k] + amb) * area;
-    }
+    const glm::dvec3 ambient_flux = ambient() * total_area_;
+    const glm::dvec3 total = incident_flux_ + ambient_flux;
     double share = 0.0;
     for (int c = 0; c < 3; ++c)
         if (total[c] > 0.0) share = std::max(share, ambient_flux[c] / total[c]);
     return share;
 }
 
+bool Progressive::nothing_unshot() const {
+    const std::size_t best = pick_.top();
+    return best >= pick_.size() || !(pick_.key(best) > 0.0);
+}
+
 std::string Progressive::convergence_rule() const {
     if (!converged_) return "";
-    if (sum(unshot_total()) <= 0.0 || ambient_share() <= settings_.threshold) return "unshot light";
+    if (nothing_unshot() || ambient_share() <= settings_.threshold) return "unshot light";
     return "a round without change";
 }
 
@@ -213,11 +238,7 @@ std::vector<glm::dvec3> Progressive::radiosity(bool with_ambient) const {
     return out;
 }
 
-glm::dvec3 Progressive::unshot_total() const {
-    glm::dvec3 flux{0.0};
-    for (std::size_t p = 0; p < unshot_.size(); ++p) flux += unshot_[p] * mesh_.patches[p].area;
-    return flux;
-}
+glm::dvec3 Progressive::unshot_total() const { return glm::max(unshot_flux_, glm::dvec3(0.0)); }
 
 void Progressive::save(std::ostream& out) const {
     using namespace state_io;
@@ -227,7 +248,9 @@ void Progressive::save(std::ostream& out) const {
     put_vector(out, snapshot_);
     put_vector(out, hit_);
     put_vector(out, round_unshot_);
-    for (const glm::dvec3& v : {emitted_, absorbed_, escaped_, recent_shot_, recent_reflected_}) put(out, v);
+    for (const glm::dvec3& v :
+         {emitted_, absorbed_, escaped_, recent_shot_, recent_reflected_, incident_flux_, unshot_flux_, landing_})
+        put(out, v);
     put(out, static_cast<std::int64_t>(passes_));
     put(out, static_cast<std::int64_t>(snapshot_pass_));
     put(out, round_held_);
@@ -243,7 +266,9 @@ void Progressive::load(std::istream& in) {
     get_vector(in, snapshot_, snapshot_.size());
     get_vector(in, hit_, hit_.size());
     get_vector(in, round_unshot_, round_unshot_.size());
-    for (glm::dvec3* v : {&emitted_, &absorbed_, &escaped_, &recent_shot_, &recent_reflected_}) get(in, *v);
+    for (glm::dvec3* v : {&emitted_, &absorbed_, &escaped_, &recent_shot_, &recent_reflected_, &incident_flux_,
+                          &unshot_flux_, &landing_})
+        get(in, *v);
     std::int64_t passes = 0, snapshot_pass = 0;
     get(in, passes);
     get(in, snapshot_pass);
@@ -254,6 +279,9 @@ void Progressive::load(std::istream& in) {
     passes_ = static_cast<long>(passes);
     snapshot_pass_ = static_cast<long>(snapshot_pass);
     converged_ = converged != 0;
+    std::vector<double> keys(unshot_.size());
+    for (std::size_t p = 0; p < unshot_.size(); ++p) keys[p] = flux_key(p);
+    pick_.reset(std::move(keys));
 }
 
 Energy Progressive::energy() const {

@@ -1,6 +1,8 @@
 // Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988): each pass shoots
 // the patch with the most unshot flux; elements receive, their reflected flux goes up to the
-// parent patch. An ambient term stands in for the flux not yet shot.
+// parent patch. An ambient term stands in for the flux not yet shot. A pass costs what its shot
+// touched: the pick is a max-tree over the patches, and the sums the ambient term and the
+// convergence measure need are kept running (recomputed exactly once a round).
 #pragma once
 
 #include <algorithm>
@@ -14,6 +16,7 @@
 
 #include "formfactor/engine.h"
 #include "mesh/mesh.h"
+#include "solve/max_tree.h"
 #include "solve/resumable.h"
 
 namespace hemirad::solve {
@@ -101,11 +104,23 @@ private:
     // Per patch, the share of its last shot that landed on the scene (ΣF + blocked); 1 until it
     // has shot. The ambient term lands each patch's unshot flux in this share.
     std::vector<double> hit_;
+    // Running sums, per channel: Σ H·A over elements, Σ U·A and Σ h·U·A over patches. Updated by
+    // each pass for what it touched, recomputed in index order at each round's start (so they
+    // cannot drift), and saved with the state (a resumed bake continues with the same bits).
+    glm::dvec3 incident_flux_{0.0}, unshot_flux_{0.0}, landing_{0.0};
+    // Per patch, its unshot flux sum(U)·A: the key of the pick.
+    MaxTree pick_;
+    std::vector<std::uint32_t> touched_;  // parents a pass sent light to (scratch)
+    std::vector<bool> is_touched_;
+
+    void recompute_sums();
+    double flux_key(std::size_t patch) const;
     long passes_ = 0;
     bool converged_ = false;
 
     glm::dvec3 effective_reflectance() const;
     glm::dvec3 unshot_total() const;  // unshot flux per channel
+    bool nothing_unshot() const;      // every patch has shot all it holds
     void start_round(std::vector<glm::dvec3> snapshot);  // snapshot: ambient-corrected H now
     void update_convergence();
 

@@ -146,9 +146,11 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
             for (std::size_t r = 0; r < requests.size(); ++r) {
                 const std::uint32_t p = requests[r].patch;
                 const glm::dvec3 flux = shot[p] * m.patches[p].area;
-                const std::vector<double>& F = results[r].F;
-                for (std::size_t k = 0; k < m.elements.size(); ++k)
-                    if (refined.is_new[k] && F[k] != 0.0) gathered[k] += flux * F[k] / m.elements[k].area;
+                const formfactor::ShotResult& row = results[r];
+                for (std::size_t i = 0; i < row.size(); ++i) {
+                    const std::uint32_t k = row.element[i];
+                    if (refined.is_new[k] && row.F[i] != 0.0) gathered[k] += flux * row.F[i] / m.elements[k].area;
+                }
             }
         }
 
