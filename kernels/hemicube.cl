@@ -493,7 +493,8 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
                  __local uint* used) {
     const double eps = shot->eps;
     const llong n_lanes = convert_long8(vload8(0, group->n));
-    const llong mine = convert_long8(vload8(0, group->patch) == (int8)(shot->shooter));
+    const int8 patch = vload8(0, group->patch);
+    const llong mine = convert_long8(patch == (int8)(shot->shooter) || patch == (int8)(shot->twin));
     const llong has_twin = convert_long8(vload8(0, group->has_twin) != 0);
     const ldouble normal_x = vload8(0, group->normal), normal_y = vload8(1, group->normal),
                   normal_z = vload8(2, group->normal);
@@ -774,10 +775,11 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const int p = (int)get_global_id(0);
     // The sums' clear, ahead of the raster in the queue (scan leaves the tile counts at zero).
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
-    if (p < shot->patches && p != shot->shooter) {  // the shooter's elements lie in its base plane
-        // Elements tile their patch: when the patch is below the base plane, so are they.
+    if (p < shot->patches && p != shot->shooter && p != shot->twin) {  // the shooter's own surface, either side
+        // Elements tile their patch: when the patch is below the base plane, so are they. A
+        // cluster (n = 0) has no polygon to tell.
         __global const HrPatch* patch = patches + p;
-        bool patch_above = false;
+        bool patch_above = patch->n == 0;
         for (int i = 0; i < patch->n; ++i)
             patch_above = patch_above || to_local(shot, vec(patch->v[3 * i], patch->v[3 * i + 1], patch->v[3 * i + 2]))
                                                  .z > shot->eps;

@@ -72,6 +72,7 @@ typedef struct {
     hr_double eps;                          // base-plane clip distance, scene units
     hr_int n;                               // hemicube resolution N (top NxN, sides NxN/2)
     hr_int shooter;                         // patch index of the shooter
+    hr_int twin;                            // its twin (the surface's other side), or −1
     hr_int elements;                        // element count
     hr_int patches;                         // patch count
     hr_int tiles_x;                         // tiles across a face: ceil(N / TILE)

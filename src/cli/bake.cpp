@@ -495,6 +495,8 @@ void run_bake(const BakeOptions& options) {
         throw InputError(fmt::format("{}: the scene has no extent (all vertices coincide)", o.scene));
     mesh_settings.patch_size = o.patch_size > 0.0 ? o.patch_size : diagonal * quality.patch_fraction;
     mesh_settings.element_size = o.element_size > 0.0 ? o.element_size : mesh_settings.patch_size / quality.elements_per_patch_edge;
+    // The exact unoccluded engine integrates over each patch's polygon: clusters only for the hemicube.
+    mesh_settings.cluster = plan.occlusion.on;
     if (mesh_settings.element_size > mesh_settings.patch_size)
         throw InputError(fmt::format("--element-size {} is larger than the patch size {}", mesh_settings.element_size, mesh_settings.patch_size));
     const output::View view = output::choose_view(scene, o.camera);  // fails early on a bad --camera
@@ -768,6 +770,7 @@ void run_bake(const BakeOptions& options) {
                         {"elements", mesh.elements.size()},
                         {"elements_before_refinement", elements_before},
                         {"quads", mesh.quads},
+                        {"clusters", mesh.clusters},
                         {"dropped_triangles", mesh.dropped_triangles},
                         {"skipped_primitives", scene.skipped_primitives}};
     report["plan"] = {{"solver", {{"name", solver_name}, {"why", solver_why}}},
@@ -781,6 +784,8 @@ void run_bake(const BakeOptions& options) {
                                        return parts;
                                    }()}}}};
     if (memory_limit.available) report["plan"]["memory"]["available"] = *memory_limit.available;  // without --max-memory
+    // Measured: the most this process held so far (resident), the outputs not yet written.
+    report["plan"]["memory"]["peak"] = peak_memory();
     report["passes"] = solution.passes;
     if (solution.resumed_from >= 0) report["resumed_from_pass"] = solution.resumed_from;
     report["converged"] = solution.converged;

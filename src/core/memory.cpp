@@ -1,6 +1,8 @@
 // Available memory from /proc and the cgroup files; byte counts in words.
 #include "core/memory.h"
 
+#include <sys/resource.h>
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -110,6 +112,12 @@ std::optional<double> available_memory() {
         available = available ? std::min(*available, left) : left;
     }
     return available;
+}
+
+double peak_memory() {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    return double(usage.ru_maxrss) * 1024.0;  // kilobytes on Linux
 }
 
 std::string format_bytes(double bytes) {

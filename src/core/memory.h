@@ -19,6 +19,9 @@ std::optional<double> machine_memory();
 // kernel reclaims before it fails an allocation). nullopt where none of these can be read.
 std::optional<double> available_memory();
 
+// The most resident memory this process has held so far (getrusage's ru_maxrss), in bytes.
+double peak_memory();
+
 // "1.2 GB", "340 MB", "12 KB", "512 bytes" (decimal units, three significant digits); infinity
 // (a count that overflowed) says so.
 std::string format_bytes(double bytes);

@@ -23,8 +23,22 @@ void NearFieldEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::ve
 
 void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     const mesh::Patch& shooter = mesh_.patches[patch];
+    // The shooter's polygons: its cell, or a cluster's elements.
+    std::vector<const mesh::Polygon*> shape;
+    if (shooter.cluster()) {
+        for (std::uint32_t k = shooter.first_element; k < shooter.first_element + shooter.element_count; ++k)
+            shape.push_back(&mesh_.elements[k].poly);
+    } else {
+        shape.push_back(&shooter.poly);
+    }
+    const auto to_shooter = [&shape](const glm::dvec3& x, const glm::dvec3& normal) {
+        double f = 0.0;
+        for (const mesh::Polygon* poly : shape) f += point_to_polygon(x, normal, *poly);
+        return f;
+    };
     double radius = 0.0;
-    for (int i = 0; i < shooter.poly.n; ++i) radius = std::max(radius, glm::length(shooter.poly.v[i] - shooter.centroid));
+    for (const mesh::Polygon* poly : shape)
+        for (int i = 0; i < poly->n; ++i) radius = std::max(radius, glm::length(poly->v[i] - shooter.centroid));
     const double reach2 = (reach_ * radius) * (reach_ * radius);
 
     // Correct the near receivers, then rescale the far ones so the shot keeps its total: the
@@ -44,7 +58,7 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
             continue;
         }
         near_before += out.F[i];
-        out.F[i] = visible * point_to_polygon(e.centroid, e.normal, shooter.poly) * e.area / shooter.area;
+        out.F[i] = visible * to_shooter(e.centroid, e.normal) * e.area / shooter.area;
         near_after += out.F[i];
         near_.push_back(i);
     }

@@ -3,6 +3,7 @@
 // squares a quarter apart). For those receivers the transfer is taken instead at the
 // receiver's centroid, exactly over the whole shooter polygon (Lambert), and scaled by the
 // share of the receiver the hemicube found visible: F_ij = vis_j · F(dA_j → A_i) · A_j / A_i.
+// A cluster's F(dA_j → A_i) is the sum over its elements' polygons.
 #pragma once
 
 #include <memory>
@@ -28,7 +29,7 @@ private:
     const mesh::Mesh& mesh_;
     std::unique_ptr<Engine> inner_;
     double reach_;
-    std::vector<std::size_t> near_;  // receivers corrected in the current shot, ascending
+    std::vector<std::size_t> near_;  // row positions of the receivers corrected in the current shot, ascending
 
     void correct(std::uint32_t patch, ShotResult& out);  // the inner engine's shot, in place
 };

@@ -28,9 +28,9 @@ static_assert(sizeof(HrElementLanes) == 1280 && offsetof(HrElementLanes, normal)
               offsetof(HrElementLanes, n) == 1152 && offsetof(HrElementLanes, patch) == 1216 &&
               offsetof(HrElementLanes, bound) == 1248);
 static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(HrPatch, elements) == 104);
-static_assert(sizeof(HrShot) == 152 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
-              offsetof(HrShot, patches) == 116 && offsetof(HrShot, tiles_x) == 120 &&
-              offsetof(HrShot, tile_base) == 124 && offsetof(HrShot, list_capacity) == 148);
+static_assert(sizeof(HrShot) == 160 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
+              offsetof(HrShot, twin) == 112 && offsetof(HrShot, patches) == 120 && offsetof(HrShot, tiles_x) == 124 &&
+              offsetof(HrShot, tile_base) == 128 && offsetof(HrShot, list_capacity) == 152);
 static_assert(sizeof(HrEdge) == 24 && sizeof(HrBox) == 24);
 static_assert(sizeof(HrRecord) == 256 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, edges) == 32 &&
               offsetof(HrRecord, spans) == 36 && offsetof(HrRecord, cover) == 40 &&
@@ -516,6 +516,8 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         shot.eps = eps_;
         shot.n = settings_.hemicube;
         shot.shooter = static_cast<hr_int>(requests[i].patch);
+        const std::uint32_t twin = mesh_.patches[requests[i].patch].twin;
+        shot.twin = twin == mesh::kNoPatch ? -1 : static_cast<hr_int>(twin);
         shot.elements = static_cast<hr_int>(mesh_.elements.size());
         shot.patches = static_cast<hr_int>(mesh_.patches.size());
         shot.tiles_x = tiles_x_;

@@ -69,6 +69,7 @@ bool covers_cell(const std::int64_t* px, const std::int64_t* py, int n, int i, i
 }
 
 bool ReferenceEngine::above_base_plane(const mesh::Polygon& poly, const Frame& frame) const {
+    if (poly.n == 0) return true;  // a cluster: no polygon bounds its elements
     for (int i = 0; i < poly.n; ++i)
         if (frame.to_local(poly.v[i]).z > eps_) return true;
     return false;
@@ -101,7 +102,7 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
 
     for (std::size_t k = 0; k < mesh_.elements.size(); ++k) {
         const mesh::Element& e = mesh_.elements[k];
-        if (e.patch == patch) continue;  // the shooter's own elements lie in its base plane
+        if (e.patch == patch || e.patch == shooter.twin) continue;  // the shooter's own surface, either side
         if (k == mesh_.patches[e.patch].first_element && !above_base_plane(mesh_.patches[e.patch].poly, frame)) {
             k += mesh_.patches[e.patch].element_count - 1;  // elements tile their patch: all are below
             continue;

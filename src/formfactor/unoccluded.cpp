@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/error.h"
 #include "formfactor/analytic.h"
 
 namespace hemirad::formfactor {
@@ -38,7 +39,11 @@ UnoccludedEngine::UnoccludedEngine(const mesh::Mesh& mesh) : mesh_(mesh) {
         }
     }
     patch_size_.reserve(mesh.patches.size());
-    for (const mesh::Patch& p : mesh.patches) patch_size_.push_back(mesh::longest_edge(p.poly));
+    for (const mesh::Patch& p : mesh.patches) {
+        // Its rules integrate over each patch's polygon; a bake meshes without clusters for it.
+        if (p.cluster()) throw InternalError("unoccluded form factors need a mesh without clusters");
+        patch_size_.push_back(mesh::longest_edge(p.poly));
+    }
     eps_ = 1e-9 * glm::length(hi - lo);
 }
 

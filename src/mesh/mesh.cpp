@@ -7,8 +7,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
 #include <limits>
 #include <map>
+#include <unordered_map>
 #include <utility>
 
 #include "core/error.h"
@@ -342,35 +344,38 @@ Polygon reversed(const Polygon& poly) {
     return r;
 }
 
-// Appends one side of a face: its patches, each followed by its contiguous elements.
-void append_side(Mesh& mesh, const Face& face, const std::vector<PatchCells>& cells, const scene::Material& mat,
-                 bool back) {
-    const scene::Triangle& t0 = *face.src[0];
-    for (const PatchCells& pc : cells) {
-        if (mesh.patches.size() >= std::numeric_limits<std::uint32_t>::max() ||
-            mesh.elements.size() + pc.elements.size() >= std::numeric_limits<std::uint32_t>::max())
-            throw InternalError("mesh: more patches or elements than 32-bit indices can hold");
-        Patch patch;
-        const Shape ps = shape_of(pc.poly);
-        patch.poly = back ? reversed(pc.poly) : pc.poly;
-        patch.normal = back ? -ps.normal : ps.normal;
-        patch.centroid = ps.centroid;
-        patch.area = ps.area;
-        patch.node = t0.node;
-        patch.first_element = static_cast<std::uint32_t>(mesh.elements.size());
-        patch.element_count = static_cast<std::uint32_t>(pc.elements.size());
-        const auto patch_index = static_cast<std::uint32_t>(mesh.patches.size());
+// One piece of a patch: a cell of a face's grid and the face it lies in.
+struct Part {
+    const Face* face;
+    const PatchCells* cells;
+};
 
-        dvec3 emitted{0.0};
-        double area = 0.0;
-        for (const Polygon& poly : pc.elements) {
+// Appends one patch of one side, followed by its contiguous elements: a cell of a face's grid
+// (one part), or a cluster of small faces (their cells' elements, poly.n = 0).
+void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Material& mat, bool back) {
+    std::size_t count = 0;
+    for (const Part& part : parts) count += part.cells->elements.size();
+    if (mesh.patches.size() >= std::numeric_limits<std::uint32_t>::max() ||
+        mesh.elements.size() + count >= std::numeric_limits<std::uint32_t>::max())
+        throw InternalError("mesh: more patches or elements than 32-bit indices can hold");
+    Patch patch;
+    patch.node = parts.front().face->src[0]->node;
+    patch.first_element = static_cast<std::uint32_t>(mesh.elements.size());
+    patch.element_count = static_cast<std::uint32_t>(count);
+    const auto patch_index = static_cast<std::uint32_t>(mesh.patches.size());
+
+    dvec3 emitted{0.0}, weighted_normal{0.0}, weighted_centroid{0.0};
+    double area = 0.0;
+    for (const Part& part : parts) {
+        const scene::Triangle& t0 = *part.face->src[0];
+        for (const Polygon& poly : part.cells->elements) {
             Element e;
             const Shape es = shape_of(poly);
             e.poly = back ? reversed(poly) : poly;
             e.normal = back ? -es.normal : es.normal;
             e.centroid = es.centroid;
             e.area = es.area;
-            e.rho = rho_at(face, es.centroid);
+            e.rho = rho_at(*part.face, es.centroid);
             e.emission = mat.emission;
             e.patch = patch_index;
             e.node = t0.node;
@@ -378,12 +383,128 @@ void append_side(Mesh& mesh, const Face& face, const std::vector<PatchCells>& ce
             e.has_twin = mat.double_sided;
             e.back = back;
             emitted += e.area * e.emission;
+            weighted_normal += e.area * e.normal;
+            weighted_centroid += e.area * e.centroid;
             area += e.area;
             mesh.elements.push_back(e);
         }
-        patch.emission = emitted / area;
-        mesh.patches.push_back(patch);
     }
+    if (parts.size() == 1) {
+        const PatchCells& pc = *parts.front().cells;
+        const Shape ps = shape_of(pc.poly);
+        patch.poly = back ? reversed(pc.poly) : pc.poly;
+        patch.normal = back ? -ps.normal : ps.normal;
+        patch.centroid = ps.centroid;
+        patch.area = ps.area;
+    } else {
+        // It shoots from its area centroid, raised along its mean normal until it is in front of
+        // every one of its elements' planes: on a convex surface the centroid lies behind the
+        // surface, where the backs of neighbouring faces (a doubleSided mesh's inside) face it,
+        // and light leaked into closed objects. On a concave one it stays where it is.
+        patch.poly.n = 0;
+        patch.normal = glm::normalize(weighted_normal);
+        const dvec3 centroid = weighted_centroid / area;
+        double lift = 0.0;
+        for (std::uint32_t k = patch.first_element; k < patch.first_element + patch.element_count; ++k) {
+            const Element& e = mesh.elements[k];
+            lift = std::max(lift, glm::dot(e.centroid - centroid, e.normal) / glm::dot(patch.normal, e.normal));
+        }
+        patch.centroid = centroid + lift * patch.normal;
+        patch.area = area;
+        ++mesh.clusters;
+    }
+    patch.emission = emitted / area;
+    mesh.patches.push_back(patch);
+}
+
+// Appends a face's patches (or a cluster's one patch) on its front and, for a doubleSided
+// material, on its back, each side's patches the other's twins.
+void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const scene::Material& mat) {
+    const std::size_t front = mesh.patches.size();
+    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, false);
+    if (!mat.double_sided) return;
+    const std::size_t back = mesh.patches.size();
+    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, true);
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+        mesh.patches[front + i].twin = static_cast<std::uint32_t>(back + i);
+        mesh.patches[back + i].twin = static_cast<std::uint32_t>(front + i);
+    }
+}
+
+// Clusters of faces that fit in one patch: each grows from its first face (in face order) across
+// shared edges to faces of the same material and node whose normals are within kClusterCos of
+// the first's and whose corners lie within half a patch diagonal of its centroid. Returns each
+// face's cluster (−1 for a face of several patches) and the clusters' faces, in the order they
+// joined. Faces meet along an edge when they share its two corners exactly, as glTF exports
+// share vertex positions across seams.
+struct Clusters {
+    std::vector<std::int64_t> of;
+    std::vector<std::vector<std::size_t>> faces;
+};
+
+Clusters cluster_faces(const std::vector<Face>& faces, const std::vector<Grid>& grids, const Settings& settings) {
+    Clusters c;
+    c.of.assign(faces.size(), -1);
+    std::vector<bool> small(faces.size());
+    for (std::size_t f = 0; f < faces.size(); ++f) small[f] = grids[f].patches() == 1.0;
+
+    struct Edge {
+        std::uint32_t material, node;
+        std::array<double, 6> ab;  // corners, lexicographically smaller first
+        bool operator==(const Edge& o) const { return material == o.material && node == o.node && ab == o.ab; }
+    };
+    struct EdgeHash {
+        std::size_t operator()(const Edge& e) const {
+            std::uint64_t h = 1469598103934665603ull ^ (std::uint64_t(e.material) << 32 | e.node);
+            for (const double d : e.ab) {
+                std::uint64_t bits;
+                std::memcpy(&bits, &d, sizeof bits);
+                h = (h ^ bits) * 1099511628211ull;
+                h ^= h >> 29;
+            }
+            return static_cast<std::size_t>(h);
+        }
+    };
+    const auto edge_of = [&faces](std::size_t f, int k) {
+        const Face& face = faces[f];
+        dvec3 a = face.poly.v[std::size_t(k)], b = face.poly.v[std::size_t((k + 1) % face.poly.n)];
+        if (lex_less(b, a)) std::swap(a, b);
+        return Edge{face.src[0]->material, face.src[0]->node, {a.x, a.y, a.z, b.x, b.y, b.z}};
+    };
+    std::unordered_map<Edge, std::vector<std::size_t>, EdgeHash> edges;
+    if (settings.cluster)
+        for (std::size_t f = 0; f < faces.size(); ++f)
+            if (small[f])
+                for (int k = 0; k < faces[f].poly.n; ++k) edges[edge_of(f, k)].push_back(f);
+
+    const double radius = settings.patch_size * std::sqrt(0.5);
+    for (std::size_t seed = 0; seed < faces.size(); ++seed) {
+        if (!small[seed] || c.of[seed] >= 0) continue;
+        const auto id = static_cast<std::int64_t>(c.faces.size());
+        std::vector<std::size_t> members{seed};
+        c.of[seed] = id;
+        const Shape first = shape_of(faces[seed].poly);
+        const auto fits = [&](std::size_t g) {
+            if (glm::dot(shape_of(faces[g].poly).normal, first.normal) < kClusterCos) return false;
+            for (int k = 0; k < faces[g].poly.n; ++k)
+                if (glm::length(faces[g].poly.v[std::size_t(k)] - first.centroid) > radius) return false;
+            return true;
+        };
+        for (std::size_t next = 0; settings.cluster && next < members.size(); ++next) {
+            const std::size_t f = members[next];
+            for (int k = 0; k < faces[f].poly.n; ++k) {
+                const auto it = edges.find(edge_of(f, k));
+                if (it == edges.end()) continue;
+                for (const std::size_t g : it->second) {
+                    if (c.of[g] >= 0 || !fits(g)) continue;
+                    c.of[g] = id;
+                    members.push_back(g);
+                }
+            }
+        }
+        c.faces.push_back(std::move(members));
+    }
+    return c;
 }
 
 // A directed edge a→b of a triangle, qualified by what may be paired with it.
@@ -511,21 +632,39 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
     for (const Face& face : faces)
         if (face.src[0]->material >= scene.materials.size())
             throw InternalError(fmt::format("mesh: triangle material {} out of range", face.src[0]->material));
+    std::vector<Grid> grids;
+    grids.reserve(faces.size());
+    for (const Face& face : faces) grids.push_back(grid_of(face.poly, settings));
+    const Clusters clusters = cluster_faces(faces, grids, settings);
     if (before) {
         Counts counts;
-        for (const Face& face : faces) {
-            const Grid grid = grid_of(face.poly, settings);
-            const double sides = scene.materials.at(face.src[0]->material).double_sided ? 2.0 : 1.0;
-            counts.patches += sides * grid.patches();
-            counts.elements += sides * grid.elements();
+        for (std::size_t f = 0; f < faces.size(); ++f) {
+            const double sides = scene.materials.at(faces[f].src[0]->material).double_sided ? 2.0 : 1.0;
+            const bool clustered = clusters.of[f] >= 0;
+            const bool first = clustered && clusters.faces[std::size_t(clusters.of[f])].front() == f;
+            counts.patches += sides * (clustered ? (first ? 1.0 : 0.0) : grids[f].patches());
+            counts.elements += sides * grids[f].elements();
         }
         before(counts);
     }
-    for (const Face& face : faces) {
-        const scene::Material& mat = scene.materials[face.src[0]->material];
-        const std::vector<PatchCells> cells = face_cells(grid_of(face.poly, settings));
-        append_side(mesh, face, cells, mat, false);
-        if (mat.double_sided) append_side(mesh, face, cells, mat, true);
+    // Patches in face order; a cluster where its first face is, with all of its faces.
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+        const scene::Material& mat = scene.materials[faces[f].src[0]->material];
+        if (clusters.of[f] < 0) {
+            const std::vector<PatchCells> cells = face_cells(grids[f]);
+            std::vector<std::vector<Part>> patches;
+            for (const PatchCells& pc : cells) patches.push_back({{&faces[f], &pc}});
+            append_sides(mesh, patches, mat);
+            continue;
+        }
+        const std::vector<std::size_t>& members = clusters.faces[std::size_t(clusters.of[f])];
+        if (members.front() != f) continue;
+        std::vector<std::vector<PatchCells>> cells;  // one cell each: the face fits in one patch
+        cells.reserve(members.size());
+        for (const std::size_t g : members) cells.push_back(face_cells(grids[g]));
+        std::vector<Part> parts;
+        for (std::size_t i = 0; i < members.size(); ++i) parts.push_back({&faces[members[i]], &cells[i].front()});
+        append_sides(mesh, {parts}, mat);
     }
     return mesh;
 }

@@ -37,27 +37,47 @@ struct Element {
     bool back = false;
 };
 
+inline constexpr std::uint32_t kNoPatch = 0xffffffffu;
+
+// A shooter: one cell of a face's grid (a planar polygon), or a cluster of small faces (adjacent,
+// of one material and node, their normals within kClusterCos of each other's), whose shape is
+// only the union of its elements and which shoots along its mean normal from its area centroid,
+// raised where needed to be in front of all of its elements' planes.
 struct Patch {
-    Polygon poly;
-    glm::dvec3 normal{0.0};
-    glm::dvec3 centroid{0.0};
+    Polygon poly;              // the cell; n = 0 for a cluster of faces (see elements)
+    glm::dvec3 normal{0.0};    // unit: the cell's normal, or a cluster's area-weighted mean
+    glm::dvec3 centroid{0.0};  // where the patch shoots from: a cell's area centroid (a cluster: see above)
     double area = 0.0;
     glm::dvec3 emission{0.0};  // area-weighted over its elements
     std::uint32_t first_element = 0;
     std::uint32_t element_count = 0;
     std::uint32_t node = 0;
+    // The same surface facing the other way (doubleSided), or kNoPatch. A shot skips its twin as it
+    // skips its own elements: a cluster on a convex surface shoots from a little behind it, where
+    // its twin's elements face the shooter.
+    std::uint32_t twin = kNoPatch;
+    bool cluster() const { return poly.n == 0; }
 };
 
 struct Settings {
     double patch_size = 0.0;    // maximum patch edge length, scene units (> 0)
     double element_size = 0.0;  // maximum element edge length, scene units (> 0, <= patch_size)
+    // Faces that fit in one patch join adjacent ones into clusters of up to about a patch's size,
+    // so that the shooter count follows the scene's area, not its triangle count. Off: a patch
+    // per small face (what meshes were before clusters).
+    bool cluster = true;
 };
+
+// Faces of a cluster have normals within this cosine (25°) of its first face's normal: close
+// enough that one hemicube, from the area centroid along the mean normal, stands for all of them.
+inline constexpr double kClusterCos = 0.9063077870366499;
 
 struct Mesh {
     std::vector<Patch> patches;
     std::vector<Element> elements;  // elements of patch p are [first_element, first_element + element_count)
     std::size_t dropped_triangles = 0;  // zero or near-zero area
     std::size_t quads = 0;              // triangle pairs meshed as quads
+    std::size_t clusters = 0;           // patches that are clusters of several faces (per side)
 };
 
 // What a mesh will hold, counted before any of it is built (doubles: any size can be counted).

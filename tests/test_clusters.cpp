@@ -1,0 +1,204 @@
+// Patches as clusters of small faces: their size and shape, and bakes on curved, finely
+// tessellated and double-sided surfaces checked against analytic answers.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "formfactor/near_field.h"
+#include "formfactor/reference.h"
+#include "mesh/mesh.h"
+#include "scene/builder.h"
+#include "solve/progressive.h"
+
+using namespace hemirad;
+using glm::dvec3;
+
+namespace {
+
+// A node of its own holding a UV sphere of rings × segments (triangles at the poles, split quads
+// elsewhere, as exporters write them), counter-clockwise seen from outside, or from inside when
+// `inward`.
+void add_sphere(scene::Scene& s, dvec3 centre, double radius, int rings, int segments, std::uint32_t material,
+                bool inward) {
+    const auto node = static_cast<std::uint32_t>(s.nodes.size());
+    s.nodes.push_back({"sphere" + std::to_string(node), static_cast<int>(node)});
+    const auto at = [&](int ring, int segment) {
+        const double theta = M_PI * ring / rings, phi = 2.0 * M_PI * (segment % segments) / segments;
+        if (ring == 0) return centre + dvec3(0, 0, radius);
+        if (ring == rings) return centre - dvec3(0, 0, radius);
+        return centre + radius * dvec3(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+    };
+    const dvec3 rho = s.materials[material].base_color;
+    const auto add = [&](dvec3 a, dvec3 b, dvec3 c) {
+        if (inward) std::swap(b, c);
+        s.triangles.push_back({{a, b, c}, {rho, rho, rho}, material, node, node});
+    };
+    for (int r = 0; r < rings; ++r)
+        for (int g = 0; g < segments; ++g) {
+            const dvec3 a = at(r, g), b = at(r + 1, g), c = at(r + 1, g + 1), d = at(r, g + 1);
+            if (r > 0) add(a, b, d);
+            if (r + 1 < rings) add(d, b, c);
+        }
+}
+
+// A planar quad p0..p3 in a node of its own, cut into n × n cells of two triangles each.
+void add_tessellated_quad(scene::Scene& s, dvec3 p0, dvec3 p1, dvec3 p3, int n, std::uint32_t material) {
+    const auto node = static_cast<std::uint32_t>(s.nodes.size());
+    s.nodes.push_back({"quad" + std::to_string(node), static_cast<int>(node)});
+    const auto at = [&](int i, int j) { return p0 + (p1 - p0) * (double(i) / n) + (p3 - p0) * (double(j) / n); };
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+            scene::add_quad_to(s, at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1), material, node, node);
+}
+
+// An inward-facing closed box [0, 1]³, every wall cut into n × n cells.
+void add_tessellated_box(scene::Scene& s, int n, std::uint32_t wall, std::uint32_t ceiling) {
+    add_tessellated_quad(s, {0, 0, 0}, {0, 1, 0}, {0, 0, 1}, n, wall);  // x = 0, normal +x
+    add_tessellated_quad(s, {1, 0, 0}, {1, 0, 1}, {1, 1, 0}, n, wall);  // x = 1, normal −x
+    add_tessellated_quad(s, {0, 0, 0}, {0, 0, 1}, {1, 0, 0}, n, wall);  // y = 0, normal +y
+    add_tessellated_quad(s, {0, 1, 0}, {1, 1, 0}, {0, 1, 1}, n, wall);  // y = 1, normal −y
+    add_tessellated_quad(s, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, n, wall);  // z = 0, normal +z
+    add_tessellated_quad(s, {0, 0, 1}, {0, 1, 1}, {1, 0, 1}, n, ceiling);  // z = 1, normal −z
+}
+
+std::vector<glm::dvec3> bake(const mesh::Mesh& m, int hemicube, double threshold, bool ambient = true) {
+    formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{hemicube, 7}));
+    solve::Progressive solver(m, engine, {threshold, 100000});
+    while (solver.step()) {
+    }
+    REQUIRE(solver.converged());
+    return solver.radiosity(ambient);
+}
+
+}  // namespace
+
+TEST_CASE("a finely tessellated wall becomes patches of about the patch size, its cells the elements", "[clusters]") {
+    scene::Scene s;
+    const std::uint32_t grey = scene::add_material(s, dvec3(0.5), dvec3(0.0));
+    add_tessellated_quad(s, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 32, grey);
+    scene::finish(s);
+    mesh::Settings settings{0.25, 0.125};
+    const mesh::Mesh clustered = mesh::build(s, settings);
+    settings.cluster = false;
+    const mesh::Mesh plain = mesh::build(s, settings);
+
+    CHECK(plain.patches.size() == 32 * 32);  // a patch per cell (the split quads paired again)
+    CHECK(clustered.elements.size() == 32 * 32);
+    CHECK(clustered.patches.size() <= 48);  // the area over the patch size's discs, not the cell count
+    CHECK(clustered.patches.size() >= 16);
+    double area = 0.0;
+    for (const mesh::Patch& p : clustered.patches) {
+        CHECK(p.cluster() == (p.element_count > 1));
+        CHECK(glm::dot(p.normal, dvec3(0, 0, 1)) == Approx(1.0));
+        for (std::uint32_t k = p.first_element; k < p.first_element + p.element_count; ++k) {
+            const mesh::Element& e = clustered.elements[k];
+            CHECK(e.patch == std::uint32_t(&p - clustered.patches.data()));
+            for (int i = 0; i < e.poly.n; ++i) CHECK(glm::length(e.poly.v[i] - p.centroid) <= 0.25 * std::sqrt(2.0) + 1e-12);
+        }
+        area += p.area;
+    }
+    CHECK(area == Approx(1.0).epsilon(1e-12));
+}
+
+TEST_CASE("a cluster keeps its faces' normals within the cone and its material, and never spans nodes", "[clusters]") {
+    scene::Scene s;
+    const std::uint32_t a = scene::add_material(s, dvec3(0.5), dvec3(0.0));
+    const std::uint32_t b = scene::add_material(s, dvec3(0.3), dvec3(0.0));
+    add_sphere(s, {0, 0, 0}, 1.0, 24, 48, a, false);
+    add_sphere(s, {0.5, 0, 0}, 1.0, 24, 48, b, false);  // overlapping: shares no edge with the first
+    scene::finish(s);
+    const mesh::Mesh m = mesh::build(s, {0.6, 0.6});
+    CHECK(m.patches.size() < s.triangles.size() / 8);
+    CHECK(m.clusters > 0);
+    const double cone = std::cos(2.0 * std::acos(mesh::kClusterCos));  // both within the cone of the first face
+    for (const mesh::Patch& p : m.patches) {
+        const mesh::Element& first = m.elements[p.first_element];
+        for (std::uint32_t k = p.first_element; k < p.first_element + p.element_count; ++k) {
+            const mesh::Element& e = m.elements[k];
+            CHECK(e.node == first.node);
+            CHECK(e.material == first.material);
+            for (std::uint32_t j = p.first_element; j < k; ++j) CHECK(glm::dot(e.normal, m.elements[j].normal) >= cone - 1e-12);
+        }
+    }
+}
+
+TEST_CASE("inside a clustered sphere that glows everywhere, radiosity is E / (1 − ρ) on every element", "[clusters]") {
+    // A closed surface of uniform emission E and reflectance ρ: every point receives the same, so
+    // B = E + ρB everywhere. The sphere's curvature is what clusters must get right: each shoots
+    // from off the surface, along its mean normal.
+    scene::Scene s;
+    const std::uint32_t glow = scene::add_material(s, dvec3(0.5), dvec3(1.0));
+    add_sphere(s, {0, 0, 0}, 1.0, 16, 32, glow, true);
+    scene::finish(s);
+    const mesh::Mesh m = mesh::build(s, {0.7, 0.7});
+    REQUIRE(m.clusters > 0);
+    const std::vector<glm::dvec3> B = bake(m, 128, 1e-4);
+    double worst = 0.0;
+    for (const glm::dvec3& b : B) worst = std::max(worst, std::abs(b.x / 2.0 - 1.0));
+    CAPTURE(m.patches.size(), m.elements.size());
+    CHECK(worst < 0.03);
+}
+
+TEST_CASE("a double-sided clustered sphere in a lit room lights nothing inside itself", "[clusters]") {
+    // Its inside is closed off: the back faces (its twin clusters) can receive no light at all. From
+    // a cluster's area centroid, a little inside the convex surface, the twins' elements face the
+    // shooter: shooting from in front of its elements' planes instead is what keeps them dark.
+    scene::Scene s;
+    const std::uint32_t wall = scene::add_material(s, dvec3(0.6), dvec3(0.0));
+    const std::uint32_t lamp = scene::add_material(s, dvec3(0.0), dvec3(4.0));
+    const std::uint32_t ball = scene::add_material(s, dvec3(0.7), dvec3(0.0), /*double_sided=*/true);
+    add_tessellated_box(s, 2, wall, lamp);
+    add_sphere(s, {0.5, 0.5, 0.4}, 0.25, 12, 24, ball, false);
+    scene::finish(s);
+    const bool cluster = GENERATE(true, false);
+    mesh::Settings settings{0.3, 0.3};
+    settings.cluster = cluster;
+    const mesh::Mesh m = mesh::build(s, settings);
+    CHECK((m.clusters > 0) == cluster);
+    const std::vector<glm::dvec3> B = bake(m, 64, 1e-3, /*ambient=*/false);  // the ambient term lands everywhere
+    std::size_t inside = 0, outside_lit = 0;
+    for (std::size_t k = 0; k < m.elements.size(); ++k) {
+        if (m.elements[k].material != ball) continue;
+        if (m.elements[k].back) {
+            ++inside;
+            CHECK(B[k].x == 0.0);
+        } else {
+            outside_lit += B[k].x > 0.0;
+        }
+    }
+    CHECK(inside > 0);
+    CHECK(outside_lit > 0);
+}
+
+TEST_CASE("a furnace of finely tessellated walls gives the same flux with clusters as with a patch per cell", "[clusters]") {
+    // A closed box lit by its ceiling: Σ B A = Φ_E / (1 − ρ) whatever the mesh; and the walls'
+    // means agree with the unclustered mesh's within the hemicube's noise.
+    scene::Scene s;
+    const std::uint32_t wall = scene::add_material(s, dvec3(0.8), dvec3(0.0));
+    const std::uint32_t ceiling = scene::add_material(s, dvec3(0.8), dvec3(1.0));
+    add_tessellated_box(s, 12, wall, ceiling);
+    scene::finish(s);
+    mesh::Settings settings{0.34, 0.34};
+    const mesh::Mesh clustered = mesh::build(s, settings);
+    settings.cluster = false;
+    const mesh::Mesh plain = mesh::build(s, settings);
+    REQUIRE(clustered.patches.size() * 4 < plain.patches.size());
+    const std::vector<glm::dvec3> Bc = bake(clustered, 128, 1e-4), Bp = bake(plain, 128, 1e-4);
+    const auto node_mean = [](const mesh::Mesh& m, const std::vector<glm::dvec3>& B, std::uint32_t node) {
+        double flux = 0.0, area = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k)
+            if (m.elements[k].node == node) {
+                flux += B[k].x * m.elements[k].area;
+                area += m.elements[k].area;
+            }
+        return flux / area;
+    };
+    double total = 0.0;
+    for (std::uint32_t node = 0; node < 6; ++node) {
+        CAPTURE(node);
+        CHECK(node_mean(clustered, Bc, node) == Approx(node_mean(plain, Bp, node)).epsilon(0.01));
+        total += node_mean(clustered, Bc, node);
+    }
+    // Σ B A over the six unit walls = E·1 / (1 − ρ) = 5.
+    CHECK(total == Approx(5.0).epsilon(0.005));
+}
