@@ -2,6 +2,7 @@
 #include "cl/runtime.h"
 
 #include <cstdlib>
+#include <fstream>
 #include <iostream>
 #include <regex>
 
@@ -45,6 +46,24 @@ void prepare_pocl_environment() {
     }();
     (void)done;
 #endif
+}
+
+// The host CPU's model and feature flags, for a CPU device's cache key: such a device's name
+// ("pthread-haswell-AMD EPYC") can be the same on CPUs of other generations, whose binaries may
+// use instructions this one lacks (a cache in a home directory shared between machines).
+std::string host_cpu() {
+    std::ifstream in("/proc/cpuinfo");
+    std::string line, model, flags;
+    while (std::getline(in, line) && (model.empty() || flags.empty())) {
+        if (model.empty() && line.rfind("model name", 0) == 0) model = line;
+        if (flags.empty() && line.rfind("flags", 0) == 0) flags = line;
+    }
+    return model + '\n' + flags;
+}
+
+bool show_kernels() {
+    const char* show = std::getenv("HEMIRAD_SHOW_KERNELS");
+    return show && std::string(show) == "1";
 }
 
 std::vector<cl::Platform> get_platforms() {
@@ -163,22 +182,72 @@ std::vector<DeviceInfo> list_devices() {
     return out;
 }
 
-Context::Context(const DeviceInfo& device) : info_(device) {
+Context::Context(const DeviceInfo& device, std::optional<std::filesystem::path> cache_dir)
+    : info_(device), disk_(std::move(cache_dir)) {
     const std::vector<cl::Platform> platforms = get_platforms();
     std::vector<cl::Device> devices;
     platforms.at(static_cast<std::size_t>(device.platform)).getDevices(CL_DEVICE_TYPE_ALL, &devices);
     device_ = devices.at(static_cast<std::size_t>(device.device));
     context_ = cl::Context(device_);
     queue_ = cl::CommandQueue(context_, device_, CL_QUEUE_PROFILING_ENABLE);
+    // Queried from the device itself, not from `info_`: the key must describe what builds the
+    // binary. The driver version is in it so that a driver update never loads its old binaries.
+    const cl::Platform platform(device_.getInfo<CL_DEVICE_PLATFORM>());
+    identity_ =
+        fmt::format("hemirad {} program binary, entry format {}\nplatform: {} | {}\ndevice: {} | {} | {}\ndriver: {}\n",
+                    HEMIRAD_VERSION, kProgramCacheFormat, trimmed(platform.getInfo<CL_PLATFORM_NAME>()),
+                    trimmed(platform.getInfo<CL_PLATFORM_VERSION>()), trimmed(device_.getInfo<CL_DEVICE_NAME>()),
+                    trimmed(device_.getInfo<CL_DEVICE_VENDOR>()), trimmed(device_.getInfo<CL_DEVICE_VERSION>()),
+                    trimmed(device_.getInfo<CL_DRIVER_VERSION>()));
+    if (device_.getInfo<CL_DEVICE_TYPE>() & CL_DEVICE_TYPE_CPU) identity_ += "host cpu: " + host_cpu() + '\n';
+}
+
+std::string Context::program_key(const std::string& source, const std::string& options) const {
+    return identity_ + "options: " + options + "\nsource:\n" + source;
 }
 
 cl::Program& Context::program(const std::string& source, const std::string& options) {
     const std::string key = options + '\0' + source;
     if (auto it = programs_.find(key); it != programs_.end()) return it->second;
-    const char* show = std::getenv("HEMIRAD_SHOW_KERNELS");
-    if (show && std::string(show) == "1")
-        std::cerr << fmt::format("hemirad: building for {} ({}) with options '{}':\n{}\n", info_.name, info_.id(), options, source);
+    const std::string disk_key = disk_.enabled() ? program_key(source, options) : std::string();
+    const std::optional<std::vector<unsigned char>> binary = disk_.load(disk_key);
+    const bool show = show_kernels();
+    if (show)
+        std::cerr << fmt::format(
+            "hemirad: {} for {} ({}) with options '{}':\n{}\n",
+            binary ? fmt::format("loading from the program cache ({})", disk_.entry_path(disk_key).string())
+                   : "building",
+            info_.name, info_.id(), options, source);
 
+    if (binary) {
+        // A binary the driver refuses (an entry from another build of the same driver version, or
+        // damaged in a way the checksum missed) is built from source and its entry rewritten.
+        try {
+            cl::Program program(context_, {device_}, cl::Program::Binaries{*binary});
+            program.build(std::vector<cl::Device>{device_}, options.c_str());
+            ++counts_.loaded;
+            return programs_.emplace(key, std::move(program)).first->second;
+        } catch (const cl::Error& e) {
+            ++counts_.rejected;
+            if (show)
+                std::cerr << fmt::format("hemirad: the program cache's entry was refused ({}); building\n",
+                                         error_name(e.err()));
+        }
+    }
+    cl::Program program = build_from_source(source, options);
+    ++counts_.built;
+    if (disk_.enabled()) {
+        try {
+            const std::vector<std::vector<unsigned char>> binaries = program.getInfo<CL_PROGRAM_BINARIES>();
+            if (binaries.size() == 1 && disk_.store(disk_key, binaries.front())) ++counts_.stored;
+        } catch (const cl::Error&) {
+            // a driver that cannot give its binary: the next run builds again
+        }
+    }
+    return programs_.emplace(key, std::move(program)).first->second;
+}
+
+cl::Program Context::build_from_source(const std::string& source, const std::string& options) {
     cl::Program program(context_, source);
     try {
         program.build(std::vector<cl::Device>{device_}, options.c_str());
@@ -189,10 +258,10 @@ cl::Program& Context::program(const std::string& source, const std::string& opti
         } catch (const cl::Error&) {
             log = "(no build log)";
         }
-        throw BuildError(fmt::format("OpenCL kernel build failed on {} ({}) with options '{}':\n{}", info_.name, info_.id(),
-                                     options, trimmed(log)));
+        throw BuildError(fmt::format("OpenCL kernel build failed on {} ({}) with options '{}':\n{}", info_.name,
+                                     info_.id(), options, trimmed(log)));
     }
-    return programs_.emplace(key, std::move(program)).first->second;
+    return program;
 }
 
 }  // namespace hemirad::ocl

@@ -1,15 +1,20 @@
-// OpenCL runtime: device discovery, selection, and per-context program caching with build logs.
+// OpenCL runtime: device discovery, selection, and per-context program caching with build logs
+// (built binaries also kept on the disk across runs: program_cache.h).
 // Namespace `ocl` (not `cl`) so the Khronos C++ bindings' `cl::` stays unambiguous.
 #pragma once
 
 #include <CL/opencl.hpp>
 
 #include <cstddef>
+#include <filesystem>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include "cl/program_cache.h"
 
 namespace hemirad::ocl {
 
@@ -63,28 +68,49 @@ std::string error_name(cl_int code);
 // Whether `code` says the device (or the host driving it) had not the memory for a request.
 bool out_of_memory(cl_int code);
 
+// How a context's programs were made: tests look, HEMIRAD_SHOW_KERNELS says.
+struct ProgramCounts {
+    int built = 0;     // compiled from source
+    int loaded = 0;    // from a binary in the disk cache
+    int rejected = 0;  // disk entries the driver would not build (then built from source)
+    int stored = 0;    // binaries written to the disk cache
+};
+
 // One device, its context and an in-order queue with profiling. Programs are built once per
 // (source, options) and kept for the life of the context: the cache belongs to the context,
-// never to a global, so tests and engines cannot interfere.
+// never to a global, so tests and engines cannot interfere. Across runs, built binaries are kept
+// in `cache_dir` (nullopt: not kept), keyed by source, options, device, driver and platform.
 class Context {
 public:
-    explicit Context(const DeviceInfo& device);
+    explicit Context(const DeviceInfo& device,
+                     std::optional<std::filesystem::path> cache_dir = program_cache_directory());
     const DeviceInfo& info() const { return info_; }
     cl::Context& context() { return context_; }
     cl::Device& device() { return device_; }
     cl::CommandQueue& queue() { return queue_; }
 
-    // Builds (or returns the cached) program from `source` with `options`. With
-    // HEMIRAD_SHOW_KERNELS=1 the exact source and options are printed to stderr first.
+    // Builds (or returns the cached) program from `source` with `options`: from the disk cache
+    // where it holds a binary the driver accepts, else from source, then stored there. With
+    // HEMIRAD_SHOW_KERNELS=1 the exact source and options, and which way, go to stderr first.
     // Throws BuildError with the build log on failure.
     cl::Program& program(const std::string& source, const std::string& options);
 
+    const ProgramCounts& program_counts() const { return counts_; }
+    const ProgramCache& program_cache() const { return disk_; }
+    // The disk cache's key for a program: everything a stored binary depends on, source included.
+    std::string program_key(const std::string& source, const std::string& options) const;
+
 private:
+    cl::Program build_from_source(const std::string& source, const std::string& options);
+
     DeviceInfo info_;
     cl::Device device_;
     cl::Context context_;
     cl::CommandQueue queue_;
     std::map<std::string, cl::Program> programs_;  // key: options + '\0' + source
+    ProgramCache disk_;
+    std::string identity_;  // the platform, device and driver part of program_key
+    ProgramCounts counts_;
 };
 
 // The embedded text of kernels/<name> with its includes of the shared layout header inlined.
