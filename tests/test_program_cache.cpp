@@ -126,6 +126,12 @@ TEST_CASE("opencl: the program cache directory comes from HEMIRAD_CACHE_DIR, XDG
         ScopedEnv dir("HEMIRAD_CACHE_DIR", "");  // empty is unset
         ScopedEnv xdg("XDG_CACHE_HOME", "/xdg");
         CHECK(ocl::program_cache_directory() == fs::path("/xdg/hemirad"));
+        CHECK(ocl::program_cache_directory("gpu") == fs::path("/xdg/hemirad"));
+        CHECK(!ocl::program_cache_directory("cpu"));  // PoCL's own cache, unless asked for
+    }
+    {
+        ScopedEnv dir("HEMIRAD_CACHE_DIR", "/asked/for");
+        CHECK(ocl::program_cache_directory("cpu") == fs::path("/asked/for"));
     }
     {
         ScopedEnv dir("HEMIRAD_CACHE_DIR", nullptr);

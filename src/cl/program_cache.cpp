@@ -46,7 +46,7 @@ std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t h) {
     return h;
 }
 
-std::optional<fs::path> program_cache_directory() {
+std::optional<fs::path> program_cache_directory(const std::string& device_type) {
     const auto set = [](const char* name) -> const char* {
         const char* value = std::getenv(name);
         return value && *value ? value : nullptr;
@@ -55,6 +55,7 @@ std::optional<fs::path> program_cache_directory() {
         if (std::string_view(dir) == "off") return std::nullopt;
         return fs::path(dir);
     }
+    if (device_type == "cpu") return std::nullopt;
     // The XDG base directory spec ignores a relative XDG_CACHE_HOME.
     if (const char* xdg = set("XDG_CACHE_HOME"); xdg && fs::path(xdg).is_absolute()) return fs::path(xdg) / "hemirad";
     if (const char* home = set("HOME")) return fs::path(home) / ".cache" / "hemirad";

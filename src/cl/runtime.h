@@ -82,8 +82,8 @@ struct ProgramCounts {
 // in `cache_dir` (nullopt: not kept), keyed by source, options, device, driver and platform.
 class Context {
 public:
-    explicit Context(const DeviceInfo& device,
-                     std::optional<std::filesystem::path> cache_dir = program_cache_directory());
+    explicit Context(const DeviceInfo& device) : Context(device, program_cache_directory(device.type)) {}
+    Context(const DeviceInfo& device, std::optional<std::filesystem::path> cache_dir);
     const DeviceInfo& info() const { return info_; }
     cl::Context& context() { return context_; }
     cl::Device& device() { return device_; }
