@@ -195,7 +195,7 @@ int main(int argc, char** argv) {
         std::cout << fmt::format("{}, {} threads; {} shots × {} repeats, the peer in batches of {}\n\n",
                                  formfactor::EmbreeEngine::version(), threads, o.shots, o.repeats, o.batch);
         std::cout << "| scene | elements | N | peer ms/shot | plain loop ms/shot (robust, as the peer) | peer ÷ plain "
-                     "| plain loop, not robust | robust ÷ not |\n|---|---|---|---|---|---|---|---|\n";
+                     "(fastest repeats) | plain loop, not robust | robust ÷ not |\n|---|---|---|---|---|---|---|---|\n";
         for (const std::string& spec : o.scenes) {
             const bench::BenchScene s = bench::load_bench_scene(spec);
             const mesh::Mesh m = mesh::build(s.scene, bench::mesh_settings_for(o, s.scene));
@@ -240,14 +240,17 @@ int main(int argc, char** argv) {
                         "{} at N = {}: the plain loop hit with {} of {} rays in a closed scene", spec, n, hits, rays));
                 const bench::Stats peer_stats = bench::stats(peer_ms), plain_stats = bench::stats(plain_ms),
                                    fast_stats = bench::stats(fast_ms);
+                // Medians as hemirad bench reports them; on a busy machine the fastest repeats are
+                // nearer what each costs alone, so their ratio is given too.
                 const double fraction = plain_stats.median / peer_stats.median;
+                const double fraction_min = plain_stats.min / peer_stats.min;
                 const double robust_cost = plain_stats.median / fast_stats.median;
                 std::cout << fmt::format(
-                    "| {} | {} | {} | {:.3g} (±{:.0f}%) | {:.3g} (±{:.0f}%) | {:.0f}% | {:.3g} (±{:.0f}%) | {:.2f}× "
-                    "|\n",
+                    "| {} | {} | {} | {:.3g} (±{:.0f}%) | {:.3g} (±{:.0f}%) | {:.0f}% ({:.0f}%) | {:.3g} (±{:.0f}%) | "
+                    "{:.2f}× |\n",
                     spec, m.elements.size(), n, peer_stats.median, peer_stats.sigma_percent, plain_stats.median,
-                    plain_stats.sigma_percent, 100.0 * fraction, fast_stats.median, fast_stats.sigma_percent,
-                    robust_cost);
+                    plain_stats.sigma_percent, 100.0 * fraction, 100.0 * fraction_min, fast_stats.median,
+                    fast_stats.sigma_percent, robust_cost);
                 results.push_back({{"scene", spec},
                                    {"triangles", s.scene.triangles.size()},
                                    {"elements", m.elements.size()},
@@ -265,6 +268,7 @@ int main(int argc, char** argv) {
                                      {"median", fast_stats.median},
                                      {"sigma_percent", fast_stats.sigma_percent}}},
                                    {"fraction_of_plain", fraction},
+                                   {"fraction_of_plain_min", fraction_min},
                                    {"robust_over_not", robust_cost}});
             }
         }
