@@ -143,9 +143,6 @@ BenchScene load_bench_scene(const std::string& spec) {
     return {scene::load(spec), false};
 }
 
-namespace {
-
-// Unless given, the patch and element sizes of a bake at the default quality.
 mesh::Settings mesh_settings_for(const ThroughputOptions& o, const scene::Scene& s) {
     const QualityPreset& quality = quality_preset("default");
     mesh::Settings settings;
@@ -153,6 +150,16 @@ mesh::Settings mesh_settings_for(const ThroughputOptions& o, const scene::Scene&
     settings.element_size = o.element_size > 0.0 ? o.element_size : settings.patch_size / quality.elements_per_patch_edge;
     return settings;
 }
+
+std::vector<formfactor::ShotRequest> bench_shots(const mesh::Mesh& m, int count) {
+    std::vector<formfactor::ShotRequest> shots;
+    for (int i = 0; i < count; ++i)
+        shots.push_back({static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u) % m.patches.size()),
+                         static_cast<std::uint64_t>(i)});
+    return shots;
+}
+
+namespace {
 
 // The most elements a benchmark's mesh may have: a tiny --element-size (1e-4 on a room) would
 // exhaust the memory long after the calibration.
@@ -245,11 +252,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
         log << fmt::format("\n{}: {} triangles, {} patches, {} elements (meshed in {:.2f} s)\n", spec,
                            s.triangles.size(), m.patches.size(), m.elements.size(), seconds_since(t_mesh));
 
-        // The same shots for every engine: patches spread over the scene, shot index = seed stream.
-        std::vector<formfactor::ShotRequest> shots;
-        for (int i = 0; i < o.shots; ++i)
-            shots.push_back({static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u) % m.patches.size()),
-                             static_cast<std::uint64_t>(i)});
+        const std::vector<formfactor::ShotRequest> shots = bench_shots(m, o.shots);
         const std::size_t sample = std::min(kSampleShots, shots.size());
 
         for (int n : o.hemicubes) {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "formfactor/engine.h"
+#include "mesh/mesh.h"
 #include "scene/scene.h"
 
 namespace hemirad::bench {
@@ -58,6 +59,14 @@ struct BenchScene {
     bool closed = false;
 };
 BenchScene load_bench_scene(const std::string& spec);
+
+// The mesh a benchmark shoots in: the patch and element sizes of `options`, or where they are 0
+// those of a bake at the default quality (core/quality.h).
+mesh::Settings mesh_settings_for(const ThroughputOptions& options, const scene::Scene& s);
+
+// The shots every engine is timed on: `count` patches spread over the scene (mesh `m`, which has
+// patches), shot i with shot counter i (the seed stream).
+std::vector<formfactor::ShotRequest> bench_shots(const mesh::Mesh& m, int count);
 
 // The machine a benchmark ran on: {cpu, hardware_threads}.
 nlohmann::ordered_json machine_info();

@@ -19,9 +19,9 @@ namespace hemirad::formfactor {
 
 class EmbreeEngine final : public Engine {
 public:
-    // threads 0: one per hardware thread. Each thread casts a fixed range of cells into its own
-    // sums, added in thread order: the same bits run after run for a thread count, and the same
-    // id buffer (the sums to rounding) for any.
+    // threads 0: one per hardware thread. The threads are started here and kept until the
+    // engine goes. A shot's cells are cast in fixed tiles, claimed by whichever thread is free,
+    // each tile's sums kept apart and added in tile order: the same bits for any thread count.
     EmbreeEngine(const mesh::Mesh& mesh, const Settings& settings, unsigned threads = 0);
     ~EmbreeEngine() override;
     EmbreeEngine(const EmbreeEngine&) = delete;
@@ -29,28 +29,20 @@ public:
 
     std::string name() const override { return "embree"; }
     void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    // The tiles of every shot of the batch shared out at once, so that the threads go on from
+    // one shot to the next without waiting for each other; results as shoot() one at a time.
+    void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
+    // Keeps the id buffer of the batch's last shot (as the reference's: element, −1 empty, −2 a
+    // blocker).
+    const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
 
-    // Keeps the last shot's id buffer (as the reference's: element, −1 empty, −2 a blocker).
-    void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override {
-        Engine::shoot_batch(shots, out);
-        last_batch_ = shots.size();
-    }
-    const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override {
-        return i + 1 == last_batch_ ? &ids_ : nullptr;
-    }
-
-    unsigned threads() const { return threads_; }
+    unsigned threads() const;
     static std::string version();  // "Embree 3.13.5"
 
     struct Impl;
 
 private:
     std::unique_ptr<Impl> impl_;
-    unsigned threads_;
-    std::vector<std::vector<double>> sums_;            // per thread, per element; zero between shots
-    std::vector<std::vector<std::uint32_t>> touched_;  // per thread: the elements its sums hold
-    std::vector<std::int32_t> ids_;
-    std::size_t last_batch_ = 1;
 };
 
 }  // namespace hemirad::formfactor
