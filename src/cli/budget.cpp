@@ -42,7 +42,8 @@ double expected_sweeps(const BakeShape& s) { return solve::Matrix::expected_swee
 double engine_bytes(const BakeShape& s, double elements, int hemicube, double shots) {
     if (!s.opencl) return 3.0 * hemicube * hemicube * 17.0 + elements * sizeof(double);  // reference: cells, one F
     const double per_shot = formfactor::OpenCLEngine::shot_bytes(elements, hemicube);
-    const double budget = std::max(per_shot, 1024.0 * 1024.0 * 1024.0);  // a launch's budget, one shot at least
+    // A launch's budget, one shot at least: a CPU's, whose buffers are the host memory planned for.
+    const double budget = std::max(per_shot, double(formfactor::OpenCLEngine::launch_budget(true, 0)));
     return formfactor::OpenCLEngine::mesh_bytes(elements, s.counts.patches) + std::min(shots * per_shot, budget);
 }
 

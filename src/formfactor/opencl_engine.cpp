@@ -471,9 +471,8 @@ std::size_t OpenCLEngine::memory_batch() const {
     const std::size_t per_shot = record_slots() * (sizeof(HrRecord) + sizeof(HrBox)) +
                                  std::size_t{list_capacity_} * sizeof(hr_uint) + delta_.cells() * sizeof(hr_int) +
                                  sum_stride() * sizeof(hr_long);
-    const std::size_t budget = tuning_.batch_memory > 0
-                                   ? tuning_.batch_memory
-                                   : std::min<std::size_t>(std::size_t{1} << 30, context_.info().global_memory / 4);
+    const std::size_t budget =
+        tuning_.batch_memory > 0 ? tuning_.batch_memory : launch_budget(context_.info().type == "cpu", context_.info().global_memory);
     return std::max<std::size_t>(1, budget / per_shot);
 }
 

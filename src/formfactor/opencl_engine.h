@@ -28,7 +28,7 @@ struct OpenCLTuning {
     bool setup_lanes = false;         // setup takes 8 elements per work-item in double8 lanes (CPUs)
     std::string extra_options;        // appended to the build options (never a knob above: apply_build_options)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
-    std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: 1 GiB or device memory / 4
+    std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: launch_budget
     bool cull = true;                 // lanes setup skips clusters and groups behind the shooter (off: to measure)
     // Told each time the device had not the memory for a batch of `shots` and the engine retried
     // it in parts of at most `limit` (the results do not change); `why`: the OpenCL error.
@@ -77,7 +77,7 @@ public:
 
     // Runs a batch's shots together: each stage is one launch over every shot (dimension 1 of
     // the NDRange), so a GPU has enough work. The buffers grow to the largest batch seen; a
-    // batch beyond the memory budget (1 GiB or a quarter of the device's memory) runs in parts,
+    // batch beyond the memory budget (launch_budget) runs in parts,
     // and then only the last part's id buffers are kept. Should the device run out of memory
     // all the same, the batch runs again in halves, and every later batch in parts no larger
     // (tuning's on_shrink is told): the results are the same. Throws ocl::DeviceError when
@@ -99,9 +99,17 @@ public:
     // Memory the engine holds for a mesh of `elements` elements and `patches` patches at
     // resolution `hemicube`: the uploaded mesh, and each shot of a launch's buffers (on the device,
     // and the host's copies of its ids and sums). A launch holds as many shots as the batch asks,
-    // up to what fits its budget (tuning's batch_memory: 1 GiB or a quarter of the device's memory)
+    // up to what fits its budget (tuning's batch_memory, else launch_budget)
     // and at least one. For planning a bake before its mesh is built.
     static double mesh_bytes(double elements, double patches);
+    // The per-shot buffers one launch may hold: on a CPU (host memory) 32 MiB, since a shot of a
+    // few thousand elements already gives its cores hundreds of work-groups and more shots only
+    // cost memory (the Cornell box's bake peaked at 1.2 GB with 1 GiB launches, 350 MB with these,
+    // of which PoCL itself holds 195 MB, in the same time); on a GPU 1 GiB or a quarter of its
+    // memory, for the parallelism a batch brings.
+    static std::size_t launch_budget(bool cpu, std::size_t device_memory) {
+        return cpu ? std::size_t{32} << 20 : std::min<std::size_t>(std::size_t{1} << 30, device_memory / 4);
+    }
     static double shot_bytes(double elements, int hemicube);
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
