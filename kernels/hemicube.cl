@@ -945,7 +945,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
     const size_t face_offset = face_cell_offset(face, n);
     const size_t cell = face_offset + (size_t)j * n + i;
     ids[cell] = best < 0 ? HR_EMPTY : (best_back ? HR_BLOCKER : best);
-    if (best >= 0) atom_add(&sums[best_back ? shot->elements : best], delta_fixed[cell]);
+    if (best >= 0) atom_add(&sums[best_back ? shot->elements : best], delta_fixed[(size_t)tile * HEMIRAD_TILE * HEMIRAD_TILE + lid]);
 }
 
 // For CPU devices: one work-item per tile walks the records of its list in turn, each over
@@ -1092,7 +1092,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     double row_t[HEMIRAD_TILE];  // t = y / per_unit - t0 of its rows
     for (int c = 0; c < HEMIRAD_TILE; ++c) row_t[c] = (cj0 + c + 0.5) / per_unit - t0;
     const size_t face_offset = face_cell_offset(face, n);
-    __global const long* delta_face = delta_fixed + face_offset;
+    __global const long* delta_tile = delta_fixed + (size_t)tile * TILE_CELLS;  // the tile's cells, row by row
 
     const uint end = offsets[(tile + 1) * HEMIRAD_COUNT_COPIES];
     for (uint at = offsets[tile * HEMIRAD_COUNT_COPIES]; at < end; ++at) {
@@ -1183,7 +1183,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
                                              ((inv_depth == old_depth) & convert_lane_long((lane_int)(owner) < old)));
                 if (!any_lanes(take)) continue;
                 const lane_int take_int = convert_lane_int(take);
-                const lane_long delta = vload_lanes(0, delta_face + (size_t)j * n + i);  // may read past the row
+                const lane_long delta = vload_lanes(0, delta_tile + cell);  // may read past the tile's row
                 won += select((lane_long)(0), delta, take);
                 // Cells taken from an earlier record (overdraw): its element gives them back.
                 // Per lane through private copies: portable OpenCL C indexes no vector.

@@ -71,8 +71,8 @@ typedef struct {
     hr_double origin[3], u[3], v[3], w[3];  // frame: w the shooter's normal
     hr_double eps;                          // base-plane clip distance, scene units
     hr_int n;                               // hemicube resolution N (top NxN, sides NxN/2)
-    hr_int shooter;                         // patch index of the shooter
-    hr_int twin;                            // its twin (the surface's other side), or −1
+    hr_int shooter;                         // patch whose elements the shot skips: the shooter, −1 for a cluster
+    hr_int twin;                            // the shooter's twin (the surface's other side), likewise, or −1
     hr_int elements;                        // element count
     hr_int patches;                         // patch count
     hr_int tiles_x;                         // tiles across a face: ceil(N / TILE)

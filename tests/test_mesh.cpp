@@ -213,7 +213,7 @@ TEST_CASE("a needle triangle is cut into strips across it, not n^2 slivers", "[m
 }
 
 TEST_CASE("folded or non-convex triangle pairs are not merged into quads", "[mesh]") {
-    const Settings big{100.0, 100.0};
+    const Settings big{100.0, 100.0, /*cluster=*/false};  // a patch per face: the pairing alone
     SECTION("flat pair: control, is paired") {
         const Mesh m =
             build(scene_of({tri({0, 0, 0}, {1, 0, 0}, {1, 1, 0}), tri({0, 0, 0}, {1, 1, 0}, {0, 1, 0})}), big);
@@ -231,6 +231,13 @@ TEST_CASE("folded or non-convex triangle pairs are not merged into quads", "[mes
             build(scene_of({tri({0, 0, 0}, {2, 1, 0}, {2, 3, 0}), tri({2, 1, 0}, {4, 0, 0}, {2, 3, 0})}), big);
         CHECK(m.quads == 0);
         CHECK(m.patches.size() == 2);
+        // Clustered, the two faces are one shooter of two elements.
+        const Mesh c =
+            build(scene_of({tri({0, 0, 0}, {2, 1, 0}, {2, 3, 0}), tri({2, 1, 0}, {4, 0, 0}, {2, 3, 0})}), {100.0, 100.0});
+        REQUIRE(c.patches.size() == 1);
+        CHECK(c.patches[0].cluster());
+        CHECK(c.patches[0].element_count == 2);
+        CHECK(c.patches[0].area == Approx(4.0));
     }
     SECTION("different primitives are never paired") {
         const Mesh m =

@@ -49,6 +49,10 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     for (std::size_t i = 0; i < out.size(); ++i) {
         if (out.F[i] == 0.0) continue;  // unseen: occluded, behind, or coplanar
         const mesh::Element& e = mesh_.elements[out.element[i]];
+        if (e.patch == patch) {  // a cluster's own element (a concave one sees itself): part of its
+            far += out.F[i];     // shape, so no point-to-shooter factor; the hemicube's value stands
+            continue;
+        }
         const glm::dvec3 d = e.centroid - shooter.centroid;
         // What the hemicube would have measured with nothing in the way, from the same point.
         const double unoccluded = glm::dot(d, d) < reach2 ? point_to_polygon(shooter.centroid, shooter.normal, e.poly) : 0.0;

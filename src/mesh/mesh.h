@@ -52,9 +52,8 @@ struct Patch {
     std::uint32_t first_element = 0;
     std::uint32_t element_count = 0;
     std::uint32_t node = 0;
-    // The same surface facing the other way (doubleSided), or kNoPatch. A shot skips its twin as it
-    // skips its own elements: a cluster on a convex surface shoots from a little behind it, where
-    // its twin's elements face the shooter.
+    // The same surface facing the other way (doubleSided), or kNoPatch. A cell's shot skips its
+    // twin's elements as its own (all in its base plane); a cluster's skips neither.
     std::uint32_t twin = kNoPatch;
     bool cluster() const { return poly.n == 0; }
 };

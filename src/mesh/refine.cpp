@@ -36,6 +36,7 @@ Refined split_elements(const Mesh& mesh, const std::vector<bool>& split) {
     out.mesh.patches = mesh.patches;
     out.mesh.dropped_triangles = mesh.dropped_triangles;
     out.mesh.quads = mesh.quads;
+    out.mesh.clusters = mesh.clusters;
     std::size_t count = mesh.elements.size();
     for (bool s : split) count += s ? 3 : 0;
     if (count >= std::numeric_limits<std::uint32_t>::max())
