@@ -413,7 +413,8 @@ def plot_scale(doc, out, prefix):
     runs = doc["runs"]
     keys = unique((r["kind"], r["quality"]) for r in runs)
     colour = colours(unique(r["kind"] for r in runs))
-    extra = "; ".join(x for x in (doc.get("machine", {}).get("device", ""), doc.get("note", "")) if x)
+    device = doc.get("machine", {}).get("device", "").split("|")[0].strip()  # the id and name, not the details
+    extra = "; ".join(x for x in (device, doc.get("note", ""), "hollow: stopped at the timeout (a lower bound)") if x)
     for what, key, unit, title in (("time", "wall_s", " s", "Bake wall time"),
                                    ("memory", "peak_rss_bytes", "", "Peak resident memory")):
         fig, axes = panels(2)

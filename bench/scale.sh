@@ -100,7 +100,8 @@ def bake(args, limit):
     os.close(master)
     proc.returncode = os.waitstatus_to_exitcode(wait_status)
     lines = [l.strip() for l in re.split(rb"[\r\n]+", tail) if l.strip()]
-    text = [l.decode(errors="replace") for l in lines]
+    # Without the terminal's escapes (the progress line clears itself with ESC [K).
+    text = [re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", l.decode(errors="replace")) for l in lines]
     progress = next((l for l in reversed(text) if "pass" in l or "row" in l), "")
     if stop_sent is not None:
         status = "timeout"
@@ -137,16 +138,17 @@ def table():
     m = result["machine"]
     rows = [f"Scale benchmark{': ' + note if note else ''} ({m['hardware_threads']} hardware threads of {m['cpu']}; {m['device']}; "
             f"commit {result['commit']}, {result['date']})", "",
-            "| scene | triangles | quality | patches / elements | solver, passes | status | wall | CPU | peak RSS | bytes / element |",
-            "|---|---|---|---|---|---|---|---|---|---|"]
+            "| scene | triangles | quality | patches / elements | solver, passes | status | wall | CPU | peak RSS | bytes / element | load before, after |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result["runs"]:
         elements = r.get("elements")
         pe = f"{r['patches']} / {elements}" if elements else "–"
         passes = f"{r['solver']}, {r['passes']}" if r.get("passes") is not None else "–"
         status = r["status"] + (f" ({r['progress']})" if r["status"] == "timeout" and r.get("progress") else "")
         per = f"{r['peak_rss_bytes'] / elements:,.0f}" if elements else "–"
+        load = f"{r['load_before']:.1f}, {r['load_after']:.1f}"
         rows.append(f"| {r['kind']}:{r['count']} | {r['triangles']:,} | {r['quality']} | {pe} | {passes} | {status} | "
-                    f"{r['wall_s']:.1f} s | {r['cpu_s']:.1f} s | {fmt_bytes(r['peak_rss_bytes'])} | {per} |")
+                    f"{r['wall_s']:.1f} s | {r['cpu_s']:.1f} s | {fmt_bytes(r['peak_rss_bytes'])} | {per} | {load} |")
     return "\n".join(rows) + "\n"
 
 for kind in kinds.split(","):
@@ -182,7 +184,9 @@ for kind in kinds.split(","):
                         "elements_before_refinement": c["elements_before_refinement"], "passes": rep["passes"],
                         "solver": rep["settings"]["solver"], "converged": rep["converged"],
                         "device": rep["device"]["name"] or rep["device"]["backend"],
-                        "memory_estimate_bytes": rep["plan"]["memory"]["estimate"]})
+                        "memory_estimate_bytes": rep["plan"]["memory"]["estimate"],
+                        # Where the time and the planned memory go: what the engine work needs to see.
+                        "memory_parts_bytes": rep["plan"]["memory"]["parts"], "timings_s": rep.get("timings_s")})
         result["runs"].append(run)
         write_results()  # after every bake, so a long run that is cut short keeps what it measured
         print(table().splitlines()[-1], flush=True)
