@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""Draw PNG plots from one JSON document written by `hemirad bench --json`."""
+"""Draw PNG plots from one JSON document written by `hemirad bench --json`
+(`plot.py scale FILE`: from bench/scale.sh's JSON)."""
 import argparse
 import json
 import os
@@ -390,7 +391,93 @@ def plot_accuracy_analytic(doc, acc, out):
 
 # ---------------------------------------------------------------------------------------------
 
+SCALE_KEYS = ("kind", "count", "triangles", "quality", "status", "wall_s", "peak_rss_bytes")
+# The issue's targets: (kind or None for any, triangles, quality, seconds).
+SCALE_TARGETS = (("city", 150e3, "default", 300), (None, 1e6, "draft", 900), ("furniture", 15e3, "default", 30))
+KIND_MARKERS = {"city": "s", "furniture": "o", "foliage": "^"}
+
+
+def validate_scale(doc):
+    need(doc, ("runs",), "the document")
+    for i, r in enumerate(listed(doc["runs"], "runs")):
+        need(r, SCALE_KEYS, f"runs[{i}]")
+        for key in ("triangles", "wall_s", "peak_rss_bytes"):
+            positive(r[key], f"runs[{i}].{key}")
+
+
+def plot_scale(doc, out, prefix):
+    """Bake time and peak memory against triangles and against elements, one series per kind and quality.
+
+    A bake stopped at the timeout is drawn hollow at the time it had run (a lower bound); bakes
+    without a report (stopped, failed) have no elements and are left off the elements panels."""
+    runs = doc["runs"]
+    keys = unique((r["kind"], r["quality"]) for r in runs)
+    colour = colours(unique(r["kind"] for r in runs))
+    device = doc.get("machine", {}).get("device", "").split("|")[0].strip()  # the id and name, not the details
+    extra = "; ".join(x for x in (device, doc.get("note", ""), "hollow: stopped at the timeout (a lower bound)") if x)
+    for what, key, unit, title in (("time", "wall_s", " s", "Bake wall time"),
+                                   ("memory", "peak_rss_bytes", "", "Peak resident memory")):
+        fig, axes = panels(2)
+        for ax, x_key, x_label in ((axes[0], "triangles", "triangles"), (axes[1], "elements", "elements (after refinement)")):
+            for kind, quality in keys:
+                rows = sorted((r for r in runs if r["kind"] == kind and r["quality"] == quality and r.get(x_key)),
+                              key=lambda r: r[x_key])
+                if not rows:
+                    continue
+                xs = [r[x_key] for r in rows]
+                ys = [r[key] / (2**20 if what == "memory" else 1) for r in rows]
+                ax.plot(xs, ys, color=colour[kind], lw=1, ls="-" if quality == "default" else "--",
+                        label=f"{kind}, {quality}")
+                for x, y, r in zip(xs, ys, rows):
+                    ax.plot([x], [y], marker=KIND_MARKERS.get(kind, "o"), color=colour[kind],
+                            mfc=colour[kind] if r["status"] == "ok" else "none", ms=6)
+            if what == "time" and x_key == "triangles":
+                for kind, tris, quality, seconds in SCALE_TARGETS:
+                    ax.plot([tris], [seconds], marker="v", color="0.3", ms=7, ls="none",
+                            label="targets" if kind == SCALE_TARGETS[0][0] else None)
+                    ax.annotate(f"{kind or 'any'} {count_label(tris)} {quality}", (tris, seconds), fontsize=6.5,
+                                xytext=(4, 4), textcoords="offset points", color="0.3")
+            if what == "memory" and x_key == "elements":
+                xs = [r["elements"] for r in runs if r.get("elements")]
+                if xs:
+                    lo, hi = min(xs), max(xs)
+                    ax.plot([lo, hi], [2048 * lo / 2**20, 2048 * hi / 2**20], ls="--", color="0.6", lw=1,
+                            label="target: 2 KB per element", zorder=0)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel(x_label)
+            ax.set_ylabel("seconds (wall)" if what == "time" else "MiB (peak RSS)")
+            plain_log(ax, "x", fmt=count_label)
+            plain_log(ax, "y", unit=unit)
+            ax.grid(True, which="major", color="0.9")
+            ax.set_title(f"{title} against {x_key}")
+        finish(fig, os.path.join(out, f"{prefix}_{what}.png"), doc, f"{title} against scene size",
+               extra, merged_legend(axes))
+
+
+def main_scale(argv):
+    parser = argparse.ArgumentParser(prog="plot.py scale",
+                                     description="Plot bake time and peak memory from bench/scale.sh's JSON.")
+    parser.add_argument("json", help="file written by bench/scale.sh")
+    parser.add_argument("--out", help="folder for the PNG files (default: the JSON's folder)")
+    parser.add_argument("--prefix", default="scale", help="file names: PREFIX_time.png, PREFIX_memory.png")
+    args = parser.parse_args(argv)
+    try:
+        with open(args.json, encoding="utf-8") as f:
+            doc = json.load(f)
+        validate_scale(doc)
+    except (OSError, json.JSONDecodeError, BadDocument) as e:
+        print(f"plot.py: {args.json}: {e}", file=sys.stderr)
+        sys.exit(2)
+    out = args.out or os.path.dirname(os.path.abspath(args.json))
+    os.makedirs(out, exist_ok=True)
+    plt.rcParams.update({"font.size": 9, "axes.titlesize": 10})
+    plot_scale(doc, out, args.prefix)
+
+
 def main():
+    if sys.argv[1:2] == ["scale"]:
+        return main_scale(sys.argv[2:])
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("json", help="file written by `hemirad bench --json`")
     parser.add_argument("--out", help="folder for the PNG files (default: the JSON's folder)")

@@ -14,6 +14,7 @@
 #include <memory>
 #include <optional>
 #include <thread>
+#include <utility>
 
 #include "bench/calibrate.h"
 #include "cl/runtime.h"
@@ -24,7 +25,7 @@
 #include "formfactor/reference.h"
 #include "formfactor/verify.h"
 #include "mesh/mesh.h"
-#include "scene/procedural.h"
+#include "scene/content_scenes.h"
 #if HEMIRAD_HAVE_EMBREE
 #include "formfactor/embree_engine.h"
 constexpr bool kHaveEmbree = true;
@@ -138,8 +139,9 @@ ordered_json machine_info() {
 }
 
 BenchScene load_bench_scene(const std::string& spec) {
-    if (const std::optional<std::size_t> triangles = scene::parse_procedural_spec(spec))
-        return {scene::procedural_scene(*triangles), true};
+    bool closed = false;
+    if (std::optional<scene::Scene> generated = scene::generated_scene(spec, &closed))
+        return {std::move(*generated), closed};
     return {scene::load(spec), false};
 }
 
@@ -193,7 +195,7 @@ void check_mesh_settings(const ThroughputOptions& o, const scene::Scene& s, cons
 }  // namespace
 
 ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
-    if (o.scenes.empty()) throw InputError("bench: no scene given (a glTF file or procedural:<triangles>)");
+    if (o.scenes.empty()) throw InputError("bench: no scene given (a glTF file, procedural:<triangles>, city:, furniture: or foliage:<triangles>)");
     for (int n : o.hemicubes)
         if (n < 8 || n > 4096 || n % 2 != 0)
             throw InputError(fmt::format("--hemicube {}: must be even, from 8 to 4096", n));

@@ -16,7 +16,7 @@
 namespace hemirad::bench {
 
 struct ThroughputOptions {
-    std::vector<std::string> scenes;   // glTF files or procedural:<triangles> (see scene/procedural.h)
+    std::vector<std::string> scenes;   // glTF files or generated specs: procedural:, city:, furniture:, foliage:<triangles>
     std::vector<int> hemicubes{256};   // N of each run, even, 8..4096
     std::vector<std::string> engines;  // ref, embree, opencl (every device), opencl:P.D; empty: all
     int shots = 16;                    // shots per engine per repeat
@@ -51,9 +51,10 @@ struct Stats {
 };
 Stats stats(std::vector<double> values);
 
-// A scene by name: procedural:<count> is generated, anything else loaded as glTF. `closed` is
-// true where every direction from every patch hits a surface by construction (procedural
-// scenes), so each shot's form factors and blocked share must sum to 1.
+// A scene by name: a generated spec (procedural:<count>, city:, furniture:, foliage:<count>; see
+// scene/content_scenes.h) is generated, anything else loaded as glTF. `closed` is true where every
+// direction from every patch hits a surface by construction (every generated kind but the open
+// city), so each shot's form factors and blocked share must sum to 1.
 struct BenchScene {
     scene::Scene scene;
     bool closed = false;

@@ -15,8 +15,10 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <limits>
 #include <iostream>
+#include <ostream>
 #include <optional>
 #include <string>
 #include <type_traits>
@@ -28,6 +30,8 @@
 #include "cli/engine_select.h"
 #include "core/error.h"
 #include "formfactor/verify.h"
+#include "scene/content_scenes.h"
+#include "scene/writer.h"
 
 namespace hemirad::cli {
 namespace {
@@ -181,7 +185,7 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
 
 void add_bench_options(CLI::App& cmd, BenchCommand& c) {
     bench::ThroughputOptions& o = c.throughput;
-    cmd.add_option("scenes", o.scenes, "glTF files or procedural:<triangles> (e.g. procedural:100k, procedural:1M)");
+    cmd.add_option("scenes", o.scenes, "glTF files or generated scenes: procedural:, city:, furniture:, foliage:<triangles> (e.g. city:100k, procedural:1M)");
     cmd.add_option("--hemicube", o.hemicubes, "hemicube resolutions N, comma-separated")
         ->delimiter(',')
         ->transform(integer_in(8, 4096))
@@ -225,6 +229,26 @@ extern "C" void on_interrupt(int) {
     g_interrupted = true;
 }
 
+struct SceneWriteCommand {
+    std::string spec;
+    std::string output;
+    std::uint64_t seed = 1;
+};
+
+// `hemirad scene write`: generates the scene and writes it where the bake can load it.
+void write_generated_scene(const SceneWriteCommand& c, std::ostream& out) {
+    const std::filesystem::path file(c.output);
+    if (file.extension() != ".glb" && file.extension() != ".gltf")
+        throw InputError(fmt::format("{}: the output must end in .glb or .gltf", c.output));
+    std::optional<scene::Scene> s = scene::generated_scene(c.spec, nullptr, c.seed);
+    if (!s)
+        throw InputError(fmt::format("{}: not a generated scene (procedural:, city:, furniture: or foliage:<triangles>)",
+                                     c.spec));
+    scene::write_gltf(*s, file);
+    out << fmt::format("{}: {} triangles, {} nodes, {} materials -> {}\n", s->path.string(), s->triangles.size(),
+                       s->nodes.size(), s->materials.size(), c.output);
+}
+
 }  // namespace
 
 int run(int argc, char** argv) {
@@ -238,6 +262,16 @@ int run(int argc, char** argv) {
     CLI::App* bench_app =
         app.add_subcommand("bench", "benchmark the form-factor engines against each other and the machine");
     add_bench_options(*bench_app, bench_command);
+    SceneWriteCommand scene_write;
+    CLI::App* scene_app = app.add_subcommand("scene", "generated benchmark scenes");
+    scene_app->require_subcommand(1);
+    CLI::App* scene_write_app = scene_app->add_subcommand(
+        "write", "write a generated scene as glTF, for hemirad bake: procedural:, city:, furniture:, foliage:<triangles>");
+    scene_write_app->add_option("spec", scene_write.spec, "e.g. city:150k, furniture:1M, foliage:2.5M")->required();
+    scene_write_app->add_option("output", scene_write.output, "the file to write, .glb or .gltf (+ .bin)")->required();
+    scene_write_app->add_option("--seed", scene_write.seed, "seed of the layout, sizes and colours")
+        ->transform(integer_from<std::uint64_t>(0))
+        ->capture_default_str();
     bool devices_json = false;
     CLI::App* devices = app.add_subcommand("devices", "list the form-factor engines this build can use");
     devices->add_flag("--json", devices_json, "machine-readable output");
@@ -262,6 +296,10 @@ int run(int argc, char** argv) {
         }
         if (*bench_app) {
             run_bench(bench_command, std::cout);
+            return 0;
+        }
+        if (*scene_write_app) {
+            write_generated_scene(scene_write, std::cout);
             return 0;
         }
         // SIGHUP (the terminal closed) is an interruption like Ctrl-C: clean up, exit 130. A signal

@@ -347,14 +347,13 @@ Camera make_camera() {
     return c;
 }
 
-// "1M", "250k" or digits: how the request reads back in reports.
+}  // namespace
+
 std::string count_label(std::size_t n) {
     if (n % 1'000'000 == 0) return fmt::format("{}M", n / 1'000'000);
     if (n % 1'000 == 0) return fmt::format("{}k", n / 1'000);
     return fmt::format("{}", n);
 }
-
-}  // namespace
 
 Scene procedural_scene(std::size_t triangles, std::uint64_t seed) {
     const Plan plan = make_plan(triangles);
@@ -375,9 +374,12 @@ Scene procedural_scene(std::size_t triangles, std::uint64_t seed) {
 }
 
 std::optional<std::size_t> parse_procedural_spec(const std::string& spec) {
-    static const std::string kPrefix = "procedural:";
-    if (spec.compare(0, kPrefix.size(), kPrefix) != 0) return std::nullopt;
-    const std::string text = spec.substr(kPrefix.size());
+    return parse_count_spec(spec, "procedural:");
+}
+
+std::optional<std::size_t> parse_count_spec(const std::string& spec, const std::string& prefix) {
+    if (spec.compare(0, prefix.size(), prefix) != 0) return std::nullopt;
+    const std::string text = spec.substr(prefix.size());
     const auto fail = [&spec](const std::string& problem) -> InputError {
         return InputError(fmt::format("{}: {}", spec, problem));
     };

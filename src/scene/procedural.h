@@ -31,4 +31,11 @@ Scene procedural_scene(std::size_t triangles, std::uint64_t seed = 1);
 // one line when the count is malformed, zero or above kMaxProceduralTriangles.
 std::optional<std::size_t> parse_procedural_spec(const std::string& spec);
 
+// The count of any "<prefix><count>" spec, read as parse_procedural_spec reads "procedural:"'s
+// (the same syntax, limit and messages), so every generated scene kind takes the same counts.
+std::optional<std::size_t> parse_count_spec(const std::string& spec, const std::string& prefix);
+
+// "1M", "250k" or digits: how a requested count reads back in scene paths and reports.
+std::string count_label(std::size_t n);
+
 }  // namespace hemirad::scene

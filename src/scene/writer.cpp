@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -58,6 +59,27 @@ json material_json(const Material& m, bool colour_from_vertices) {
     return out;
 }
 
+// The binary container: a 12-byte header, the JSON chunk padded with spaces and the BIN chunk
+// padded with zeros, each to 4 bytes, as glTF 2.0 requires.
+void write_glb(json& gltf, std::vector<unsigned char>& bin, const std::filesystem::path& file) {
+    bin.resize((bin.size() + 3) / 4 * 4, 0);
+    gltf["buffers"] = json::array({json{{"byteLength", bin.size()}}});
+    std::string text = gltf.dump();
+    text.resize((text.size() + 3) / 4 * 4, ' ');
+    const auto u32 = [](std::size_t v) { return static_cast<std::uint32_t>(v); };
+    const std::uint32_t header[3] = {0x46546C67u, 2u, u32(12 + 8 + text.size() + 8 + bin.size())};  // "glTF"
+    const std::uint32_t json_chunk[2] = {u32(text.size()), 0x4E4F534Au};                           // "JSON"
+    const std::uint32_t bin_chunk[2] = {u32(bin.size()), 0x004E4942u};                             // "BIN\0"
+    std::ofstream out(file, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(header), sizeof header);
+    out.write(reinterpret_cast<const char*>(json_chunk), sizeof json_chunk);
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.write(reinterpret_cast<const char*>(bin_chunk), sizeof bin_chunk);
+    out.write(reinterpret_cast<const char*>(bin.data()), static_cast<std::streamsize>(bin.size()));
+    out.flush();
+    if (!out) throw InternalError(fmt::format("{}: could not write the scene", file.string()));
+}
+
 }  // namespace
 
 void write_gltf(const Scene& scene, const std::filesystem::path& file) {
@@ -82,11 +104,13 @@ void write_gltf(const Scene& scene, const std::filesystem::path& file) {
     }
     if (uses_strength) gltf["extensionsUsed"] = {"KHR_materials_emissive_strength"};
 
+    // Triangles by node, then material, in one pass: a scan per node would be quadratic in a
+    // generated scene's thousands of objects.
+    std::vector<std::map<std::uint32_t, std::vector<const Triangle*>>> by_node(scene.nodes.size());
+    for (const Triangle& t : scene.triangles) by_node.at(t.node)[t.material].push_back(&t);
     std::vector<unsigned char> bin;
     for (std::size_t n = 0; n < scene.nodes.size(); ++n) {
-        std::map<std::uint32_t, std::vector<const Triangle*>> by_material;
-        for (const Triangle& t : scene.triangles)
-            if (t.node == n) by_material[t.material].push_back(&t);
+        const std::map<std::uint32_t, std::vector<const Triangle*>>& by_material = by_node[n];
         json primitives = json::array();
         for (const auto& [material, triangles] : by_material) {
             std::vector<float> positions, colours;
@@ -105,6 +129,18 @@ void write_gltf(const Scene& scene, const std::filesystem::path& file) {
         gltf["nodes"].push_back({{"name", scene.nodes[n].name}, {"mesh", gltf["meshes"].size() - 1}});
         gltf["scenes"][0]["nodes"].push_back(gltf["nodes"].size() - 1);
     }
+    // Cameras as nodes of their own, so a bake of the file renders the view the scene was made with.
+    for (const Camera& c : scene.cameras) {
+        json perspective = {{"yfov", c.yfov}, {"znear", c.znear}};
+        if (c.aspect > 0.0) perspective["aspectRatio"] = c.aspect;
+        gltf["cameras"].push_back({{"name", c.name}, {"type", "perspective"}, {"perspective", perspective}});
+        json matrix = json::array();  // column-major, as glm stores it
+        for (int col = 0; col < 4; ++col)
+            for (int row = 0; row < 4; ++row) matrix.push_back(c.camera_to_world[col][row]);
+        gltf["nodes"].push_back({{"name", c.name}, {"camera", gltf["cameras"].size() - 1}, {"matrix", matrix}});
+        gltf["scenes"][0]["nodes"].push_back(gltf["nodes"].size() - 1);
+    }
+    if (file.extension() == ".glb") return write_glb(gltf, bin, file);
     const std::filesystem::path bin_file = std::filesystem::path(file).replace_extension(".bin");
     gltf["buffers"] = json::array({json{{"uri", bin_file.filename().string()}, {"byteLength", bin.size()}}});
 
