@@ -181,7 +181,8 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
     if (r.solver != "progressive" && r.solver != "matrix") throw InternalError("accuracy: unknown solver " + r.solver);
     const auto t0 = Clock::now();
     const double patch = room.diagonal() * r.patch_fraction;
-    mesh::Mesh m = mesh::build(room, {patch, patch / r.elements_per_edge});
+    // Clusters only for the hemicube, as a bake meshes (the exact engine integrates over cells).
+    mesh::Mesh m = mesh::build(room, {patch, patch / r.elements_per_edge, /*cluster=*/!r.exact});
     const std::size_t elements_before = m.elements.size();
     // As a bake's make_engine: the same kind of engine for a refined mesh, a hemicube's N doubled
     // per level of refinement (capped), so that children cover as many cells as their parents did.

@@ -263,10 +263,13 @@ TEST_CASE("a double-sided cylinder under a rotated, scaled node: every engine st
     const glm::dmat3 transform = rotate * glm::dmat3(0.3, 0, 0, 0, 1.7, 0, 0, 0, 0.3);
     const scene::Scene s = cylinder_scene(28, transform);
     REQUIRE(s.triangles.size() == 4 * 28 + 2);
-    const mesh::Mesh m = mesh::build(s, {0.5, 0.25});
-
-    formfactor::UnoccludedEngine exact(m);
-    check_shots(m, exact);
-    formfactor::NearFieldEngine hemicube(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{32, 1}));
-    check_shots(m, hemicube);
+    const mesh::Mesh cells = mesh::build(s, {0.5, 0.25, /*cluster=*/false});  // the exact engine's mesh
+    formfactor::UnoccludedEngine exact(cells);
+    check_shots(cells, exact);
+    for (const bool cluster : {false, true}) {
+        const mesh::Mesh m = mesh::build(s, {0.5, 0.25, cluster});
+        REQUIRE((m.clusters > 0) == cluster);
+        formfactor::NearFieldEngine hemicube(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{32, 1}));
+        check_shots(m, hemicube);
+    }
 }
