@@ -20,6 +20,7 @@
 #include "bench/throughput.h"
 #include "core/timing.h"
 #include "formfactor/embree_engine.h"
+#include "formfactor/embree_ray.h"
 #include "formfactor/hemicube.h"
 #include "mesh/mesh.h"
 
@@ -117,7 +118,7 @@ Packets make_packets(int n) {
 
 // Casts every packet of every shot once on `threads` threads, each claiming packets from one
 // counter; nothing is done with a hit but count it (a closed scene must hit with every ray).
-std::size_t plain_loop(RTCScene scene, const Packets& packets, const std::vector<formfactor::Frame>& frames,
+std::size_t plain_loop(RTCScene scene, const Packets& packets, const std::vector<formfactor::FloatFrame>& frames,
                        float tnear, unsigned threads) {
     const std::size_t per_shot = packets.dir.size(), total = per_shot * frames.size();
     std::atomic<std::size_t> next{0};
@@ -131,28 +132,13 @@ std::size_t plain_loop(RTCScene scene, const Packets& packets, const std::vector
         std::size_t count = 0;
         for (std::size_t first; (first = next.fetch_add(kClaim)) < total;)
             for (std::size_t p = first; p < std::min(total, first + kClaim); ++p) {
-                const formfactor::Frame& f = frames[p / per_shot];
+                const formfactor::FloatFrame& f = frames[p / per_shot];
                 const std::size_t q = p % per_shot;
                 const auto& d = packets.dir[q];
                 for (int r = 0; r < kPacket; ++r) {
                     const float x = d[r], y = d[kPacket + r], z = d[2 * kPacket + r];
                     valid[static_cast<std::size_t>(r)] = r < packets.lanes[q] ? -1 : 0;
-                    rh.ray.org_x[r] = static_cast<float>(f.origin.x);
-                    rh.ray.org_y[r] = static_cast<float>(f.origin.y);
-                    rh.ray.org_z[r] = static_cast<float>(f.origin.z);
-                    rh.ray.dir_x[r] =
-                        x * static_cast<float>(f.u.x) + y * static_cast<float>(f.v.x) + z * static_cast<float>(f.w.x);
-                    rh.ray.dir_y[r] =
-                        x * static_cast<float>(f.u.y) + y * static_cast<float>(f.v.y) + z * static_cast<float>(f.w.y);
-                    rh.ray.dir_z[r] =
-                        x * static_cast<float>(f.u.z) + y * static_cast<float>(f.v.z) + z * static_cast<float>(f.w.z);
-                    rh.ray.tnear[r] = tnear;
-                    rh.ray.tfar[r] = std::numeric_limits<float>::infinity();
-                    rh.ray.time[r] = 0.0f;
-                    rh.ray.mask[r] = ~0u;
-                    rh.ray.id[r] = static_cast<unsigned>(r);
-                    rh.ray.flags[r] = 0;
-                    rh.hit.geomID[r] = RTC_INVALID_GEOMETRY_ID;
+                    set_packet_ray(rh, r, f, x, y, z, tnear);
                 }
                 rtcIntersect16(valid.data(), scene, &context, &rh);
                 for (int r = 0; r < packets.lanes[q]; ++r) count += rh.hit.geomID[r] != RTC_INVALID_GEOMETRY_ID;
@@ -200,9 +186,9 @@ int main(int argc, char** argv) {
             const bench::BenchScene s = bench::load_bench_scene(spec);
             const mesh::Mesh m = mesh::build(s.scene, bench::mesh_settings_for(o, s.scene));
             const std::vector<formfactor::ShotRequest> shots = bench::bench_shots(m, o.shots);
-            std::vector<formfactor::Frame> frames;
+            std::vector<formfactor::FloatFrame> frames;
             for (const auto& shot : shots)
-                frames.push_back(formfactor::make_frame(m.patches[shot.patch], o.seed, shot.shot));
+                frames.push_back(formfactor::float_frame(formfactor::make_frame(m.patches[shot.patch], o.seed, shot.shot)));
             const PlainScene plain(m, RTC_SCENE_FLAG_ROBUST), fast(m, RTC_SCENE_FLAG_NONE);
             // The peer's own: hits nearer are the shooter's plane.
             const auto tnear = static_cast<float>(1e4 * formfactor::base_plane_epsilon(m));
@@ -224,10 +210,7 @@ int main(int argc, char** argv) {
                     fast_ms.push_back(1e3 * seconds_since(t0) / static_cast<double>(shots.size()));
                     double seconds = 0.0;
                     for (std::size_t first = 0; first < shots.size(); first += static_cast<std::size_t>(o.batch)) {
-                        const std::vector<formfactor::ShotRequest> batch(
-                            shots.begin() + static_cast<std::ptrdiff_t>(first),
-                            shots.begin() + static_cast<std::ptrdiff_t>(
-                                                std::min(shots.size(), first + static_cast<std::size_t>(o.batch))));
+                        const std::vector<formfactor::ShotRequest> batch = bench::shots_from(shots, first, o.batch);
                         t0 = Clock::now();
                         peer.shoot_batch(batch, out);
                         seconds += seconds_since(t0);

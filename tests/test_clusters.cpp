@@ -131,9 +131,7 @@ TEST_CASE("inside a clustered sphere that glows everywhere, radiosity is E / (1 
     add_sphere(s, {0, 0, 0}, 1.0, 16, 32, glow, true);
     scene::finish(s);
     const bool cluster = GENERATE(true, false);
-    mesh::Settings settings{0.7, 0.7};
-    settings.cluster = cluster;
-    const mesh::Mesh m = mesh::build(s, settings);
+    const mesh::Mesh m = mesh::build(s, {0.7, 0.7, cluster});
     CHECK((m.clusters > 0) == cluster);
     const std::vector<glm::dvec3> B = bake(m, 128, 1e-4);
     double worst = 0.0, flux = 0.0, area = 0.0;
@@ -159,9 +157,7 @@ TEST_CASE("a double-sided clustered sphere in a lit room lights nothing inside i
     add_sphere(s, {0.5, 0.5, 0.4}, 0.25, 12, 24, ball, false);
     scene::finish(s);
     const bool cluster = GENERATE(true, false);
-    mesh::Settings settings{0.3, 0.3};
-    settings.cluster = cluster;
-    const mesh::Mesh m = mesh::build(s, settings);
+    const mesh::Mesh m = mesh::build(s, {0.3, 0.3, cluster});
     CHECK((m.clusters > 0) == cluster);
     const std::vector<glm::dvec3> B = bake(m, 64, 1e-3, /*ambient=*/false);  // the ambient term lands everywhere
     std::size_t inside = 0, outside_lit = 0;

@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "scene/content_scenes.h"
 #include "scene/writer.h"
+#include "test_scenes.h"
 
 using glm::dvec3;
 using hemirad::InputError;
@@ -50,16 +51,6 @@ std::string closure_problem(const std::vector<const Triangle*>& surface) {
     return {};
 }
 
-bool same_triangles(const Scene& a, const Scene& b) {
-    if (a.triangles.size() != b.triangles.size()) return false;
-    for (std::size_t i = 0; i < a.triangles.size(); ++i) {
-        const Triangle &x = a.triangles[i], &y = b.triangles[i];
-        if (x.p != y.p || x.rho != y.rho || x.material != y.material || x.node != y.node || x.primitive != y.primitive)
-            return false;
-    }
-    return true;
-}
-
 }  // namespace
 
 TEST_CASE("content scenes have the requested triangle count within 3%", "[content]") {
@@ -78,8 +69,8 @@ TEST_CASE("content scenes are deterministic, and the seed changes them", "[conte
         const Scene a = content_scene(kind, 20'000, 3), b = content_scene(kind, 20'000, 3);
         const Scene c = content_scene(kind, 20'000, 4);
         INFO(a.path.string());
-        CHECK(same_triangles(a, b));
-        CHECK_FALSE(same_triangles(a, c));
+        CHECK(test::same_triangles(a, b));
+        CHECK_FALSE(test::same_triangles(a, c));
         CHECK(relative_error(c.triangles.size(), 20'000) <= 0.03);
     }
     // The same bytes on the disk, too.

@@ -14,6 +14,7 @@
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
 #include "scene/procedural.h"
+#include "test_scenes.h"
 
 using glm::dvec3;
 using hemirad::InputError;
@@ -152,16 +153,6 @@ void check_structure(const Scene& s) {
     for (std::size_t n = 2; n < s.nodes.size(); ++n) CHECK(s.nodes[n].name.rfind("object_", 0) == 0);
 }
 
-bool same_triangles(const Scene& a, const Scene& b) {
-    if (a.triangles.size() != b.triangles.size()) return false;
-    for (std::size_t i = 0; i < a.triangles.size(); ++i) {
-        const Triangle &x = a.triangles[i], &y = b.triangles[i];
-        if (x.p != y.p || x.rho != y.rho || x.material != y.material || x.node != y.node || x.primitive != y.primitive)
-            return false;
-    }
-    return true;
-}
-
 // The floor fraction under the objects: a closed convex object's outline seen from above has
 // half the sum over its triangles of area × |n·y| (every vertical line crosses it twice).
 double floor_coverage(const Scene& s) {
@@ -208,9 +199,9 @@ TEST_CASE("procedural scenes: bounding box, camera and materials", "[procedural]
 
 TEST_CASE("procedural scenes are deterministic; the seed changes layout, not size", "[procedural]") {
     const Scene a = procedural_scene(20'000, 3), b = procedural_scene(20'000, 3), c = procedural_scene(20'000, 4);
-    CHECK(same_triangles(a, b));
+    CHECK(hemirad::test::same_triangles(a, b));
     CHECK(c.triangles.size() == a.triangles.size());
-    CHECK_FALSE(same_triangles(a, c));
+    CHECK_FALSE(hemirad::test::same_triangles(a, c));
 }
 
 TEST_CASE("procedural scenes cover a similar floor fraction at every size", "[procedural]") {

@@ -69,4 +69,14 @@ double perpendicular_rectangles_ff(double l, double w, double h) {
     return t / (M_PI * W);
 }
 
+bool same_triangles(const scene::Scene& a, const scene::Scene& b) {
+    if (a.triangles.size() != b.triangles.size()) return false;
+    for (std::size_t i = 0; i < a.triangles.size(); ++i) {
+        const scene::Triangle &x = a.triangles[i], &y = b.triangles[i];
+        if (x.p != y.p || x.rho != y.rho || x.material != y.material || x.node != y.node || x.primitive != y.primitive)
+            return false;
+    }
+    return true;
+}
+
 }  // namespace hemirad::test

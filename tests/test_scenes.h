@@ -60,4 +60,7 @@ double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::ui
 double parallel_rectangles_ff(double a, double b, double c);
 double perpendicular_rectangles_ff(double l, double w, double h);
 
+// The same triangles in the same order: corners, reflectance, material, node and primitive.
+bool same_triangles(const scene::Scene& a, const scene::Scene& b);
+
 }  // namespace hemirad::test

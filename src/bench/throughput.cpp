@@ -161,6 +161,12 @@ std::vector<formfactor::ShotRequest> bench_shots(const mesh::Mesh& m, int count)
     return shots;
 }
 
+std::vector<formfactor::ShotRequest> shots_from(const std::vector<formfactor::ShotRequest>& shots, std::size_t first,
+                                                int batch) {
+    const std::size_t end = std::min(shots.size(), first + static_cast<std::size_t>(batch));
+    return {shots.begin() + static_cast<std::ptrdiff_t>(first), shots.begin() + static_cast<std::ptrdiff_t>(end)};
+}
+
 namespace {
 
 // The most elements a benchmark's mesh may have: a tiny --element-size (1e-4 on a room) would
@@ -303,10 +309,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                 for (auto& r : runners) {
                     double seconds = 0.0;
                     for (std::size_t first = 0; first < shots.size(); first += static_cast<std::size_t>(o.batch)) {
-                        const std::vector<formfactor::ShotRequest> batch(
-                            shots.begin() + static_cast<std::ptrdiff_t>(first),
-                            shots.begin() + static_cast<std::ptrdiff_t>(
-                                                std::min(shots.size(), first + static_cast<std::size_t>(o.batch))));
+                        const std::vector<formfactor::ShotRequest> batch = shots_from(shots, first, o.batch);
                         const auto t0 = Clock::now();
                         r.impl->shoot_batch(batch, out);
                         seconds += seconds_since(t0);

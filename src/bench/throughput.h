@@ -68,6 +68,9 @@ mesh::Settings mesh_settings_for(const ThroughputOptions& options, const scene::
 // The shots every engine is timed on: `count` patches spread over the scene (mesh `m`, which has
 // patches), shot i with shot counter i (the seed stream).
 std::vector<formfactor::ShotRequest> bench_shots(const mesh::Mesh& m, int count);
+// shots[first, first + batch), cut at the end: one engine call of a timed run.
+std::vector<formfactor::ShotRequest> shots_from(const std::vector<formfactor::ShotRequest>& shots, std::size_t first,
+                                                int batch);
 
 // The machine a benchmark ran on: {cpu, hardware_threads}.
 nlohmann::ordered_json machine_info();

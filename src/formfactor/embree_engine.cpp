@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "core/error.h"
+#include "formfactor/embree_ray.h"
 
 namespace hemirad::formfactor {
 
@@ -132,7 +133,7 @@ struct EmbreeEngine::Impl {
     // One shot's frame: floats for the rays, the double origin for the side test.
     struct ShotFrame {
         glm::dvec3 origin{0.0};
-        std::array<float, 3> org{}, u{}, v{}, w{};
+        FloatFrame rays;
     };
     // What one tile of one shot found: sums in the order first hit, and its blocked part.
     struct TileSums {
@@ -349,19 +350,7 @@ void EmbreeEngine::Impl::cast_tile(const ShotFrame& f, std::size_t tile, TileSum
         const Packet& p = packets[q];
         for (int r = 0; r < kPacket; ++r) {
             const float x = p.dir[r], y = p.dir[kPacket + r], z = p.dir[2 * kPacket + r];
-            rh.ray.org_x[r] = f.org[0];
-            rh.ray.org_y[r] = f.org[1];
-            rh.ray.org_z[r] = f.org[2];
-            rh.ray.dir_x[r] = x * f.u[0] + y * f.v[0] + z * f.w[0];
-            rh.ray.dir_y[r] = x * f.u[1] + y * f.v[1] + z * f.w[1];
-            rh.ray.dir_z[r] = x * f.u[2] + y * f.v[2] + z * f.w[2];
-            rh.ray.tnear[r] = tnear;
-            rh.ray.tfar[r] = std::numeric_limits<float>::infinity();
-            rh.ray.time[r] = 0.0f;
-            rh.ray.mask[r] = ~0u;
-            rh.ray.id[r] = static_cast<unsigned>(r);
-            rh.ray.flags[r] = 0;
-            rh.hit.geomID[r] = RTC_INVALID_GEOMETRY_ID;
+            set_packet_ray(rh, r, f.rays, x, y, z, tnear);
         }
         rtcIntersect16(p.valid.data(), scene, &context, &rh);
         for (int r = 0; r < p.size; ++r) {
@@ -422,12 +411,7 @@ void EmbreeEngine::Impl::run(const ShotRequest* shots, std::size_t count, ShotRe
         const Frame frame = make_frame(mesh.patches.at(shots[b].patch), settings.seed, shots[b].shot);
         ShotFrame& f = frames[b];
         f.origin = frame.origin;
-        for (int a = 0; a < 3; ++a) {
-            f.org[a] = static_cast<float>(frame.origin[a]);
-            f.u[a] = static_cast<float>(frame.u[a]);
-            f.v[a] = static_cast<float>(frame.v[a]);
-            f.w[a] = static_cast<float>(frame.w[a]);
-        }
+        f.rays = float_frame(frame);
     }
     while (tile_sums.size() < count * per_shot) {
         tile_sums.emplace_back();

@@ -58,16 +58,20 @@ bool Progressive::done() const {
 
 double Progressive::flux_key(std::size_t patch) const { return sum(unshot_[patch]) * mesh_.patches[patch].area; }
 
+void Progressive::reset_pick() {
+    std::vector<double> keys(unshot_.size());
+    for (std::size_t p = 0; p < unshot_.size(); ++p) keys[p] = flux_key(p);
+    pick_.reset(std::move(keys));
+}
+
 void Progressive::recompute_sums() {
     incident_flux_ = unshot_flux_ = landing_ = glm::dvec3(0.0);
     for (std::size_t k = 0; k < H_.size(); ++k) incident_flux_ += H_[k] * mesh_.elements[k].area;
-    std::vector<double> keys(unshot_.size());
     for (std::size_t p = 0; p < unshot_.size(); ++p) {
         unshot_flux_ += unshot_[p] * mesh_.patches[p].area;
         landing_ += hit_[p] * unshot_[p] * mesh_.patches[p].area;
-        keys[p] = flux_key(p);
     }
-    pick_.reset(std::move(keys));
+    reset_pick();
 }
 
 bool Progressive::step() {
@@ -79,8 +83,8 @@ bool Progressive::step() {
     if (settings_.max_passes > 0) count = std::min(count, settings_.max_passes - passes_);
     std::vector<formfactor::ShotRequest> requests;
     while (static_cast<long>(requests.size()) < count) {
+        if (nothing_unshot()) break;
         const std::size_t best = pick_.top();
-        if (best >= pick_.size() || !(pick_.key(best) > 0.0)) break;
         requests.push_back({static_cast<std::uint32_t>(best), static_cast<std::uint64_t>(passes_) + requests.size()});
         pick_.set(best, -1.0);
     }
@@ -279,9 +283,7 @@ void Progressive::load(std::istream& in) {
     passes_ = static_cast<long>(passes);
     snapshot_pass_ = static_cast<long>(snapshot_pass);
     converged_ = converged != 0;
-    std::vector<double> keys(unshot_.size());
-    for (std::size_t p = 0; p < unshot_.size(); ++p) keys[p] = flux_key(p);
-    pick_.reset(std::move(keys));
+    reset_pick();
 }
 
 Energy Progressive::energy() const {

@@ -114,6 +114,7 @@ private:
     std::vector<bool> is_touched_;
 
     void recompute_sums();
+    void reset_pick();  // the max-tree's keys from unshot_
     double flux_key(std::size_t patch) const;
     long passes_ = 0;
     bool converged_ = false;
