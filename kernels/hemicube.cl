@@ -879,7 +879,10 @@ int tile_face(const HrShot* shot, int tile) {
     return face;
 }
 
-// The first cell of a face in the id and delta-form-factor buffers (DeltaFormFactors::offset).
+// Cells of a raster tile; the delta form-factor table holds the tiles' cells tile by tile.
+#define TILE_CELLS (HEMIRAD_TILE * HEMIRAD_TILE)
+
+// The first cell of a face in the id buffers (DeltaFormFactors::offset).
 size_t face_cell_offset(int face, int n) {
     return face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
 }
@@ -945,7 +948,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
     const size_t face_offset = face_cell_offset(face, n);
     const size_t cell = face_offset + (size_t)j * n + i;
     ids[cell] = best < 0 ? HR_EMPTY : (best_back ? HR_BLOCKER : best);
-    if (best >= 0) atom_add(&sums[best_back ? shot->elements : best], delta_fixed[(size_t)tile * HEMIRAD_TILE * HEMIRAD_TILE + lid]);
+    if (best >= 0) atom_add(&sums[best_back ? shot->elements : best], delta_fixed[(size_t)tile * TILE_CELLS + lid]);
 }
 
 // For CPU devices: one work-item per tile walks the records of its list in turn, each over
@@ -982,7 +985,6 @@ typedef int4 lane_int;
 #else
 #error HEMIRAD_LANES must be 4 or 8
 #endif
-#define TILE_CELLS (HEMIRAD_TILE * HEMIRAD_TILE)
 #define HR_SUM_TABLE 64  // entries of raster_records' table of give-backs, a power of two
 
 // The sum a raster_records winner 2 k + back adds to: its element's, or the blockers'.

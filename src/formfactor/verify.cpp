@@ -23,11 +23,11 @@ std::string compare_shot(const ShotResult& got, const ShotResult& want, VerifySu
         if (failure.empty() &&
             abs_error > VerifyingEngine::kAbsoluteTolerance + VerifyingEngine::kRelativeTolerance * std::abs(w))
             failure = fmt::format("{} has F = {:.9g}, the reference says {:.9g} (|error| {:.3g} > {:g} + {:g}·F)",
-                                  element < 0 ? std::string("the blocked share") : fmt::format("element {}", element), g, w, abs_error, VerifyingEngine::kAbsoluteTolerance,
+                                  element < 0 ? std::string("the blocked share") : fmt::format("element {}", element),
+                                  g, w, abs_error, VerifyingEngine::kAbsoluteTolerance,
                                   VerifyingEngine::kRelativeTolerance);
-        return failure.empty();
     };
-    for_each_in_union(got, want, [&](std::uint32_t k, double g, double w) { check(k, g, w); });
+    for_each_in_union(got, want, check);
     check(-1, got.blocked, want.blocked);
     return failure;
 }
