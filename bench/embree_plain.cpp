@@ -188,7 +188,7 @@ int main(int argc, char** argv) {
             const std::vector<formfactor::ShotRequest> shots = bench::bench_shots(m, o.shots);
             std::vector<formfactor::FloatFrame> frames;
             for (const auto& shot : shots)
-                frames.push_back(formfactor::float_frame(formfactor::make_frame(m.patches[shot.patch], o.seed, shot.shot)));
+                frames.push_back(formfactor::float_frame(formfactor::make_frame(m.patches[shot.shooter.patch], o.seed, shot.shot)));
             const PlainScene plain(m, RTC_SCENE_FLAG_ROBUST), fast(m, RTC_SCENE_FLAG_NONE);
             // The peer's own: hits nearer are the shooter's plane.
             const auto tnear = static_cast<float>(1e4 * formfactor::base_plane_epsilon(m));

@@ -388,7 +388,7 @@ TEST_CASE("effects: analytic engine is deterministic and ignores the shot counte
     engine.shoot(3, 12345, b);
     CHECK(a == b);
     std::vector<formfactor::ShotResult> batch;
-    engine.shoot_batch({{3, 7}, {5, 8}}, batch);
+    engine.shoot_batch({formfactor::ShotRequest::of_patch(3, 7), formfactor::ShotRequest::of_patch(5, 8)}, batch);
     REQUIRE(batch.size() == 2);
     CHECK(batch[0] == a);
     CHECK(formfactor::UnoccludedEngine::subdivisions(5.0, 1.0) == 1);

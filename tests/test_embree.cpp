@@ -105,7 +105,7 @@ TEST_CASE("embree: the same bits for any thread count, and a batch as its shots 
         // Tiles summed apart and added in tile order, whichever thread cast them.
         CHECK(a == b);
         CHECK(b == again);
-        shots.push_back({patch, patch});
+        shots.push_back(formfactor::ShotRequest::of_patch(patch, patch));
         singles.push_back(a);
         last_ids = *one.last_ids();
     }

@@ -263,9 +263,10 @@ TEST_CASE("opencl: a batch of shots gives exactly the shots one at a time", "[op
     formfactor::ReferenceEngine ref(m, {128, 5});
     // Different shooters and shot counters, one patch twice; then a smaller batch reusing the buffers.
     for (const std::vector<formfactor::ShotRequest>& requests :
-         {std::vector<formfactor::ShotRequest>{
-              {0, 3}, {5, 4}, {static_cast<std::uint32_t>(m.patches.size() - 1), 5}, {5, 6}, {2, 7}},
-          std::vector<formfactor::ShotRequest>{{1, 8}, {3, 9}}}) {
+         {std::vector<formfactor::ShotRequest>{formfactor::ShotRequest::of_patch(0, 3), formfactor::ShotRequest::of_patch(5, 4),
+                                               formfactor::ShotRequest::of_patch(static_cast<std::uint32_t>(m.patches.size() - 1), 5),
+                                               formfactor::ShotRequest::of_patch(5, 6), formfactor::ShotRequest::of_patch(2, 7)},
+          std::vector<formfactor::ShotRequest>{formfactor::ShotRequest::of_patch(1, 8), formfactor::ShotRequest::of_patch(3, 9)}}) {
         std::vector<formfactor::ShotResult> results, split_results;
         batched.shoot_batch(requests, results);
         split.shoot_batch(requests, split_results);
@@ -277,9 +278,9 @@ TEST_CASE("opencl: a batch of shots gives exactly the shots one at a time", "[op
         CHECK(*split.last_ids(requests.size() - 1) == *batched.last_ids(requests.size() - 1));
         for (std::size_t i = 0; i < requests.size(); ++i) {
             formfactor::ShotResult one, want;
-            single.shoot(requests[i].patch, requests[i].shot, one);
-            ref.shoot(requests[i].patch, requests[i].shot, want);
-            CAPTURE(i, requests[i].patch, requests[i].shot);
+            single.shoot(requests[i], one);
+            ref.shoot(requests[i], want);
+            CAPTURE(i, requests[i].shooter.patch, requests[i].shot);
             CHECK(results[i] == one);
             CHECK(split_results[i] == one);
             CHECK(results[i].blocked == one.blocked);
@@ -345,7 +346,7 @@ TEST_CASE("opencl: the GPU kernels (setup per patch, raster per cell) give the r
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::ReferenceEngine ref(m, {64, 2});
     const std::vector<formfactor::ShotRequest> requests{
-        {0, 0}, {3, 1}, {static_cast<std::uint32_t>(m.patches.size() - 1), 2}};
+        formfactor::ShotRequest::of_patch(0, 0), formfactor::ShotRequest::of_patch(3, 1), formfactor::ShotRequest::of_patch(static_cast<std::uint32_t>(m.patches.size() - 1), 2)};
     for (const bool setup_lanes : {false, true}) {
         formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
         tuning.raster_per_record = false;
@@ -356,7 +357,7 @@ TEST_CASE("opencl: the GPU kernels (setup per patch, raster per cell) give the r
         gpu_style.shoot_batch(requests, results);
         for (std::size_t i = 0; i < requests.size(); ++i) {
             formfactor::ShotResult want;
-            ref.shoot(requests[i].patch, requests[i].shot, want);
+            ref.shoot(requests[i], want);
             CAPTURE(setup_lanes, i);
             CHECK(*gpu_style.last_ids(i) == *ref.last_ids());
             CHECK(formfactor::compare_shot(results[i], want).empty());
@@ -402,7 +403,7 @@ TEST_CASE("opencl: out of device memory, a batch runs again in smaller parts wit
 
     std::vector<formfactor::ShotRequest> requests;
     for (std::uint32_t i = 0; i < 7; ++i)
-        requests.push_back({static_cast<std::uint32_t>((3 * i) % m.patches.size()), 10u + i});
+        requests.push_back(formfactor::ShotRequest::of_patch(static_cast<std::uint32_t>((3 * i) % m.patches.size()), 10u + i));
     std::vector<formfactor::ShotResult> want, got;
     whole.shoot_batch(requests, want);
     tight.shoot_batch(requests, got);

@@ -156,8 +156,9 @@ mesh::Settings mesh_settings_for(const ThroughputOptions& o, const scene::Scene&
 std::vector<formfactor::ShotRequest> bench_shots(const mesh::Mesh& m, int count) {
     std::vector<formfactor::ShotRequest> shots;
     for (int i = 0; i < count; ++i)
-        shots.push_back({static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u) % m.patches.size()),
-                         static_cast<std::uint64_t>(i)});
+        shots.push_back(formfactor::ShotRequest::of_patch(
+            static_cast<std::uint32_t>((static_cast<std::size_t>(i) * 7919u) % m.patches.size()),
+            static_cast<std::uint64_t>(i)));
     return shots;
 }
 
@@ -267,7 +268,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
             const formfactor::Settings settings{n, o.seed};
             formfactor::ReferenceEngine reference(m, settings);
             std::vector<formfactor::ShotResult> expected(sample);
-            for (std::size_t i = 0; i < sample; ++i) reference.shoot(shots[i].patch, shots[i].shot, expected[i]);
+            for (std::size_t i = 0; i < sample; ++i) reference.shoot(shots[i], expected[i]);
 
             std::vector<Runner> runners;
             if (selection.ref)

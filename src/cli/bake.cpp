@@ -53,9 +53,10 @@ class TimedEngine final : public formfactor::Engine {
 public:
     explicit TimedEngine(formfactor::Engine& inner) : inner_(inner) {}
     std::string name() const override { return inner_.name(); }
-    void shoot(std::uint32_t patch, std::uint64_t shot, formfactor::ShotResult& out) override {
+    using formfactor::Engine::shoot;
+    void shoot(const formfactor::ShotRequest& request, formfactor::ShotResult& out) override {
         const auto t0 = Clock::now();
-        inner_.shoot(patch, shot, out);
+        inner_.shoot(request, out);
         seconds_ += seconds_since(t0);
     }
     void shoot_batch(const std::vector<formfactor::ShotRequest>& shots,
@@ -78,8 +79,9 @@ public:
     ObservedEngine(std::unique_ptr<formfactor::Engine> inner, Observer observer)
         : inner_(std::move(inner)), observer_(std::move(observer)) {}
     std::string name() const override { return inner_->name(); }
-    void shoot(std::uint32_t patch, std::uint64_t shot, formfactor::ShotResult& out) override {
-        inner_->shoot(patch, shot, out);
+    using formfactor::Engine::shoot;
+    void shoot(const formfactor::ShotRequest& request, formfactor::ShotResult& out) override {
+        inner_->shoot(request, out);
         observer_(out);
     }
     void shoot_batch(const std::vector<formfactor::ShotRequest>& shots,

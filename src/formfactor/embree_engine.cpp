@@ -408,7 +408,7 @@ void EmbreeEngine::Impl::run(const ShotRequest* shots, std::size_t count, ShotRe
     const std::size_t per_shot = tiles();
     frames.resize(std::max(frames.size(), count));
     for (std::size_t b = 0; b < count; ++b) {
-        const Frame frame = make_frame(mesh.patches.at(shots[b].patch), settings.seed, shots[b].shot);
+        const Frame frame = make_frame(mesh.patches.at(shots[b].shooter.patch), settings.seed, shots[b].shot);
         ShotFrame& f = frames[b];
         f.origin = frame.origin;
         f.rays = float_frame(frame);
@@ -449,8 +449,7 @@ unsigned EmbreeEngine::threads() const {
     return impl_->threads;
 }
 
-void EmbreeEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    const ShotRequest request{patch, shot};
+void EmbreeEngine::shoot(const ShotRequest& request, ShotResult& out) {
     impl_->run(&request, 1, &out);
 }
 

@@ -28,7 +28,8 @@ public:
     EmbreeEngine& operator=(const EmbreeEngine&) = delete;
 
     std::string name() const override { return "embree"; }
-    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    using Engine::shoot;
+    void shoot(const ShotRequest& request, ShotResult& out) override;
     // The tiles of every shot of the batch shared out at once, so that the threads go on from
     // one shot to the next without waiting for each other; results as shoot() one at a time.
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;

@@ -1,4 +1,4 @@
-// FormFactorEngine: shoot(patch) → the sparse row F[patch → element] over the elements it
+// FormFactorEngine: shoot(shooter) → the sparse row F[shooter → element] over the elements it
 // reaches, one shot or a batch of shots at a time. Implemented by the scalar reference hemicube, the OpenCL
 // engine, and decorators (near field, verification).
 #pragma once
@@ -75,25 +75,57 @@ void for_each_in_union(const ShotResult& a, const ShotResult& b, Fn fn) {
     }
 }
 
-// One shot of a batch: the shooter and the global shot counter.
-struct ShotRequest {
-    std::uint32_t patch = 0;
-    std::uint64_t shot = 0;
+// What shoots, as data: every engine takes a Shooter, so that new kinds of shooter (point, spot,
+// directional and sky lights) come as new kinds here, not as new engine interfaces. Today one
+// kind: a patch of the mesh, shooting its hemicube from its centre along its normal (a planar
+// cell skips its own elements and its twin's; a cluster draws its own, see shot_skips).
+struct Shooter {
+    enum class Kind : std::uint8_t { patch };
+    Kind kind = Kind::patch;
+    std::uint32_t patch = 0;  // Kind::patch: the patch
+
+    static Shooter of_patch(std::uint32_t patch) { return {Kind::patch, patch}; }
+    bool operator==(const Shooter& o) const { return kind == o.kind && patch == o.patch; }
 };
+
+// One shot: who shoots, and the global shot counter, which with the seed fixes the hemicube's
+// rotation, so that any engine reproduces the same shot.
+struct ShotRequest {
+    Shooter shooter;
+    std::uint64_t shot = 0;
+
+    static ShotRequest of_patch(std::uint32_t patch, std::uint64_t shot) { return {Shooter::of_patch(patch), shot}; }
+};
+
+// The patches whose elements a shot leaves out (mesh::kNoPatch: none): a planar cell's own
+// surface, both sides, which cannot see itself; a cluster draws its own elements (the rim of a
+// concave one blocks and receives). Every engine skips exactly these.
+struct ShotSkips {
+    std::uint32_t own = mesh::kNoPatch, twin = mesh::kNoPatch;
+    bool skips(std::uint32_t patch) const { return patch == own || patch == twin; }
+};
+inline ShotSkips shot_skips(const mesh::Mesh& mesh, const Shooter& shooter) {
+    const mesh::Patch& p = mesh.patches.at(shooter.patch);
+    if (p.cluster()) return {};
+    return {shooter.patch, p.twin};
+}
 
 class Engine {
 public:
     virtual ~Engine() = default;
     virtual std::string name() const = 0;  // "ref", "opencl"
-    // Form factors from patch `patch` to every element. `shot` is the global shot counter:
-    // with the seed it fixes the hemicube's rotation, so any engine reproduces the same shot.
-    virtual void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) = 0;
+    // Form factors from a shooter to every element, as a sparse row.
+    virtual void shoot(const ShotRequest& request, ShotResult& out) = 0;
+    // A patch's shot: shoot(ShotRequest::of_patch(patch, shot), out).
+    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
+        shoot(ShotRequest::of_patch(patch, shot), out);
+    }
     // Several shots at once, with exactly the results of shoot() one at a time (out[i] for
     // shots[i]). Engines that can run them together (the OpenCL engine: one launch per stage)
     // override it; this one shoots in turn.
     virtual void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
         out.resize(shots.size());
-        for (std::size_t i = 0; i < shots.size(); ++i) shoot(shots[i].patch, shots[i].shot, out[i]);
+        for (std::size_t i = 0; i < shots.size(); ++i) shoot(shots[i], out[i]);
     }
     // The id buffer of shot i of the last shoot_batch (a shoot() is a batch of one): element
     // index, −1 empty, −2 blocker, cells in DeltaFormFactors order; nullptr where the engine

@@ -11,14 +11,14 @@ namespace hemirad::formfactor {
 NearFieldEngine::NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine> inner, double reach)
     : mesh_(mesh), inner_(std::move(inner)), reach_(reach) {}
 
-void NearFieldEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    inner_->shoot(patch, shot, out);
-    correct(patch, out);
+void NearFieldEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    inner_->shoot(request, out);
+    correct(request.shooter.patch, out);
 }
 
 void NearFieldEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     inner_->shoot_batch(shots, out);
-    for (std::size_t i = 0; i < shots.size(); ++i) correct(shots[i].patch, out[i]);
+    for (std::size_t i = 0; i < shots.size(); ++i) correct(shots[i].shooter.patch, out[i]);
 }
 
 void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {

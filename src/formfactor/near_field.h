@@ -19,7 +19,8 @@ public:
     // to farthest vertex) are corrected.
     NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine> inner, double reach = kDefaultReach);
     std::string name() const override { return inner_->name(); }
-    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    using Engine::shoot;
+    void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return inner_->last_ids(i); }
 

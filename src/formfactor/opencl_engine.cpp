@@ -518,7 +518,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     const std::size_t batch = requests.size();
     std::vector<HrShot> shots(batch);
     for (std::size_t i = 0; i < batch; ++i) {
-        const Frame frame = make_frame(mesh_.patches.at(requests[i].patch), settings_.seed, requests[i].shot);
+        const Frame frame = make_frame(mesh_.patches.at(requests[i].shooter.patch), settings_.seed, requests[i].shot);
         HrShot& shot = shots[i];
         shot = {};
         copy3(frame.origin, shot.origin);
@@ -527,11 +527,10 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         copy3(frame.w, shot.w);
         shot.eps = eps_;
         shot.n = settings_.hemicube;
-        // The patches a shot skips (see ReferenceEngine::shoot): a cell's own and its twin's, none
-        // for a cluster.
-        const mesh::Patch& shooter = mesh_.patches[requests[i].patch];
-        shot.shooter = shooter.cluster() ? -1 : static_cast<hr_int>(requests[i].patch);
-        shot.twin = shooter.cluster() || shooter.twin == mesh::kNoPatch ? -1 : static_cast<hr_int>(shooter.twin);
+        // The patches a shot skips (shot_skips): a cell's own and its twin's, none for a cluster.
+        const ShotSkips skips = shot_skips(mesh_, requests[i].shooter);
+        shot.shooter = skips.own == mesh::kNoPatch ? -1 : static_cast<hr_int>(skips.own);
+        shot.twin = skips.twin == mesh::kNoPatch ? -1 : static_cast<hr_int>(skips.twin);
         shot.elements = static_cast<hr_int>(mesh_.elements.size());
         shot.patches = static_cast<hr_int>(mesh_.patches.size());
         shot.tiles_x = tiles_x_;
@@ -595,8 +594,8 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     return needed;
 }
 
-void OpenCLEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    shoot_batch({{patch, shot}}, batch_results_);
+void OpenCLEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    shoot_batch({request}, batch_results_);
     out = std::move(batch_results_[0]);
 }
 

@@ -73,7 +73,8 @@ public:
                  const OpenCLFault& fault = {});
 
     std::string name() const override { return "opencl"; }
-    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    using Engine::shoot;
+    void shoot(const ShotRequest& request, ShotResult& out) override;
 
     // Runs a batch's shots together: each stage is one launch over every shot (dimension 1 of
     // the NDRange), so a GPU has enough work. The buffers grow to the largest batch seen; a

@@ -89,15 +89,13 @@ ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& setting
         fixed_[c] = static_cast<std::int64_t>(std::llround(std::ldexp(delta_.table()[c], HR_FIXED_SHIFT)));
 }
 
-void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    const mesh::Patch& shooter = mesh_.patches.at(patch);
-    const Frame frame = make_frame(shooter, settings_.seed, shot);
+void ReferenceEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    const Frame frame = make_frame(mesh_.patches.at(request.shooter.patch), settings_.seed, request.shot);
     last_batch_ = 1;
     // A cell's own elements, and its twin's, lie in its base plane: skipped. A cluster's are drawn
     // like any other, since the rim of a concave one rises in front of the shooter and must block
     // and receive its light (skipped, they let the inside of a double-sided cylinder light the room).
-    const std::uint32_t skip = shooter.cluster() ? mesh::kNoPatch : patch;
-    const std::uint32_t skip_twin = shooter.cluster() ? mesh::kNoPatch : shooter.twin;
+    const ShotSkips skips = shot_skips(mesh_, request.shooter);
     const int n = delta_.n();
     const double half = 0.5 * n;  // cells per unit of face coordinate
 
@@ -107,7 +105,7 @@ void ReferenceEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult&
 
     for (std::size_t k = 0; k < mesh_.elements.size(); ++k) {
         const mesh::Element& e = mesh_.elements[k];
-        if (e.patch == skip || e.patch == skip_twin) continue;
+        if (skips.skips(e.patch)) continue;
         if (k == mesh_.patches[e.patch].first_element && !above_base_plane(mesh_.patches[e.patch].poly, frame)) {
             k += mesh_.patches[e.patch].element_count - 1;  // elements tile their patch: all are below
             continue;

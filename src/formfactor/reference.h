@@ -17,7 +17,8 @@ class ReferenceEngine final : public Engine {
 public:
     ReferenceEngine(const mesh::Mesh& mesh, const Settings& settings);
     std::string name() const override { return "ref"; }
-    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    using Engine::shoot;
+    void shoot(const ShotRequest& request, ShotResult& out) override;
 
     // The id buffer of the last shot, face by face (row-major, as DeltaFormFactors): element
     // index, kEmpty where nothing was hit, kBlocker for the back of a one-sided surface.

@@ -99,8 +99,8 @@ double cell_mean(const glm::dvec3* v, int n, const glm::dvec3& centroid, int q, 
 
 }  // namespace
 
-void UnoccludedEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    (void)shot;
+void UnoccludedEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    const std::uint32_t patch = request.shooter.patch;
     out.clear();
     const mesh::Patch& shooter = mesh_.patches[patch];
     if (!(shooter.area > 0.0)) return;

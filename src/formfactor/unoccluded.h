@@ -22,7 +22,8 @@ public:
     std::string name() const override { return "analytic"; }
     // F[j] = 0 for the shooter's own elements, elements coplanar with it, and elements whose
     // centroid is not in front of its plane. `blocked` = 0. `shot` is ignored.
-    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    using Engine::shoot;
+    void shoot(const ShotRequest& request, ShotResult& out) override;
 
     // The quadrature's sub-cells per element side, q (q² sub-cells): d is the distance from the
     // element's centroid to the shooter's, s the larger of their longest edges. 1 if d > 4s,

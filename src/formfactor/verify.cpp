@@ -35,17 +35,17 @@ std::string compare_shot(const ShotResult& got, const ShotResult& want, VerifySu
 VerifyingEngine::VerifyingEngine(std::unique_ptr<Engine> engine, std::unique_ptr<Engine> reference, long every)
     : engine_(std::move(engine)), reference_(std::move(reference)), every_(std::max(1L, every)) {}
 
-void VerifyingEngine::shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) {
-    shoot_batch({{patch, shot}}, batch_);
+void VerifyingEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    shoot_batch({request}, batch_);
     out = std::move(batch_[0]);
 }
 
 void VerifyingEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     engine_->shoot_batch(shots, out);
     for (std::size_t i = 0; i < shots.size(); ++i) {
-        const auto [patch, shot] = shots[i];
+        const std::uint64_t shot = shots[i].shot;
         if (shot % static_cast<std::uint64_t>(every_) != 0) continue;
-        reference_->shoot(patch, shot, expected_);
+        reference_->shoot(shots[i], expected_);
         ++summary_.shots_checked;
 
         const auto* ids = engine_->last_ids(i);
@@ -57,7 +57,7 @@ void VerifyingEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::ve
         const std::string problem = compare_shot(out[i], expected_, &summary_);
         if (!problem.empty())
             throw VerifyError(fmt::format("verify: shot {} (patch {}) on {}: {}; {} of {} cells differ so far", shot,
-                                          patch, engine_->name(), problem, summary_.cells_mismatched,
+                                          shots[i].shooter.patch, engine_->name(), problem, summary_.cells_mismatched,
                                           summary_.cells_compared));
     }
 }

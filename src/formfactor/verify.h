@@ -38,7 +38,8 @@ public:
     // `every`: check shots 0, K, 2K, … (K >= 1). Both engines must see the same mesh and settings.
     VerifyingEngine(std::unique_ptr<Engine> engine, std::unique_ptr<Engine> reference, long every);
     std::string name() const override { return engine_->name(); }
-    void shoot(std::uint32_t patch, std::uint64_t shot, ShotResult& out) override;
+    using Engine::shoot;
+    void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return engine_->last_ids(i); }
     const VerifySummary& summary() const { return summary_; }

@@ -128,11 +128,11 @@ bool Matrix::shoot_rows(const std::function<void(long, long)>& progress) {
         // Shot counter = patch index: a row does not depend on the batching or on which other
         // patches are active.
         for (std::size_t k = first; k < std::min(first + batch, pending.size()); ++k)
-            requests.push_back({pending[k], static_cast<std::uint64_t>(pending[k])});
+            requests.push_back(formfactor::ShotRequest::of_patch(pending[k], pending[k]));
         engine_.shoot_batch(requests, results);
         for (std::size_t k = 0; k < requests.size(); ++k) {
             const formfactor::ShotResult& shot = results[k];
-            Row& row = rows_[requests[k].patch];
+            Row& row = rows_[requests[k].shooter.patch];
             row.element.reserve(shot.size());
             row.F.reserve(shot.size());
             for (std::size_t i = 0; i < shot.size(); ++i) {

@@ -85,17 +85,18 @@ bool Progressive::step() {
     while (static_cast<long>(requests.size()) < count) {
         if (nothing_unshot()) break;
         const std::size_t best = pick_.top();
-        requests.push_back({static_cast<std::uint32_t>(best), static_cast<std::uint64_t>(passes_) + requests.size()});
+        requests.push_back(formfactor::ShotRequest::of_patch(static_cast<std::uint32_t>(best),
+                                                            static_cast<std::uint64_t>(passes_) + requests.size()));
         pick_.set(best, -1.0);
     }
-    for (const formfactor::ShotRequest& r : requests) pick_.set(r.patch, flux_key(r.patch));
+    for (const formfactor::ShotRequest& r : requests) pick_.set(r.shooter.patch, flux_key(r.shooter.patch));
     if (requests.empty()) {
         converged_ = true;
         return false;
     }
     engine_.shoot_batch(requests, batch_results_);
     // In order; a batch cut short by convergence leaves the rest unshot, the books exact.
-    for (std::size_t i = 0; i < requests.size() && !done(); ++i) apply(requests[i].patch, batch_results_[i]);
+    for (std::size_t i = 0; i < requests.size() && !done(); ++i) apply(requests[i].shooter.patch, batch_results_[i]);
     return true;
 }
 

@@ -138,13 +138,13 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
             if (settings.cancelled && settings.cancelled()) break;
             requests.clear();
             for (std::size_t i = first; i < std::min(shooters.size(), first + batch); ++i)
-                requests.push_back(
-                    {shooters[i],
-                     settings.first_shot + static_cast<std::uint64_t>(depth) * mesh.patches.size() + shooters[i]});
+                requests.push_back(formfactor::ShotRequest::of_patch(
+                    shooters[i],
+                    settings.first_shot + static_cast<std::uint64_t>(depth) * mesh.patches.size() + shooters[i]));
             engine->shoot_batch(requests, results);
             shots += static_cast<long>(requests.size());
             for (std::size_t r = 0; r < requests.size(); ++r) {
-                const std::uint32_t p = requests[r].patch;
+                const std::uint32_t p = requests[r].shooter.patch;
                 const glm::dvec3 flux = shot[p] * m.patches[p].area;
                 const formfactor::ShotResult& row = results[r];
                 for (std::size_t i = 0; i < row.size(); ++i) {
