@@ -45,7 +45,7 @@ double engine_bytes(const BakeShape& s, double elements, int hemicube, double sh
     const double per_shot = formfactor::OpenCLEngine::shot_bytes(elements, hemicube);
     // A launch's budget, one shot at least: a CPU's, whose buffers are the host memory planned for.
     const double budget = std::max(per_shot, double(formfactor::OpenCLEngine::launch_budget(true, 0)));
-    return formfactor::OpenCLEngine::mesh_bytes(elements, s.counts.patches) + std::min(shots * per_shot, budget);
+    return formfactor::DeviceMesh::bytes(elements, s.counts.patches) + std::min(shots * per_shot, budget);
 }
 
 }  // namespace
@@ -101,7 +101,7 @@ MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
 double refinement_room(const BakeShape& s, const std::string& solver, double limit) {
     // Bytes per refined element: itself, its engine share, its re-gathered light and its output.
     const double per_element = sizeof(mesh::Element) + 2 * 24.0 + kWeldedPerElement +
-                               (s.opencl ? formfactor::OpenCLEngine::mesh_bytes(1.0, 0.0) : sizeof(double));
+                               (s.opencl ? formfactor::DeviceMesh::bytes(1.0, 0.0) : sizeof(double));
     const double spent = estimate_memory(s, solver).needed();
     return std::max(s.counts.elements, (limit - spent) / per_element);
 }

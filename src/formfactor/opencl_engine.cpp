@@ -74,11 +74,6 @@ cl::Buffer upload(cl::Context& context, cl::CommandQueue& queue, const std::vect
     return buffer;
 }
 
-void copy_polygon(const mesh::Polygon& poly, hr_double (&v)[12]) {
-    for (int i = 0; i < 4; ++i)
-        for (int c = 0; c < 3; ++c) v[3 * i + c] = i < poly.n ? poly.v[static_cast<std::size_t>(i)][c] : 0.0;
-}
-
 void copy3(const glm::dvec3& from, hr_double (&to)[3]) {
     for (int c = 0; c < 3; ++c) to[c] = from[c];
 }
@@ -98,24 +93,6 @@ void check_layout(ocl::Context& context, cl::Program& program) {
             "{}: kernels/hemicube_types.h lays out differently on the device (sizes {} {} {} {}, host {} {} {} {})",
             context.info().name, sizes[0], sizes[1], sizes[2], sizes[3], expected[0], expected[1], expected[2],
             expected[3]));
-}
-
-// A sphere holding every vertex of elements [first, first + count) (clamped to the mesh): the
-// centre of their box and the distance to the farthest, as {x, y, z, radius}.
-std::array<double, 4> bounding_sphere(const mesh::Mesh& mesh, std::size_t first, std::size_t count) {
-    const std::size_t end = std::min(mesh.elements.size(), first + count);
-    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-    for (std::size_t k = first; k < end; ++k)
-        for (int i = 0; i < mesh.elements[k].poly.n; ++i) {
-            lo = glm::min(lo, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
-            hi = glm::max(hi, mesh.elements[k].poly.v[static_cast<std::size_t>(i)]);
-        }
-    const glm::dvec3 centre = 0.5 * (lo + hi);
-    double radius = 0.0;
-    for (std::size_t k = first; k < end; ++k)
-        for (int i = 0; i < mesh.elements[k].poly.n; ++i)
-            radius = std::max(radius, glm::length(mesh.elements[k].poly.v[static_cast<std::size_t>(i)] - centre));
-    return {centre.x, centre.y, centre.z, radius};
 }
 
 // The clusters (lanes setup) each shot must set up: those whose bounding sphere does not lie
@@ -271,10 +248,14 @@ OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device) {
 }
 
 OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings)
-    : OpenCLEngine(mesh, context, settings, default_tuning(context.info())) {}
+    : OpenCLEngine(mesh, DeviceMesh(mesh), context, settings, default_tuning(context.info())) {}
 
 OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings,
                            const OpenCLTuning& tuning, const OpenCLFault& fault)
+    : OpenCLEngine(mesh, DeviceMesh(mesh), context, settings, tuning, fault) {}
+
+OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl::Context& context,
+                           const Settings& settings, const OpenCLTuning& tuning, const OpenCLFault& fault)
     : mesh_(mesh),
       context_(context),
       settings_(settings),
@@ -295,7 +276,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
         (tuning.scan_work_group & (tuning.scan_work_group - 1)) != 0)
         throw InternalError("OpenCL tuning: tile and work-group sizes must be positive, the scan's a power of two");
 
-    eps_ = base_plane_epsilon(mesh);  // exactly the reference's clip distance
+    if (packed.elements.size() != mesh.elements.size() || packed.patches.size() != mesh.patches.size())
+        throw InternalError("OpenCL engine: the packed mesh is not this mesh's");
+    eps_ = packed.eps;  // exactly the reference's clip distance
 
     // Never -cl-fast-relaxed-math or -cl-mad-enable: the kernel must round like the reference.
     options_ = fmt::format(
@@ -336,54 +319,11 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
             tile_base_[static_cast<std::size_t>(face)] + tiles_x_ * tiles_y;
     }
 
-    std::vector<HrElement> elements(mesh.elements.size());
-    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
-        const mesh::Element& e = mesh.elements[k];
-        HrElement& h = elements[k];
-        h = {};
-        copy_polygon(e.poly, h.v);
-        copy3(e.normal, h.normal);
-        copy3(e.centroid, h.centroid);
-        h.n = e.poly.n;
-        h.has_twin = e.has_twin ? 1 : 0;
-    }
-    // The same, HR_SETUP_LANES elements to a group, for setup in lanes.
-    std::vector<HrElementLanes> element_lanes((mesh.elements.size() + HR_SETUP_LANES - 1) / HR_SETUP_LANES);
-    for (HrElementLanes& group : element_lanes) group = {};
-    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
-        const mesh::Element& e = mesh.elements[k];
-        HrElementLanes& group = element_lanes[k / HR_SETUP_LANES];
-        const std::size_t lane = k % HR_SETUP_LANES;
-        for (int i = 0; i < 4; ++i)
-            for (int c = 0; c < 3; ++c)
-                group.v[(3 * i + c) * HR_SETUP_LANES + lane] =
-                    e.poly.v[static_cast<std::size_t>(std::min(i, e.poly.n - 1))][c];
-        for (int c = 0; c < 3; ++c) {
-            group.normal[c * HR_SETUP_LANES + lane] = e.normal[c];
-            group.centroid[c * HR_SETUP_LANES + lane] = e.centroid[c];
-        }
-        group.n[lane] = e.poly.n;
-        group.has_twin[lane] = e.has_twin ? 1 : 0;
-        group.patch[lane] = static_cast<hr_int>(e.patch);
-    }
-    // Each lane group's bounding sphere, for group_behind in setup.
-    for (std::size_t g = 0; g < element_lanes.size(); ++g) {
-        const std::array<double, 4> bound = bounding_sphere(mesh, g * HR_SETUP_LANES, HR_SETUP_LANES);
-        std::copy(bound.begin(), bound.end(), element_lanes[g].bound);
-    }
     // Clusters, a setup work-group's elements each (lanes setup): their bounding spheres, for
     // select_clusters on the host.
     if (tuning.setup_lanes)
         for (std::size_t first = 0; first < mesh.elements.size(); first += cluster_elements())
             cluster_bounds_.push_back(bounding_sphere(mesh, first, cluster_elements()));
-    std::vector<HrPatch> patches(mesh.patches.size());
-    for (std::size_t p = 0; p < mesh.patches.size(); ++p) {
-        patches[p] = {};
-        copy_polygon(mesh.patches[p].poly, patches[p].v);
-        patches[p].n = mesh.patches[p].poly.n;
-        patches[p].first_element = static_cast<hr_int>(mesh.patches[p].first_element);
-        patches[p].elements = static_cast<hr_int>(mesh.patches[p].element_count);
-    }
     // Fixed point: 2^62 per unit of form factor; the whole table sums to 1, far below 2^63. In
     // the order the raster reads it: tile by tile (the tiles' global order), each tile's T×T
     // cells row by row, zero where a tile overhangs its face, so that a tile's reads are one
@@ -409,9 +349,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const 
                          ? tuning.list_capacity
                          : static_cast<std::uint32_t>(initial_list_entries(double(record_slots())));
     try {
-        elements_ = upload(cl_context, queue, elements);
-        element_lanes_ = upload(cl_context, queue, element_lanes);
-        patches_ = upload(cl_context, queue, patches);
+        elements_ = upload(cl_context, queue, packed.elements);
+        element_lanes_ = upload(cl_context, queue, packed.lanes);
+        patches_ = upload(cl_context, queue, packed.patches);
         delta_fixed_ = upload(cl_context, queue, delta_fixed);
         allocate_batch(1);
     } catch (const cl::Error& e) {
@@ -464,10 +404,6 @@ std::size_t OpenCLEngine::raster_group_size() const {
 
 std::size_t OpenCLEngine::max_batch() const {
     return std::min(batch_limit_, memory_batch());
-}
-
-double OpenCLEngine::mesh_bytes(double elements, double patches) {
-    return elements * (sizeof(HrElement) + double(sizeof(HrElementLanes)) / HR_SETUP_LANES) + patches * sizeof(HrPatch);
 }
 
 double OpenCLEngine::shot_bytes(double elements, int hemicube) {

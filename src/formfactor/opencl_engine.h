@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "cl/runtime.h"
+#include "formfactor/device_mesh.h"
 #include "formfactor/engine.h"
 #include "formfactor/hemicube.h"
 
@@ -71,6 +72,10 @@ public:
     OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings);
     OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings, const OpenCLTuning& tuning,
                  const OpenCLFault& fault = {});
+    // With the mesh packed already (DeviceMesh(mesh)), as several devices' engines share one
+    // packing; uploaded here and not kept.
+    OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl::Context& context, const Settings& settings,
+                 const OpenCLTuning& tuning, const OpenCLFault& fault = {});
 
     std::string name() const override { return "opencl"; }
     using Engine::shoot;
@@ -97,12 +102,11 @@ public:
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
 
-    // Memory the engine holds for a mesh of `elements` elements and `patches` patches at
-    // resolution `hemicube`: the uploaded mesh, and each shot of a launch's buffers (on the device,
-    // and the host's copies of its ids and sums). A launch holds as many shots as the batch asks,
-    // up to what fits its budget (tuning's batch_memory, else launch_budget)
-    // and at least one. For planning a bake before its mesh is built.
-    static double mesh_bytes(double elements, double patches);
+    // Memory each shot of a launch holds for a mesh of `elements` elements at resolution
+    // `hemicube` (on the device, and the host's copies of its ids and sums), besides the uploaded
+    // mesh (DeviceMesh::bytes). A launch holds as many shots as the batch asks, up to what fits
+    // its budget (tuning's batch_memory, else launch_budget) and at least one. For planning a bake
+    // before its mesh is built.
     // The per-shot buffers one launch may hold: on a CPU (host memory) 32 MiB, since a shot of a
     // few thousand elements already gives its cores hundreds of work-groups and more shots only
     // cost memory (the Cornell box's bake peaked at 1.2 GB with 1 GiB launches, 350 MB with these,
