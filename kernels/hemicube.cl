@@ -250,11 +250,39 @@ size_t record_stride(const HrShot* shot) {
 size_t counter_stride(const HrShot* shot) {
     return (size_t)shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
 }
+// Per element; then the blocked share, the list entries needed, and the lane groups setup tested
+// for occlusion and those it found hidden (occlusion culling's count, for benchmarks).
 size_t sum_stride(const HrShot* shot) {
-    return (size_t)shot->elements + 2;  // per element, the blocked share, the list entries needed
+    return (size_t)shot->elements + 4;
+}
+
+// Occlusion culling's depth buffer: per block of DEPTH_BLOCK x DEPTH_BLOCK cells, face by face,
+// row-major within a face, the least 1/depth over the block's cells (0 where one is empty).
+#define DEPTH_BLOCK HR_DEPTH_BLOCK
+int depth_blocks_x(int n) {
+    return (n + DEPTH_BLOCK - 1) / DEPTH_BLOCK;
+}
+int depth_block_base(int face, int n) {
+    const int top = depth_blocks_x(n) * depth_blocks_x(n), side = depth_blocks_x(n) * ((n / 2 + DEPTH_BLOCK - 1) / DEPTH_BLOCK);
+    return face == 0 ? 0 : top + (face - 1) * side;
+}
+size_t depth_stride(int n) {
+    return (size_t)depth_block_base(HR_FACES, n);
 }
 size_t cell_stride(const HrShot* shot) {
     return (size_t)3 * shot->n * shot->n;
+}
+
+// The record counts of setup's work-groups (group_records): a shot's launch has at most this many
+// (one per cluster of lane groups, or per HEMIRAD_WG patches), whatever the launch's row length,
+// so that the occluder pass's counts sit where the final pass finds them.
+size_t group_stride(const HrShot* shot) {
+#if HEMIRAD_SETUP_LANES
+    const size_t items = ((size_t)shot->elements + HR_SETUP_LANES - 1) / HR_SETUP_LANES;
+#else
+    const size_t items = (size_t)shot->patches;
+#endif
+    return max((size_t)1, (items + HEMIRAD_WG - 1) / HEMIRAD_WG);
 }
 
 // The first counter of the copy that this work-group's records count in (and scatter to): copy
@@ -486,6 +514,74 @@ bool group_behind(const HrShot* shot, __global const HrElementLanes* group) {
     const Vec d = vec(group->bound[0] - shot->origin[0], group->bound[1] - shot->origin[1],
                       group->bound[2] - shot->origin[2]);
     return dot3(d, vec(shot->w[0], shot->w[1], shot->w[2])) + group->bound[3] < -shot->eps;
+}
+
+// Occlusion culling (HrShot.occluded): whether every cell any element of a lane group could
+// cover holds something nearer already, so that setup may drop the group without changing one
+// cell. tile_depth[t] is the least 1/depth over tile t's cells in the occluder pass (0 where a
+// cell was empty; per DEPTH_BLOCK² cells, in fact); the final raster only adds records, so a cell's winner is at least that near.
+// A group is hidden when, on every face its bounding sphere reaches, an upper bound of the
+// 1/depth its records could hold at any cell is below tile_depth on every tile the sphere's
+// projection (widened as below) touches (blocks, in fact). The bound must hold for the values setup and the raster
+// compute, not only for the geometry:
+// - a cell centre inside a record lies within 2^-17 sqrt2 cells of the element's true projection
+//   (its vertices are snapped to 2^-16 cells), where the plane's 1/depth is at most 1/(z - r)
+//   (z the sphere centre's depth on the face); beyond it, the plane rises at most 1/c per unit of
+//   face coordinate (c the plane's distance from the shooter, the normal a unit vector), so the
+//   bound adds delta/c with delta that distance in face units;
+// - setup computes c from rounded vertices: relative error ~1e-15 |v - origin| / c, bounded here
+//   by 1e-12 |v - origin| (the plane's 1/depth scales by c/c_computed), with c_eff the smallest
+//   c less that and a group with c_eff <= 0 never hidden (a plane through the shooter);
+// - the rest is rounding of order 1e-15 relative, covered by the factor 1 + 1e-9, and a sphere
+//   within 1e-4 of its size from a face's eye plane is never hidden on it.
+// Triangles repeat their last vertex, so vertex 0 and the normal of live lanes suffice for c.
+bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __global const double* tile_depth) {
+    const llong live = convert_long8(vload8(0, group->n)) > 0;
+    const ldouble dx = vload8(0, group->v) - shot->origin[0], dy = vload8(1, group->v) - shot->origin[1],
+                  dz = vload8(2, group->v) - shot->origin[2];
+    const ldouble c = fabs(vload8(0, group->normal) * dx + vload8(1, group->normal) * dy +
+                           vload8(2, group->normal) * dz);
+    const ldouble reach = fabs(dx) + fabs(dy) + fabs(dz);
+    const ldouble c_eff = select((ldouble)(INFINITY), c - 1e-12 * reach, live);
+    const ldouble far = select((ldouble)(0.0), reach, live);
+    const double4 c_half = fmin(c_eff.lo, c_eff.hi), far_half = fmax(far.lo, far.hi);
+    const double c_min = fmin(fmin(c_half.x, c_half.y), fmin(c_half.z, c_half.w));
+    const double q = fmax(fmax(far_half.x, far_half.y), fmax(far_half.z, far_half.w));
+    if (!(c_min > 0.0) || c_min == INFINITY) return false;
+
+    const int n = shot->n;
+    const double per_unit = 0.5 * n;
+    const double delta = 0x1p-17 * 1.4142135623730951 * 1.01 / per_unit;  // face units
+    const double slack = delta / c_min;
+    const double scale = 1.0 + 1e-9 + 4e-12 * q / c_min;
+    const Vec centre = to_local(shot, vec(group->bound[0], group->bound[1], group->bound[2]));
+    const double r = group->bound[3];
+    const double size = fabs(centre.x) + fabs(centre.y) + fabs(centre.z) + r;
+    for (int face = 0; face < HR_FACES; ++face) {
+        const Vec f = to_face(face, centre);
+        if (f.z + r <= 0.0) continue;                   // wholly behind this face's eye plane: not on it
+        if (f.z - r <= 1e-4 * size) return false;       // (near) the eye plane: no bound
+        const double near_depth = f.z - r, far_depth = f.z + r;
+        const double s_lo = fmin((f.x - r) / near_depth, (f.x - r) / far_depth) - delta;
+        const double s_hi = fmax((f.x + r) / near_depth, (f.x + r) / far_depth) + delta;
+        const double t_lo = fmin((f.y - r) / near_depth, (f.y - r) / far_depth) - delta;
+        const double t_hi = fmax((f.y + r) / near_depth, (f.y + r) / far_depth) + delta;
+        const double t0 = face == 0 ? 1.0 : 0.0;
+        // Cells whose centre (i + 1/2) may lie in the box, clamped to the face; none: not on it.
+        const double x_lo = (s_lo + 1.0) * per_unit - 0.5, x_hi = (s_hi + 1.0) * per_unit - 0.5;
+        const double y_lo = (t_lo + t0) * per_unit - 0.5, y_hi = (t_hi + t0) * per_unit - 0.5;
+        const int rows = face_rows(face, n);
+        if (x_hi < -1.0 || y_hi < -1.0 || x_lo > n || y_lo > rows) continue;
+        const int i0 = max(0, (int)floor(x_lo)), i1 = min(n - 1, (int)ceil(x_hi));
+        const int j0 = max(0, (int)floor(y_lo)), j1 = min(rows - 1, (int)ceil(y_hi));
+        if (i0 > i1 || j0 > j1) continue;
+        const double bound = (1.0 / near_depth + slack) * scale;
+        __global const double* depth = tile_depth + depth_block_base(face, n);
+        for (int by = j0 / DEPTH_BLOCK; by <= j1 / DEPTH_BLOCK; ++by)
+            for (int bx = i0 / DEPTH_BLOCK; bx <= i1 / DEPTH_BLOCK; ++bx)
+                if (!(bound < depth[by * depth_blocks_x(n) + bx])) return false;
+    }
+    return true;
 }
 
 void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int first,
@@ -745,33 +841,58 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrElement* elements,
     __global const HrElementLanes* element_lanes, __global const HrPatch* patches, __global HrRecord* records,
     __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts, __global long* sums,
-    __global const int* clusters) {
+    __global const int* clusters, __global const double* tile_depth, const int occluded) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
     records += b * record_stride(shot);
     boxes += b * record_stride(shot);
-    group_records += b * get_num_groups(0);
+    group_records += b * group_stride(shot);
     tile_counts += b * counter_stride(shot);
     sums += b * sum_stride(shot);
     __local uint used;
-    if (get_local_id(0) == 0) used = group_first_slot(shot, patches, (int)get_group_id(0));
-    barrier(CLK_LOCAL_MEM_FENCE);
 #if HEMIRAD_SETUP_LANES
     // Work-group g sets up cluster clusters[b][g] (HEMIRAD_WG lane groups; -1: none), those the
     // host found not wholly behind the shot's base plane: the rest of the scene costs nothing
     // here. The host reads back only these clusters' sums, so only theirs are cleared (ahead of
     // the raster in the queue; scan leaves the tile counts at zero), and the blocked share.
-    const int cluster = clusters[b * get_num_groups(0) + get_group_id(0)];
+    // -2 - c: cluster c, which the occluder pass set up as work-group g already: its records and
+    // their count stand, and are only counted into the tiles again.
+    const int entry = clusters[b * get_num_groups(0) + get_group_id(0)];
+    const bool kept = entry < -1;
+    const int cluster = kept ? -2 - entry : entry;
+    if (get_local_id(0) == 0)
+        used = group_first_slot(shot, patches, (int)get_group_id(0)) + (kept ? group_records[get_group_id(0)] : 0u);
+    barrier(CLK_LOCAL_MEM_FENCE);
     const int p = cluster * HEMIRAD_WG + (int)get_local_id(0);
     if (get_global_id(0) == 0) sums[shot->elements] = 0;
+    if (get_global_id(0) == 0 && !occluded) sums[shot->elements + 2] = sums[shot->elements + 3] = 0;  // none counted here
     if (cluster >= 0)
         for (int l = 0; l < HR_SETUP_LANES && p * HR_SETUP_LANES + l < shot->elements; ++l)
             sums[p * HR_SETUP_LANES + l] = 0;
-    if (cluster >= 0 && p * HR_SETUP_LANES < shot->elements &&
-        !(HEMIRAD_CULL && group_behind(shot, element_lanes + p)))
-        setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, records, boxes, &used);
+    // occluded: the occluder pass has drawn this shot's depth blocks (group_hidden); the groups
+    // tested and those hidden are counted for benchmarks, once per work-group.
+    __local uint tested, hidden;
+    if (get_local_id(0) == 0) tested = hidden = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (!kept && cluster >= 0 && p * HR_SETUP_LANES < shot->elements &&
+        !(HEMIRAD_CULL && group_behind(shot, element_lanes + p))) {
+        bool drop = false;
+        if (occluded) {
+            drop = group_hidden(shot, element_lanes + p, tile_depth + b * depth_stride(shot->n));
+            atomic_inc(&tested);
+            if (drop) atomic_inc(&hidden);
+        }
+        if (!drop) setup_lanes(shot, element_lanes + p, p * HR_SETUP_LANES, records, boxes, &used);
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+    if (get_local_id(0) == 0 && tested > 0) {
+        atom_add(&sums[shot->elements + 2], (long)tested);
+        atom_add(&sums[shot->elements + 3], (long)hidden);
+    }
 #else
+    if (get_local_id(0) == 0) used = group_first_slot(shot, patches, (int)get_group_id(0));
+    barrier(CLK_LOCAL_MEM_FENCE);
     const int p = (int)get_global_id(0);
     // The sums' clear, ahead of the raster in the queue (scan leaves the tile counts at zero).
     for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
@@ -853,7 +974,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
     boxes += b * record_stride(shot);
-    group_records += b * get_num_groups(0);
+    group_records += b * group_stride(shot);
     cursors += b * counter_stride(shot);
     lists += b * (size_t)shot->list_capacity;
     bin_records(shot, patches, boxes, group_records[get_group_id(0)], cursors, lists);
@@ -901,10 +1022,12 @@ bool raster_tile(const HrShot* shot, __global const uint* offsets, int tile, int
 // ties to the lower element index. (depth, index) is a total order, so the winner does not
 // depend on the order of the tile's list. The winner's delta form factor goes to its sum
 // (sums[elements] for blockers) in fixed point: integer atomics add in any order exactly.
+// It leaves tile_depth alone: the host culls by occlusion only with raster_records.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))) void raster(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrRecord* records,
     __global const HrBox* boxes, __global const uint* offsets, __global const uint* lists,
-    __global const long* delta_fixed, __global int* ids, __global long* sums) {
+    __global const long* delta_fixed, __global int* ids, __global long* sums, __global double* tile_depth,
+    const int occluder_pass) {
     const HrShot shot_value = batch_shot(first_shot, more_shots, get_global_id(1));
     const HrShot* shot = &shot_value;
     raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
@@ -1065,7 +1188,8 @@ bool any_lanes(lane_long mask) {
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrRecord* records,
     __global const HrBox* boxes, __global const uint* offsets, __global const uint* lists,
-    __global const long* delta_fixed, __global int* ids, __global long* sums) {
+    __global const long* delta_fixed, __global int* ids, __global long* sums, __global double* tile_depth,
+    const int occluder_pass) {
     const HrShot shot_value = batch_shot(first_shot, more_shots, get_global_id(1));
     const HrShot* shot = &shot_value;
     raster_slices(shot, get_global_id(1), &records, &boxes, &offsets, &lists, &ids, &sums);
@@ -1210,11 +1334,31 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     for (int t = 0; t < HR_SUM_TABLE; ++t)
         if (give_back.owner[t] >= 0) atom_add(&sums[owner_sum(shot, give_back.owner[t])], give_back.sum[t]);
 
-    for (int j = cj0; j <= cj1; ++j)
-        for (int i = ci0; i <= ci1; ++i) {
-            const int owner = best[(j - cj0) * HEMIRAD_TILE + (i - ci0)];
-            ids[face_offset + (size_t)j * n + i] = owner < 0 ? HR_EMPTY : ((owner & 1) ? HR_BLOCKER : owner >> 1);
+    // The final pass writes the ids; the occluder pass (its sums are cleared again) each depth
+    // block's least 1/depth, 0 where a cell is empty, for occlusion culling (group_hidden). Tiles
+    // are whole blocks but at the face's edge: the host culls by occlusion only where TILE is a
+    // multiple of DEPTH_BLOCK.
+    if (!occluder_pass) {
+        for (int j = cj0; j <= cj1; ++j)
+            for (int i = ci0; i <= ci1; ++i) {
+                const int owner = best[(j - cj0) * HEMIRAD_TILE + (i - ci0)];
+                ids[face_offset + (size_t)j * n + i] = owner < 0 ? HR_EMPTY : ((owner & 1) ? HR_BLOCKER : owner >> 1);
+            }
+        return;
+    }
+#if HEMIRAD_TILE % DEPTH_BLOCK == 0
+    __global double* depth = tile_depth + get_global_id(1) * depth_stride(n) + depth_block_base(face, n);
+    for (int bj = cj0; bj <= cj1; bj += DEPTH_BLOCK)
+        for (int bi = ci0; bi <= ci1; bi += DEPTH_BLOCK) {
+            double least = INFINITY;
+            for (int j = bj; j <= min(bj + DEPTH_BLOCK - 1, cj1); ++j)
+                for (int i = bi; i <= min(bi + DEPTH_BLOCK - 1, ci1); ++i) {
+                    const int cell = (j - cj0) * HEMIRAD_TILE + (i - ci0);
+                    least = fmin(least, best[cell] < 0 ? 0.0 : best_depth[cell]);
+                }
+            depth[(bj / DEPTH_BLOCK) * depth_blocks_x(n) + bi / DEPTH_BLOCK] = least;
         }
+#endif
 }
 
 // The sizes of the shared structs as this compiler lays them out; the host compares them with

@@ -28,6 +28,8 @@ typedef std::int64_t hr_long;
 #define HR_FIXED_SHIFT 62
 // Projected vertices are snapped to 2^16 units per cell (formfactor::kSubcell).
 #define HR_SUBCELL_BITS 16
+// Occlusion culling keeps a shot's least 1/depth per block of HR_DEPTH_BLOCK² cells.
+#define HR_DEPTH_BLOCK 8
 
 // One receiver element: a planar convex triangle or quad, counter-clockwise from its front.
 typedef struct {

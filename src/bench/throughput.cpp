@@ -393,6 +393,9 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                         device_ms[formfactor::OpenCLEngine::kStageNames[k]] =
                             1e3 * (cl->stage_seconds()[k] - stages_before[i][k]) / timed;
                     row["device_ms_per_shot"] = device_ms;
+                    // Over the engine's every shot (its checked and warm-up shots too).
+                    row["occlusion"] = {{"lane_groups_tested", cl->occlusion_tested()},
+                                        {"lane_groups_hidden", cl->occlusion_hidden()}};
                 }
                 log << fmt::format(
                     "| {} | {} | {:.3g} ({:.3g}, ±{:.0f}%) | {:.4g} | {:.3g} | {} | {} | {:.1e} |\n", r.engine,
@@ -406,6 +409,11 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                                    row["device"].get<std::string>());
                 for (const auto& [stage, ms] : row["device_ms_per_shot"].items())
                     log << fmt::format(" {} {:.3f}", stage, ms.get<double>());
+                const auto tested = row["occlusion"]["lane_groups_tested"].get<std::uint64_t>();
+                if (tested > 0)
+                    log << fmt::format("; occlusion culling hid {:.0f}% of the lane groups it tested",
+                                       100.0 * static_cast<double>(row["occlusion"]["lane_groups_hidden"].get<std::uint64_t>()) /
+                                           static_cast<double>(tested));
                 log << "\n";
             }
         }

@@ -17,6 +17,11 @@
 
 namespace hemirad::formfactor {
 
+// Occlusion culling: never; on every launch that can (to measure); or where it pays, as measured
+// launch by launch (the default: an occluder pass costs more than it saves where a shot sees most
+// of what is in front of it, as in a room).
+enum class Occlusion { off, on, measured };
+
 // The tuning knobs of kernels/hemicube.cl, passed to the build as -D options.
 struct OpenCLTuning {
     int tile = 16;                    // raster tile edge in cells
@@ -31,6 +36,11 @@ struct OpenCLTuning {
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
     std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: launch_budget
     bool cull = true;                 // lanes setup skips clusters and groups behind the shooter (off: to measure)
+    // Occlusion culling (lanes setup with raster_records): an occluder pass draws each shot's
+    // nearest clusters first, one in `occluder_share` of those in front (at least one), and setup
+    // then drops the lane groups its depths hide (group_hidden in the kernels).
+    Occlusion occlusion = Occlusion::measured;
+    int occluder_share = 16;
     // Told each time the device had not the memory for a batch of `shots` and the engine retried
     // it in parts of at most `limit` (the results do not change); `why`: the OpenCL error.
     std::function<void(std::size_t shots, std::size_t limit, const std::string& why)> on_shrink;
@@ -59,7 +69,9 @@ OpenCLTuning default_tuning(const ocl::DeviceInfo& device);
 // cannot take, an unknown HEMIRAD_ knob, or -U of a knob.
 void apply_build_options(OpenCLTuning& tuning, const std::string& text);
 // default_tuning with HEMIRAD_OPENCL_OPTIONS applied (apply_build_options; InputError naming it
-// when it cannot be), and culling off where HEMIRAD_CULL=0: what bakes and benchmarks use.
+// when it cannot be), culling off where HEMIRAD_CULL=0, occlusion culling off or always on where
+// HEMIRAD_OCCLUSION=0 or 1 and its occluder share from HEMIRAD_OCCLUDER_SHARE: what bakes and
+// benchmarks use.
 OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device);
 // HEMIRAD_FAULT parsed (no fault where unset). Throws InputError naming it when malformed.
 OpenCLFault fault_from_environment();
@@ -118,9 +130,16 @@ public:
     static double shot_bytes(double elements, int hemicube);
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
-    static constexpr int kStages = 5;
-    static constexpr std::array<const char*, kStages> kStageNames = {"setup", "scan", "scatter", "raster", "read"};
+    // "occluders": the occluder pass's four kernels together.
+    static constexpr int kStages = 6;
+    static constexpr std::array<const char*, kStages> kStageNames = {"occluders", "setup",   "scan",
+                                                                     "scatter",   "raster", "read"};
+
     const std::array<double, kStages>& stage_seconds() const { return stage_seconds_; }
+    // Occlusion culling so far: lane groups (HR_SETUP_LANES elements) in front of a shooter that
+    // setup tested against the occluder pass's depths, and those it found hidden and skipped.
+    std::uint64_t occlusion_tested() const { return occlusion_tested_; }
+    std::uint64_t occlusion_hidden() const { return occlusion_hidden_; }
 
 private:
     const mesh::Mesh& mesh_;
@@ -152,12 +171,28 @@ private:
     std::vector<std::array<double, 4>> cluster_bounds_;
     std::vector<std::vector<std::uint32_t>> shot_clusters_;
     std::vector<std::int32_t> cluster_rows_;  // the launch's table: per shot, its clusters then −1
-    cl::Buffer clusters_;
+    std::vector<std::int32_t> occluder_rows_;  // likewise, the occluder pass's: per shot, its nearest clusters
+    cl::Buffer clusters_, occluders_;
+    cl::Buffer tile_depth_;  // per shot and tile: the least 1/depth the occluder pass drew (0: an empty cell)
 
     std::array<double, kStages> stage_seconds_{};
+    std::uint64_t occlusion_tested_ = 0, occlusion_hidden_ = 0;
     mutable std::vector<std::vector<std::int32_t>> ids_;  // per shot of the last batch
     mutable std::vector<bool> ids_stale_;
 
+    // Occlusion culling needs clusters in front enough for some to hide others (a room's few do
+    // not pay for the occluder pass).
+    static constexpr std::size_t kOcclusionMinClusters = 8;
+    // Occlusion::measured: device seconds per shot of launches with and without occlusion
+    // culling (a mean over the first kOcclusionWarm, then a moving average), each mode measured
+    // first; then the cheaper mode, and the other once every kOcclusionProbe launches, as scenes
+    // and shooters change. Either mode gives the same results, so the choice never shows in them.
+    static constexpr std::size_t kOcclusionWarm = 4, kOcclusionProbe = 16;
+    std::array<double, 2> occlusion_cost_{};
+    std::array<std::size_t, 2> occlusion_samples_{};
+    std::size_t occlusion_launches_ = 0;
+    bool occlusion_pays();
+    void record_occlusion_cost(bool on, double seconds_per_shot);
     std::size_t raster_group_size() const;
     std::size_t record_slots() const;      // per shot
     // The per-tile list entries a shot starts with, for `records` record slots: most records cover
@@ -167,6 +202,7 @@ private:
     std::size_t cluster_elements() const;  // elements per cluster (a setup work-group's, lanes setup)
     std::size_t counter_entries() const;   // per shot: tile counters of every copy
     std::size_t sum_stride() const;
+    std::size_t depth_blocks() const;  // per shot: occlusion culling's depth blocks (HR_DEPTH_BLOCK² cells)
     std::size_t memory_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
     void release_batch();  // frees the per-shot buffers (to allocate fewer)
