@@ -245,15 +245,29 @@ HrShot batch_shot(const HrShot first, __global const HrShot* rest, size_t b) {
 // Every per-shot buffer holds a batch of shots, shot b at b times these strides; a kernel's
 // dimension 1 is the shot within the batch.
 size_t record_stride(const HrShot* shot) {
-    return (size_t)shot->elements * HR_FACES;
+#if HEMIRAD_SETUP_LANES
+    return (size_t)shot->group_rows * shot->group_capacity;  // a region per setup work-group
+#else
+    return (size_t)shot->elements * HR_FACES;  // five per element, at five times its index
+#endif
+}
+
+// The end of this setup work-group's record slots: past it, records are counted, not stored.
+uint region_end(const HrShot* shot) {
+#if HEMIRAD_SETUP_LANES
+    return (uint)(get_group_id(0) + 1) * shot->group_capacity;
+#else
+    return UINT_MAX;
+#endif
 }
 size_t counter_stride(const HrShot* shot) {
     return (size_t)shot->tile_base[HR_FACES] * HEMIRAD_COUNT_COPIES;
 }
-// Per element; then the blocked share, the list entries needed, and the lane groups setup tested
-// for occlusion and those it found hidden (occlusion culling's count, for benchmarks).
+// Per element; then the blocked share, the list entries needed, the lane groups setup tested for
+// occlusion and those it found hidden (occlusion culling's count, for benchmarks), and the most
+// records a setup work-group made (lanes setup: more than group_capacity, the host reruns).
 size_t sum_stride(const HrShot* shot) {
-    return (size_t)shot->elements + 4;
+    return (size_t)shot->elements + 5;
 }
 
 // Occlusion culling's depth buffer: per block of DEPTH_BLOCK x DEPTH_BLOCK cells, face by face,
@@ -411,6 +425,7 @@ void setup_element(const HrShot* shot, const Element* e, int k, __global HrRecor
         // records stay packed, so the raster reads little memory. Their order may vary from
         // run to run; the raster's result does not depend on it.
         const uint slot = atomic_inc(used);
+        if (slot >= region_end(shot)) continue;  // the region is full: counted only
         __global HrRecord* r = records + slot;
         // The edges of the inside test: the reference's dx * (Y - ay) - dy * (X - ax) at the
         // centre X = S i + S/2, Y = S j + S/2 (S = SUBCELL), as a i + b j + c, plus 1 for an
@@ -772,6 +787,7 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     uint fast_records = 0;
     for (int l = 0; l < HR_SETUP_LANES; ++l) fast_records += flags[2][l] != 0;
     uint slot = fast_records > 0 ? atomic_add(used, fast_records) : 0u;
+    const uint end = region_end(shot);
     for (int l = 0; l < HR_SETUP_LANES; ++l) {
         const int k = first + l;
         if (!flags[0][l]) continue;
@@ -781,6 +797,7 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
             continue;
         }
         if (!flags[2][l]) continue;
+        if (slot >= end) continue;  // the region is full: counted only (later slots are past it too)
         __global HrRecord* r = records + slot;
         int edges = 0;
         if (box_lane[4][l]) {
@@ -803,11 +820,11 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
 }
 #endif
 
-// The record slots of work-group g of setup (and of scatter): five per element it sets up,
-// from five times its first element.
+// The record slots of work-group g of setup (and of scatter): lanes setup, a region of
+// group_capacity; otherwise five per element it sets up, from five times its first element.
 uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g) {
 #if HEMIRAD_SETUP_LANES
-    return (uint)(HR_FACES * g * HEMIRAD_WG * HR_SETUP_LANES);
+    return (uint)g * shot->group_capacity;
 #else
     return shot->patches == 0 ? 0u : (uint)(HR_FACES * patches[min(g * HEMIRAD_WG, shot->patches - 1)].first_element);
 #endif
@@ -821,6 +838,7 @@ void bin_records(const HrShot* shot, __global const HrPatch* patches, __global c
                  __global uint* counters, __global uint* lists) {
     __global uint* copy = counters + counter_copy(shot->tile_base[HR_FACES]);
     const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
+    used = min(used, region_end(shot) - first);  // a full region's stored records (the host reruns the shot)
     for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
         const HrBox box = boxes[slot];
         __global uint* face_counters = copy + shot->tile_base[box.face];
@@ -926,7 +944,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
 // new, or after a launch that failed part-way).
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
     const HrShot first_shot, __global const HrShot* more_shots, __global uint* tile_counts,
-    __global uint* offsets, __global uint* cursors, __global long* sums) {
+    __global uint* offsets, __global uint* cursors, __global long* sums, __global const uint* group_records,
+    const int groups) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
@@ -962,6 +981,18 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
         offsets[entries] = partial[lid];
         sums[shot->elements + 1] = partial[lid];  // read back with the sums
     }
+    // The most records one of the launch's `groups` setup work-groups made, also read back.
+    barrier(CLK_LOCAL_MEM_FENCE);
+    group_records += b * group_stride(shot);
+    uint most = 0;
+    for (int g = lid; g < groups; g += HEMIRAD_SCAN_WG) most = max(most, group_records[g]);
+    partial[lid] = most;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int step = HEMIRAD_SCAN_WG / 2; step > 0; step >>= 1) {
+        if (lid < step) partial[lid] = max(partial[lid], partial[lid + step]);
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0) sums[shot->elements + 4] = partial[0];
 }
 
 // As setup's counting (the same work-groups, so the same counter copies): the index of each

@@ -80,6 +80,12 @@ typedef struct {
     hr_int tiles_x;                         // tiles across a face: ceil(N / TILE)
     hr_int tile_base[HR_FACES + 1];         // first tile of each face, then the tile count
     hr_uint list_capacity;                  // entries the per-tile record lists can hold
+    // Lanes setup: record slots per setup work-group (a region each; a group that needs more
+    // counts them without storing, and the host grows the regions and reruns), and work-groups
+    // the record buffers hold per shot.
+    hr_uint group_capacity;
+    hr_uint group_rows;
+    hr_uint pad;
 } HrShot;
 
 // One edge of a record's inside test, exact in 64-bit integers: at cell (i, j) its value is

@@ -151,6 +151,19 @@ TEST_CASE("opencl: lists that overflow grow and the shot is redone", "[opencl]")
     check_matches_reference(compare(m, ref, cl, 10));
 }
 
+TEST_CASE("opencl: record regions that overflow grow and the shot is redone", "[opencl]") {
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const Case c = comparison_cases().back();
+    const mesh::Mesh m = mesh::build(c.scene, c.mesh);
+    formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+    tuning.setup_lanes = true;  // whose setup packs records in regions, on any device
+    tuning.raster_per_record = true;
+    tuning.group_capacity = 3;  // far too few for any shot's busiest work-group
+    formfactor::ReferenceEngine ref(m, {64, 3});
+    formfactor::OpenCLEngine cl(m, *ctx, {64, 3}, tuning);
+    check_matches_reference(compare(m, ref, cl, 10));
+}
+
 TEST_CASE("opencl: the same shot twice gives bit-identical results", "[opencl]") {
     HEMIRAD_REQUIRE_DEVICE(ctx);
     const Case c = comparison_cases().back();

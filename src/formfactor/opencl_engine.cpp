@@ -28,9 +28,10 @@ static_assert(sizeof(HrElementLanes) == 1280 && offsetof(HrElementLanes, normal)
               offsetof(HrElementLanes, n) == 1152 && offsetof(HrElementLanes, patch) == 1216 &&
               offsetof(HrElementLanes, bound) == 1248);
 static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(HrPatch, elements) == 104);
-static_assert(sizeof(HrShot) == 160 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
+static_assert(sizeof(HrShot) == 168 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
               offsetof(HrShot, twin) == 112 && offsetof(HrShot, patches) == 120 && offsetof(HrShot, tiles_x) == 124 &&
-              offsetof(HrShot, tile_base) == 128 && offsetof(HrShot, list_capacity) == 152);
+              offsetof(HrShot, tile_base) == 128 && offsetof(HrShot, list_capacity) == 152 &&
+              offsetof(HrShot, group_capacity) == 156 && offsetof(HrShot, group_rows) == 160);
 static_assert(sizeof(HrEdge) == 24 && sizeof(HrBox) == 24);
 static_assert(sizeof(HrRecord) == 256 && offsetof(HrRecord, element) == 24 && offsetof(HrRecord, edges) == 32 &&
               offsetof(HrRecord, spans) == 36 && offsetof(HrRecord, cover) == 40 &&
@@ -47,7 +48,7 @@ struct TuningEntry {
 const TuningEntry kTuningTable[] = {
     // Not yet measured: 256-cell raster groups, 4 warps per 1D group.
     // Occlusion culling needs lanes setup and raster_records: off.
-    {"gpu", {16, false, 4, 128, 256, 1, 4, false, "", 0, 0, true, Occlusion::off, 16, {}, ""}},
+    {"gpu", {16, false, 4, 128, 256, 1, 4, false, "", 0, 0, 0, true, Occlusion::off, 16, {}, ""}},
     // PoCL, 2 cores (Cornell, N = 256): the per-record raster ~2.5x faster than per-cell;
     // with integer edges, tiles of 32 ~20% ahead of 16 (fewer record-tile pieces); with span
     // records, tiles of 64 ~4% ahead in batches of 8 but ~7% behind one shot at a time, and
@@ -57,7 +58,7 @@ const TuningEntry kTuningTable[] = {
     // Occlusion culling, where it pays (measured per bake): city:1M (N = 256) 38.2 -> 31.4 ms a
     // shot with half the lane groups hidden, foliage:100k 17.8 -> 15.9 ms, but furniture:100k
     // 5.5 -> 7.9 ms (9% hidden); an occluder share of 4 hides more and costs as much more.
-    {"cpu", {32, true, 1, 16, 256, 8, 8, true, "", 0, 0, true, Occlusion::measured, 16, {}, ""}},
+    {"cpu", {32, true, 1, 16, 256, 8, 8, true, "", 0, 0, 0, true, Occlusion::measured, 16, {}, ""}},
 };
 
 // Binds a kernel's arguments in order: the one place each kernel's signature is spelled out.
@@ -390,6 +391,12 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
 
     cl::Context& cl_context = context.context();
     cl::CommandQueue& queue = context.queue();
+    if (tuning.setup_lanes) {  // regions for two records an element, a quarter of the clusters: grown as shots need
+        group_capacity_ = tuning.group_capacity > 0
+                              ? tuning.group_capacity
+                              : static_cast<std::uint32_t>(kInitialRecordsPerElement * cluster_elements());
+        record_rows_ = std::max<std::size_t>(1, setup_groups() / 4);
+    }
     list_capacity_ = tuning.list_capacity > 0
                          ? tuning.list_capacity
                          : static_cast<std::uint32_t>(initial_list_entries(double(record_slots())));
@@ -416,8 +423,8 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     };
     // The batch's shots but the first, which goes by value (batch_shot in the kernels).
     shots_ = cl::Buffer(cl_context, CL_MEM_READ_ONLY, std::max<std::size_t>(1, shots - 1) * sizeof(HrShot));
-    records_ = buffer(record_slots() * sizeof(HrRecord));
-    boxes_ = buffer(record_slots() * sizeof(HrBox));
+    batch_capacity_ = shots;
+    allocate_records();
     group_records_ = buffer(setup_groups() * sizeof(hr_uint));
     tile_counts_ = buffer(counters * sizeof(hr_uint));
     counts_zero_ = false;
@@ -454,13 +461,15 @@ std::size_t OpenCLEngine::max_batch() const {
 }
 
 double OpenCLEngine::shot_bytes(double elements, int hemicube) {
-    // As allocate_batch sizes them: records and boxes, the initial lists, the ids (device and
-    // host), the sums (device and host).
-    const double records = std::max(1.0, elements * kFaces);
+    // As allocate_batch sizes them on a CPU (lanes setup): records and boxes, the regions of
+    // every cluster at their initial capacity (a quarter of them at first, grown with the clusters
+    // in front of a shot: half the scene for most shooters, all of it for some), the initial lists,
+    // the ids (device and host), the sums (device and host).
+    const double records = std::max(1.0, elements * kInitialRecordsPerElement);
     const double lists = initial_list_entries(records);
     const double cells = 3.0 * double(hemicube) * double(hemicube);
     return records * double(sizeof(HrRecord) + sizeof(HrBox)) + lists * sizeof(hr_uint) +
-           2.0 * cells * sizeof(hr_int) + 2.0 * (elements + 4.0) * sizeof(hr_long);
+           2.0 * cells * sizeof(hr_int) + 2.0 * (elements + 5.0) * sizeof(hr_long);
 }
 
 std::size_t OpenCLEngine::memory_batch() const {
@@ -473,7 +482,13 @@ std::size_t OpenCLEngine::memory_batch() const {
 }
 
 std::size_t OpenCLEngine::record_slots() const {
+    if (tuning_.setup_lanes) return std::max<std::size_t>(1, record_rows_ * group_capacity_);
     return std::max<std::size_t>(1, mesh_.elements.size() * kFaces);  // a record per element and face at most
+}
+
+void OpenCLEngine::allocate_records() {
+    records_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE, batch_capacity_ * record_slots() * sizeof(HrRecord));
+    boxes_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE, batch_capacity_ * record_slots() * sizeof(HrBox));
 }
 
 std::size_t OpenCLEngine::setup_groups() const {
@@ -493,8 +508,8 @@ std::size_t OpenCLEngine::counter_entries() const {
 
 std::size_t OpenCLEngine::sum_stride() const {
     // Per element; the blocked share, the list entries needed, the lane groups tested for
-    // occlusion and those hidden.
-    return mesh_.elements.size() + 4;
+    // occlusion and those hidden, the most records a setup work-group made.
+    return mesh_.elements.size() + 5;
 }
 
 std::size_t OpenCLEngine::depth_blocks() const {
@@ -503,7 +518,7 @@ std::size_t OpenCLEngine::depth_blocks() const {
     return across * across + 4 * across * ((n / 2 + b - 1) / b);
 }
 
-std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) {
+OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) {
     if (++launches_ > fault_.fail_after)
         throw cl::Error(CL_INVALID_COMMAND_QUEUE, "clEnqueueNDRangeKernel (HEMIRAD_FAULT fail-after)");
     const std::size_t batch = requests.size();
@@ -527,6 +542,8 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         shot.tiles_x = tiles_x_;
         std::copy(tile_base_.begin(), tile_base_.end(), shot.tile_base);
         shot.list_capacity = list_capacity_;
+        shot.group_capacity = group_capacity_;
+        shot.group_rows = static_cast<hr_uint>(record_rows_);
     }
     // Every kernel's arguments, bound here only: the first shot by value, the rest of the batch
     // through shots_ (batch_shot in the kernels).
@@ -545,6 +562,11 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         occlusion ? select_occluders(cluster_bounds_, shots, shot_clusters_, tuning_.occluder_share, occluder_rows_,
                                      cluster_rows_, groups)
                   : 0;
+    if (tuning_.setup_lanes && groups > record_rows_) {  // more clusters in front than the regions hold: grow
+        record_rows_ = std::min(setup_groups(), std::max(groups, record_rows_ + record_rows_ / 4));
+        for (HrShot& shot : shots) shot.group_rows = static_cast<hr_uint>(record_rows_);
+        allocate_records();
+    }
     if (tuning_.setup_lanes)
         context_.queue().enqueueWriteBuffer(clusters_, CL_TRUE, 0, cluster_rows_.size() * sizeof(std::int32_t),
                                             cluster_rows_.data());
@@ -555,7 +577,10 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_,
              tile_counts_, sums_, rows, tile_depth_, hr_int{occluded ? 1 : 0});
     };
-    bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_);
+    const auto bind_scan = [&](std::size_t launch_groups) {
+        bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_, group_records_,
+             static_cast<hr_int>(launch_groups));
+    };
     bind(scatter_, first, shots_, patches_, boxes_, group_records_, cursors_, lists_);
     const auto bind_raster = [&](bool occluder_pass) {
         bind(raster_, first, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_, tile_depth_,
@@ -591,6 +616,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     if (occlusion) {  // its raster writes every tile's depth, but for lists that overflowed: zero, no culling
         queue.enqueueFillBuffer(tile_depth_, hr_double{0.0}, 0, batch * depth_blocks() * sizeof(hr_double));
         bind_setup(occluders_, false);
+        bind_scan(occluder_groups);
         run(setup_, occluder_groups * wg, wg, &occluder_events[0]);
         run(scan_, scan_wg, scan_wg, &occluder_events[1]);
         run(scatter_, occluder_groups * wg, wg, &occluder_events[2]);
@@ -598,6 +624,7 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
         run(raster_, raster_items, raster_wg, &occluder_events[3]);
     }
     bind_setup(clusters_, occlusion);
+    bind_scan(groups);
     bind_raster(false);
     const std::size_t group_items = groups * wg;
     run(setup_, group_items, wg, &events[1]);
@@ -619,9 +646,12 @@ std::uint32_t OpenCLEngine::run_batch(const std::vector<ShotRequest>& requests) 
     }
     if (can_cull && tuning_.occlusion == Occlusion::measured)
         record_occlusion_cost(occlusion, device_seconds / static_cast<double>(batch));
-    std::uint32_t needed = 0;
-    for (std::size_t i = 0; i < batch; ++i)
-        needed = std::max(needed, static_cast<std::uint32_t>(sums_host_[i * sum_stride() + elements + 1]));
+    LaunchNeeds needed;
+    for (std::size_t i = 0; i < batch; ++i) {
+        const hr_long* tail = sums_host_.data() + i * sum_stride() + elements;
+        needed.list_entries = std::max(needed.list_entries, static_cast<std::uint32_t>(tail[1]));
+        needed.group_records = std::max(needed.group_records, static_cast<std::uint32_t>(tail[4]));
+    }
     if (occlusion)
         for (std::size_t i = 0; i < batch; ++i) {
             occlusion_tested_ += static_cast<std::uint64_t>(sums_host_[i * sum_stride() + elements + 2]);
@@ -696,12 +726,23 @@ void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vecto
 void OpenCLEngine::shoot_fitting(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     if (shots.size() > batch_capacity_) allocate_batch(shots.size());
     for (;;) {
-        const std::uint32_t needed = run_batch(shots);
-        if (needed <= list_capacity_) break;
-        // The raster skipped the batch: grow the lists with some headroom and run it again.
-        list_capacity_ = static_cast<std::uint32_t>(std::min<std::uint64_t>(0xffffffffu, needed + needed / 4ull));
-        lists_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE,
-                            batch_capacity_ * std::size_t{list_capacity_} * sizeof(hr_uint));
+        const LaunchNeeds needed = run_batch(shots);
+        const bool lists_full = needed.list_entries > list_capacity_;
+        const bool regions_full = tuning_.setup_lanes && needed.group_records > group_capacity_;
+        if (!lists_full && !regions_full) break;
+        // The raster skipped the batch, or some records were only counted: grow what was short
+        // with some headroom and run it again.
+        if (lists_full) {
+            list_capacity_ = static_cast<std::uint32_t>(
+                std::min<std::uint64_t>(0xffffffffu, needed.list_entries + needed.list_entries / 4ull));
+            lists_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE,
+                                batch_capacity_ * std::size_t{list_capacity_} * sizeof(hr_uint));
+        }
+        if (regions_full) {  // at most a record per element and face
+            group_capacity_ = static_cast<std::uint32_t>(std::min<std::size_t>(
+                kFaces * cluster_elements(), needed.group_records + needed.group_records / 4u));
+            allocate_records();
+        }
     }
     last_batch_ = shots.size();
     std::fill(ids_stale_.begin(), ids_stale_.end(), true);

@@ -34,6 +34,7 @@ struct OpenCLTuning {
     bool setup_lanes = false;         // setup takes 8 elements per work-item in double8 lanes (CPUs)
     std::string extra_options;        // appended to the build options (never a knob above: apply_build_options)
     std::uint32_t list_capacity = 0;  // initial per-tile list entries; 0: from the mesh size (grows as needed)
+    std::uint32_t group_capacity = 0;  // lanes setup: initial record slots per setup work-group; 0: two an element (grows)
     std::size_t batch_memory = 0;     // per-shot buffer bytes one launch may use; 0: launch_budget
     bool cull = true;                 // lanes setup skips clusters and groups behind the shooter (off: to measure)
     // Occlusion culling (lanes setup with raster_records): an occluder pass draws each shot's
@@ -152,6 +153,11 @@ private:
     std::array<int, 6> tile_base_{};  // first tile of each face, then the tile count
     int tiles_x_ = 0;
     std::uint32_t list_capacity_ = 0;  // entries of the per-tile record lists; grows on overflow
+    // Lanes setup: record slots per setup work-group, and work-groups the record buffers hold per
+    // shot (grown as shots need: a shot makes ~1.3 records an element it sees, not five).
+    static constexpr double kInitialRecordsPerElement = 2.0;
+    std::uint32_t group_capacity_ = 0;
+    std::size_t record_rows_ = 0;
     OpenCLFault fault_;
     std::size_t launches_ = 0;                                           // run_batch calls so far
     std::size_t batch_limit_ = std::numeric_limits<std::size_t>::max();  // lowered when the device ran out
@@ -207,7 +213,13 @@ private:
     void allocate_batch(std::size_t shots);
     void release_batch();  // frees the per-shot buffers (to allocate fewer)
     void shoot_fitting(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out);
-    std::uint32_t run_batch(const std::vector<ShotRequest>& shots);  // returns the list entries needed
+    // What a launch found it needed: list entries, and (lanes setup) the most records of one
+    // setup work-group; more than the lists or regions hold, and it must run again.
+    struct LaunchNeeds {
+        std::uint32_t list_entries = 0, group_records = 0;
+    };
+    LaunchNeeds run_batch(const std::vector<ShotRequest>& shots);
+    void allocate_records();  // records_ and boxes_, for batch_capacity_ shots of record_slots()
 };
 
 }  // namespace hemirad::formfactor
