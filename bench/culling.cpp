@@ -1,6 +1,8 @@
-// What geometry behind the shooter costs a shot, with and without the OpenCL engine's culling:
-// the shooters are the floor of procedural:10k, and up to 1M more triangles of objects lie below
-// the floor, wholly behind them. Every engine's shots are checked against the reference first.
+// What hidden geometry costs a shot, with and without the OpenCL engine's culling: the shooters
+// are the floor of procedural:10k, and up to 1M more triangles of objects lie either below the
+// floor, wholly behind them (culled against the base plane), or beyond the room's +x wall, in
+// front of them but hidden by the wall (occlusion culling). Every engine's shots are checked
+// against the reference first.
 // Usage: hemirad_bench_culling [--hemicube N] [--shots K] [--repeats R]
 #include <fmt/core.h>
 
@@ -26,23 +28,25 @@ using namespace hemirad;
 
 namespace {
 
-// procedural:10k with the objects of procedural:<below> moved 20 m down, under its floor.
-scene::Scene room_over_clutter(std::size_t below) {
+// procedural:10k with the objects of procedural:<count> moved 20 m down, under its floor, or
+// (beside) 20 m along +x, beyond its wall.
+scene::Scene room_with_clutter(std::size_t count, bool beside) {
     scene::Scene s = scene::procedural_scene(10000);
-    if (below == 0) return s;
-    const scene::Scene clutter = scene::procedural_scene(below);
+    if (count == 0) return s;
+    const scene::Scene clutter = scene::procedural_scene(count);
     const auto nodes = static_cast<std::uint32_t>(s.nodes.size());
     std::uint32_t primitives = 0;
     for (const auto& t : s.triangles) primitives = std::max(primitives, t.primitive + 1);
     for (scene::Triangle t : clutter.triangles) {
         if (t.node < 2) continue;  // its room and light stay out
-        for (auto& p : t.p) p.y -= 20.0;
+        for (auto& p : t.p) (beside ? p.x : p.y) += beside ? 20.0 : -20.0;
         t.node += nodes;
         t.primitive += primitives;
         s.triangles.push_back(t);
     }
     s.nodes.insert(s.nodes.end(), clutter.nodes.begin(), clutter.nodes.end());
-    s.bbox_min.y -= 20.0;
+    if (beside) s.bbox_max.x += 20.0;
+    else s.bbox_min.y -= 20.0;
     return s;
 }
 
@@ -77,7 +81,7 @@ void check(formfactor::Engine& engine, formfactor::ReferenceEngine& reference,
 
 int main(int argc, char** argv) {
     int hemicube = 256, shots = 16, repeats = 3;
-    CLI::App app{"what geometry behind the shooter costs a shot, with and without culling"};
+    CLI::App app{"what hidden geometry costs a shot, with and without culling"};
     app.add_option("--hemicube", hemicube)->capture_default_str();
     app.add_option("--shots", shots, "floor shooters")->capture_default_str();
     app.add_option("--repeats", repeats)->capture_default_str();
@@ -91,11 +95,16 @@ int main(int argc, char** argv) {
         ocl::Context context(devices.front());
         std::cout << fmt::format("floor shooters of procedural:10k, N = {}, {} shots × {} repeats, {}\n\n", hemicube,
                                  shots, repeats, devices.front().name);
-        std::cout << "| triangles behind | elements | OpenCL, culling | OpenCL, no culling | Embree |\n"
-                     "|---|---|---|---|---|\n";
-        const std::size_t room_triangles = room_over_clutter(0).triangles.size();
-        for (std::size_t below : {std::size_t{0}, std::size_t{100000}, std::size_t{1000000}}) {
-            const scene::Scene s = room_over_clutter(below);
+        std::cout << "| hidden triangles | where | elements | OpenCL | OpenCL, no occlusion culling | OpenCL, no "
+                     "culling | Embree |\n|---|---|---|---|---|---|---|\n";
+        const std::size_t room_triangles = room_with_clutter(0, false).triangles.size();
+        struct Row {
+            std::size_t count;
+            bool beside;
+        };
+        for (const Row row : {Row{0, false}, Row{100000, false}, Row{1000000, false}, Row{100000, true},
+                              Row{1000000, true}}) {
+            const scene::Scene s = room_with_clutter(row.count, row.beside);
             const double patch = 10.0 * std::sqrt(3.0) / 16.0;  // the room's default, whatever lies below
             const mesh::Mesh m = mesh::build(s, {patch, patch / 3.0});
             std::vector<std::uint32_t> floor;  // upward patches of the room (node 0): its floor
@@ -105,10 +114,11 @@ int main(int argc, char** argv) {
             for (int i = 0; i < shots; ++i) shooters.push_back(floor[static_cast<std::size_t>(i) * 7 % floor.size()]);
             const formfactor::Settings settings{hemicube, 1};
             formfactor::ReferenceEngine reference(m, settings);
-            std::vector<double> cells;
-            for (bool cull : {true, false}) {
+            std::vector<double> cells;  // the default (occlusion culling where it pays), none, no culling at all
+            for (int variant = 0; variant < 3; ++variant) {
                 formfactor::OpenCLTuning tuning = formfactor::default_tuning(context.info());
-                tuning.cull = cull;
+                if (variant > 0) tuning.occlusion = formfactor::Occlusion::off;
+                tuning.cull = variant < 2;
                 formfactor::OpenCLEngine engine(m, context, settings, tuning);
                 check(engine, reference, shooters, bench::kRasterizer);
                 cells.push_back(ms_per_shot(engine, shooters, repeats));
@@ -119,8 +129,10 @@ int main(int argc, char** argv) {
             check(rays, reference, shooters, bench::kRayCaster);
             embree = fmt::format("{:.2f} ms", ms_per_shot(rays, shooters, repeats));
 #endif
-            std::cout << fmt::format("| {} | {} | {:.2f} ms | {:.2f} ms | {} |\n", s.triangles.size() - room_triangles,
-                                     m.elements.size(), cells[0], cells[1], embree);
+            std::cout << fmt::format("| {} | {} | {} | {:.2f} ms | {:.2f} ms | {:.2f} ms | {} |\n",
+                                     s.triangles.size() - room_triangles,
+                                     row.count == 0 ? "–" : row.beside ? "beyond a wall" : "below the floor",
+                                     m.elements.size(), cells[0], cells[1], cells[2], embree);
         }
     } catch (const std::exception& e) {
         std::cerr << "hemirad_bench_culling: " << e.what() << "\n";
