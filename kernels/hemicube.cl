@@ -531,13 +531,13 @@ bool group_behind(const HrShot* shot, __global const HrElementLanes* group) {
     return dot3(d, vec(shot->w[0], shot->w[1], shot->w[2])) + group->bound[3] < -shot->eps;
 }
 
-// Occlusion culling (HrShot.occluded): whether every cell any element of a lane group could
+// Occlusion culling (setup's `occluded`): whether every cell any element of a lane group could
 // cover holds something nearer already, so that setup may drop the group without changing one
-// cell. tile_depth[t] is the least 1/depth over tile t's cells in the occluder pass (0 where a
-// cell was empty; per DEPTH_BLOCK² cells, in fact); the final raster only adds records, so a cell's winner is at least that near.
-// A group is hidden when, on every face its bounding sphere reaches, an upper bound of the
-// 1/depth its records could hold at any cell is below tile_depth on every tile the sphere's
-// projection (widened as below) touches (blocks, in fact). The bound must hold for the values setup and the raster
+// cell. block_depth[b] is the least 1/depth over depth block b's cells in the occluder pass (0
+// where a cell was empty); the final raster only adds records, so a cell's winner is at least that
+// near. A group is hidden when, on every face its bounding sphere reaches, an upper bound of the
+// 1/depth its records could hold at any cell is below block_depth on every block the sphere's
+// projection (widened as below) touches. The bound must hold for the values setup and the raster
 // compute, not only for the geometry:
 // - a cell centre inside a record lies within 2^-17 sqrt2 cells of the element's true projection
 //   (its vertices are snapped to 2^-16 cells), where the plane's 1/depth is at most 1/(z - r)
@@ -550,7 +550,7 @@ bool group_behind(const HrShot* shot, __global const HrElementLanes* group) {
 // - the rest is rounding of order 1e-15 relative, covered by the factor 1 + 1e-9, and a sphere
 //   within 1e-4 of its size from a face's eye plane is never hidden on it.
 // Triangles repeat their last vertex, so vertex 0 and the normal of live lanes suffice for c.
-bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __global const double* tile_depth) {
+bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __global const double* block_depth) {
     const llong live = convert_long8(vload8(0, group->n)) > 0;
     const ldouble dx = vload8(0, group->v) - shot->origin[0], dy = vload8(1, group->v) - shot->origin[1],
                   dz = vload8(2, group->v) - shot->origin[2];
@@ -591,7 +591,7 @@ bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __gl
         const int j0 = max(0, (int)floor(y_lo)), j1 = min(rows - 1, (int)ceil(y_hi));
         if (i0 > i1 || j0 > j1) continue;
         const double bound = (1.0 / near_depth + slack) * scale;
-        __global const double* depth = tile_depth + depth_block_base(face, n);
+        __global const double* depth = block_depth + depth_block_base(face, n);
         for (int by = j0 / DEPTH_BLOCK; by <= j1 / DEPTH_BLOCK; ++by)
             for (int bx = i0 / DEPTH_BLOCK; bx <= i1 / DEPTH_BLOCK; ++bx)
                 if (!(bound < depth[by * depth_blocks_x(n) + bx])) return false;
@@ -859,7 +859,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrElement* elements,
     __global const HrElementLanes* element_lanes, __global const HrPatch* patches, __global HrRecord* records,
     __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts, __global long* sums,
-    __global const int* clusters, __global const double* tile_depth, const int occluded) {
+    __global const int* clusters, __global const double* block_depth, const int occluded) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
@@ -897,7 +897,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         !(HEMIRAD_CULL && group_behind(shot, element_lanes + p))) {
         bool drop = false;
         if (occluded) {
-            drop = group_hidden(shot, element_lanes + p, tile_depth + b * depth_stride(shot->n));
+            drop = group_hidden(shot, element_lanes + p, block_depth + b * depth_stride(shot->n));
             atomic_inc(&tested);
             if (drop) atomic_inc(&hidden);
         }
@@ -1053,11 +1053,11 @@ bool raster_tile(const HrShot* shot, __global const uint* offsets, int tile, int
 // ties to the lower element index. (depth, index) is a total order, so the winner does not
 // depend on the order of the tile's list. The winner's delta form factor goes to its sum
 // (sums[elements] for blockers) in fixed point: integer atomics add in any order exactly.
-// It leaves tile_depth alone: the host culls by occlusion only with raster_records.
+// It leaves block_depth alone: the host culls by occlusion only with raster_records.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))) void raster(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrRecord* records,
     __global const HrBox* boxes, __global const uint* offsets, __global const uint* lists,
-    __global const long* delta_fixed, __global int* ids, __global long* sums, __global double* tile_depth,
+    __global const long* delta_fixed, __global int* ids, __global long* sums, __global double* block_depth,
     const int occluder_pass) {
     const HrShot shot_value = batch_shot(first_shot, more_shots, get_global_id(1));
     const HrShot* shot = &shot_value;
@@ -1219,7 +1219,7 @@ bool any_lanes(lane_long mask) {
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void raster_records(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrRecord* records,
     __global const HrBox* boxes, __global const uint* offsets, __global const uint* lists,
-    __global const long* delta_fixed, __global int* ids, __global long* sums, __global double* tile_depth,
+    __global const long* delta_fixed, __global int* ids, __global long* sums, __global double* block_depth,
     const int occluder_pass) {
     const HrShot shot_value = batch_shot(first_shot, more_shots, get_global_id(1));
     const HrShot* shot = &shot_value;
@@ -1378,7 +1378,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
         return;
     }
 #if HEMIRAD_TILE % DEPTH_BLOCK == 0
-    __global double* depth = tile_depth + get_global_id(1) * depth_stride(n) + depth_block_base(face, n);
+    __global double* depth = block_depth + get_global_id(1) * depth_stride(n) + depth_block_base(face, n);
     for (int bj = cj0; bj <= cj1; bj += DEPTH_BLOCK)
         for (int bi = ci0; bi <= ci1; bi += DEPTH_BLOCK) {
             double least = INFINITY;

@@ -431,7 +431,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     offsets_ = buffer((counters + 1) * sizeof(hr_uint));
     clusters_ = buffer(setup_groups() * sizeof(hr_int));
     occluders_ = buffer(setup_groups() * sizeof(hr_int));
-    tile_depth_ = buffer(depth_blocks() * sizeof(hr_double));
+    block_depth_ = buffer(depth_blocks() * sizeof(hr_double));
     cursors_ = buffer(counters * sizeof(hr_uint));
     lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
     ids_buffer_ = buffer(delta_.cells() * sizeof(hr_int));
@@ -444,7 +444,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
 
 void OpenCLEngine::release_batch() {
     for (cl::Buffer* b : {&shots_, &records_, &boxes_, &group_records_, &tile_counts_, &offsets_, &clusters_,
-                          &occluders_, &tile_depth_, &cursors_, &lists_, &ids_buffer_, &sums_})
+                          &occluders_, &block_depth_, &cursors_, &lists_, &ids_buffer_, &sums_})
         *b = cl::Buffer();
     batch_capacity_ = 0;
     counts_zero_ = false;
@@ -575,7 +575,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
                                             occluder_rows_.data());
     const auto bind_setup = [&](const cl::Buffer& rows, bool occluded) {
         bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_,
-             tile_counts_, sums_, rows, tile_depth_, hr_int{occluded ? 1 : 0});
+             tile_counts_, sums_, rows, block_depth_, hr_int{occluded ? 1 : 0});
     };
     const auto bind_scan = [&](std::size_t launch_groups) {
         bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_, group_records_,
@@ -583,7 +583,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     };
     bind(scatter_, first, shots_, patches_, boxes_, group_records_, cursors_, lists_);
     const auto bind_raster = [&](bool occluder_pass) {
-        bind(raster_, first, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_, tile_depth_,
+        bind(raster_, first, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_, block_depth_,
              hr_int{occluder_pass ? 1 : 0});
     };
 
@@ -614,7 +614,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     // scatter reads the records of setup's work-groups, one work-group each.
     std::array<cl::Event, 4> occluder_events;
     if (occlusion) {  // its raster writes every tile's depth, but for lists that overflowed: zero, no culling
-        queue.enqueueFillBuffer(tile_depth_, hr_double{0.0}, 0, batch * depth_blocks() * sizeof(hr_double));
+        queue.enqueueFillBuffer(block_depth_, hr_double{0.0}, 0, batch * depth_blocks() * sizeof(hr_double));
         bind_setup(occluders_, false);
         bind_scan(occluder_groups);
         run(setup_, occluder_groups * wg, wg, &occluder_events[0]);

@@ -115,11 +115,6 @@ public:
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
 
-    // Memory each shot of a launch holds for a mesh of `elements` elements at resolution
-    // `hemicube` (on the device, and the host's copies of its ids and sums), besides the uploaded
-    // mesh (DeviceMesh::bytes). A launch holds as many shots as the batch asks, up to what fits
-    // its budget (tuning's batch_memory, else launch_budget) and at least one. For planning a bake
-    // before its mesh is built.
     // The per-shot buffers one launch may hold: on a CPU (host memory) 32 MiB, since a shot of a
     // few thousand elements already gives its cores hundreds of work-groups and more shots only
     // cost memory (the Cornell box's bake peaked at 1.2 GB with 1 GiB launches, 350 MB with these,
@@ -128,6 +123,11 @@ public:
     static std::size_t launch_budget(bool cpu, std::size_t device_memory) {
         return cpu ? std::size_t{32} << 20 : std::min<std::size_t>(std::size_t{1} << 30, device_memory / 4);
     }
+    // Memory each shot of a launch holds for a mesh of `elements` elements at resolution
+    // `hemicube` (on the device, and the host's copies of its ids and sums), besides the uploaded
+    // mesh (DeviceMesh::bytes). A launch holds as many shots as the batch asks, up to what fits
+    // its budget (tuning's batch_memory, else launch_budget) and at least one. For planning a bake
+    // before its mesh is built.
     static double shot_bytes(double elements, int hemicube);
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
@@ -179,7 +179,7 @@ private:
     std::vector<std::int32_t> cluster_rows_;  // the launch's table: per shot, its clusters then −1
     std::vector<std::int32_t> occluder_rows_;  // likewise, the occluder pass's: per shot, its nearest clusters
     cl::Buffer clusters_, occluders_;
-    cl::Buffer tile_depth_;  // per shot and tile: the least 1/depth the occluder pass drew (0: an empty cell)
+    cl::Buffer block_depth_;  // per shot and depth block: the least 1/depth the occluder pass drew (0: an empty cell)
 
     std::array<double, kStages> stage_seconds_{};
     std::uint64_t occlusion_tested_ = 0, occlusion_hidden_ = 0;
