@@ -1691,6 +1691,29 @@ TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same b
     }
 }
 
+TEST_CASE("HEMIRAD_OCCLUSION and HEMIRAD_OCCLUDER_SHARE: the same bytes either way; other values exit 2", "[cli][opencl][hostile]") {
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    TempDir dir;
+    const std::vector<std::string> on_opencl = concat(kFast, {"--device", "opencl"});
+    bake_ok(dir, kClosedRoom, dir / "default", on_opencl);
+    const std::string reference = read_text(dir / "default" / "baked.bin");
+    int run = 0;
+    for (const std::string env : {"HEMIRAD_OCCLUSION=0 ", "HEMIRAD_OCCLUSION=1 HEMIRAD_OCCLUDER_SHARE=1 "}) {
+        INFO(env);
+        const fs::path out = dir / ("culled" + std::to_string(run++));
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, on_opencl), env);
+        INFO("stderr: " << r.err);
+        REQUIRE(r.code == 0);
+        CHECK(read_text(out / "baked.bin") == reference);
+    }
+    const fs::path out = dir / "never";
+    for (const auto& [variable, value] : std::vector<std::pair<std::string, std::string>>{
+             {"HEMIRAD_OCCLUSION", "yes"}, {"HEMIRAD_OCCLUDER_SHARE", "0"}, {"HEMIRAD_OCCLUDER_SHARE", "4x"}}) {
+        INFO(variable << "=" << value);
+        expect_bad_input(dir, bake_args(kClosedRoom, out, on_opencl), out, variable, variable + "=" + value + " ");
+    }
+}
+
 TEST_CASE("hostile input: a name with a newline or a terminal escape still gives one line", "[cli][hostile]") {
     TempDir dir;
     const fs::path out = dir / "never";

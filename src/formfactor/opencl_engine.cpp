@@ -287,9 +287,18 @@ OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device) {
         }
     }
     if (const char* cull = std::getenv("HEMIRAD_CULL"); cull && std::string_view(cull) == "0") tuning.cull = false;
-    if (const char* occlusion = std::getenv("HEMIRAD_OCCLUSION"); occlusion && *occlusion)
-        tuning.occlusion = std::string_view(occlusion) == "0" ? Occlusion::off : Occlusion::on;
-    if (const char* share = std::getenv("HEMIRAD_OCCLUDER_SHARE"); share && *share) tuning.occluder_share = std::max(1, std::atoi(share));
+    if (const char* occlusion = std::getenv("HEMIRAD_OCCLUSION"); occlusion && *occlusion) {
+        const std::string_view value(occlusion);
+        if (value != "0" && value != "1")
+            throw InputError(fmt::format("HEMIRAD_OCCLUSION={}: must be 0 (off) or 1 (always on)", value));
+        tuning.occlusion = value == "0" ? Occlusion::off : Occlusion::on;
+    }
+    if (const char* share = std::getenv("HEMIRAD_OCCLUDER_SHARE"); share && *share) {
+        const std::string_view value(share);
+        if (value.size() > 4 || value.find_first_not_of("0123456789") != std::string_view::npos || std::atoi(share) < 1)
+            throw InputError(fmt::format("HEMIRAD_OCCLUDER_SHARE={}: must be a whole number from 1 to 9999", value));
+        tuning.occluder_share = std::atoi(share);
+    }
     return tuning;
 }
 
