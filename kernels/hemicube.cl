@@ -544,34 +544,32 @@ bool group_behind(const HrShot* shot, __global const HrElementLanes* group) {
 //   (z the sphere centre's depth on the face); beyond it, the plane rises at most 1/c per unit of
 //   face coordinate (c the plane's distance from the shooter, the normal a unit vector), so the
 //   bound adds delta/c with delta that distance in face units;
-// - setup computes c from rounded vertices: relative error ~1e-15 |v - origin| / c, bounded here
-//   by 1e-12 |v - origin| (the plane's 1/depth scales by c/c_computed), with c_eff the smallest
-//   c less that and a group with c_eff <= 0 never hidden (a plane through the shooter);
+// - setup computes c from rounded vertices (any of the element's, or a clipped one): absolute error
+//   ~1e-15 |v - origin|, bounded here by 1e-12 times `extent`, which bounds |v - origin| for every
+//   point of the bounding sphere (the plane's 1/depth scales by c/c_computed), with c_eff the
+//   smallest c less that and a group with c_eff <= 0 never hidden (a plane through the shooter);
 // - the rest is rounding of order 1e-15 relative, covered by the factor 1 + 1e-9, and a sphere
 //   within 1e-4 of its size from a face's eye plane is never hidden on it.
 // Triangles repeat their last vertex, so vertex 0 and the normal of live lanes suffice for c.
 bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __global const double* block_depth) {
+    const Vec centre = to_local(shot, vec(group->bound[0], group->bound[1], group->bound[2]));
+    const double r = group->bound[3];
+    const double size = fabs(centre.x) + fabs(centre.y) + fabs(centre.z) + r;
+    const double extent = size + r;  // >= the 1-norm of any point of the sphere less the origin
     const llong live = convert_long8(vload8(0, group->n)) > 0;
-    const ldouble dx = vload8(0, group->v) - shot->origin[0], dy = vload8(1, group->v) - shot->origin[1],
-                  dz = vload8(2, group->v) - shot->origin[2];
-    const ldouble c = fabs(vload8(0, group->normal) * dx + vload8(1, group->normal) * dy +
-                           vload8(2, group->normal) * dz);
-    const ldouble reach = fabs(dx) + fabs(dy) + fabs(dz);
-    const ldouble c_eff = select((ldouble)(INFINITY), c - 1e-12 * reach, live);
-    const ldouble far = select((ldouble)(0.0), reach, live);
-    const double4 c_half = fmin(c_eff.lo, c_eff.hi), far_half = fmax(far.lo, far.hi);
-    const double c_min = fmin(fmin(c_half.x, c_half.y), fmin(c_half.z, c_half.w));
-    const double q = fmax(fmax(far_half.x, far_half.y), fmax(far_half.z, far_half.w));
+    const ldouble c = fabs(vload8(0, group->normal) * (vload8(0, group->v) - shot->origin[0]) +
+                           vload8(1, group->normal) * (vload8(1, group->v) - shot->origin[1]) +
+                           vload8(2, group->normal) * (vload8(2, group->v) - shot->origin[2]));
+    const ldouble c_live = select((ldouble)(INFINITY), c, live);
+    const double4 c_half = fmin(c_live.lo, c_live.hi);
+    const double c_min = fmin(fmin(c_half.x, c_half.y), fmin(c_half.z, c_half.w)) - 1e-12 * extent;
     if (!(c_min > 0.0) || c_min == INFINITY) return false;
 
     const int n = shot->n;
     const double per_unit = 0.5 * n;
     const double delta = 0x1p-17 * 1.4142135623730951 * 1.01 / per_unit;  // face units
     const double slack = delta / c_min;
-    const double scale = 1.0 + 1e-9 + 4e-12 * q / c_min;
-    const Vec centre = to_local(shot, vec(group->bound[0], group->bound[1], group->bound[2]));
-    const double r = group->bound[3];
-    const double size = fabs(centre.x) + fabs(centre.y) + fabs(centre.z) + r;
+    const double scale = 1.0 + 1e-9 + 4e-12 * extent / c_min;
     for (int face = 0; face < HR_FACES; ++face) {
         const Vec f = to_face(face, centre);
         if (f.z + r <= 0.0) continue;                   // wholly behind this face's eye plane: not on it
