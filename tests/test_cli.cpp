@@ -1657,25 +1657,37 @@ TEST_CASE("textures: a decodable one is used and an image no texture uses does n
     CHECK(read_text(dir / "plain" / "baked.bin") != read_text(dir / "dark" / "baked.bin"));  // the walls darkened
 }
 
-TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same bytes) and values the kernels cannot take exit 2", "[cli][opencl][hostile]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
-    TempDir dir;
+namespace {
+
+// Bakes the closed room on OpenCL (kFast), then once with each environment of `environments`
+// (assignments in front of the command), and checks that every one of those bakes on OpenCL and
+// writes the same baked.bin.
+void check_environments_keep_bytes(const TempDir& dir, const std::vector<std::string>& environments) {
     const std::vector<std::string> on_opencl = concat(kFast, {"--device", "opencl"});
     bake_ok(dir, kClosedRoom, dir / "default", on_opencl);
     const std::string reference = read_text(dir / "default" / "baked.bin");
-    // -DHEMIRAD_TILE=8 and many counter copies used to corrupt the heap: the host sized the
-    // buffers with its own knobs. Now the host takes the overrides, and the results are the same.
     int run = 0;
-    for (const std::string options : {"-DHEMIRAD_TILE=8", "-DHEMIRAD_COUNT_COPIES=64 -D HEMIRAD_WG=32"}) {
-        INFO(options);
-        const fs::path out = dir / ("tuned" + std::to_string(run++));
-        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, on_opencl),
-                                        "HEMIRAD_OPENCL_OPTIONS=" + shell_quote(options) + " ");
+    for (const std::string& env : environments) {
+        INFO(env);
+        const fs::path out = dir / ("varied" + std::to_string(run++));
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, on_opencl), env);
         INFO("stderr: " << r.err);
         REQUIRE(r.code == 0);
         CHECK(read_json(out / "report.json")["device"]["backend"] == "opencl");
         CHECK(read_text(out / "baked.bin") == reference);
     }
+}
+
+}  // namespace
+
+TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same bytes) and values the kernels cannot take exit 2", "[cli][opencl][hostile]") {
+    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    TempDir dir;
+    // -DHEMIRAD_TILE=8 and many counter copies used to corrupt the heap: the host sized the
+    // buffers with its own knobs. Now the host takes the overrides, and the results are the same.
+    check_environments_keep_bytes(dir, {"HEMIRAD_OPENCL_OPTIONS=" + shell_quote("-DHEMIRAD_TILE=8") + " ",
+                                        "HEMIRAD_OPENCL_OPTIONS=" +
+                                            shell_quote("-DHEMIRAD_COUNT_COPIES=64 -D HEMIRAD_WG=32") + " "});
     // Refused before any shot, with the variable and the knob named; `auto` does not fall back.
     const fs::path out = dir / "never";
     // (Every knob and spelling: "opencl: -D overrides of the host's knobs …" in test_opencl.cpp.)
@@ -1694,18 +1706,8 @@ TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same b
 TEST_CASE("HEMIRAD_OCCLUSION and HEMIRAD_OCCLUDER_SHARE: the same bytes either way; other values exit 2", "[cli][opencl][hostile]") {
     HEMIRAD_SKIP_WITHOUT_OPENCL();
     TempDir dir;
+    check_environments_keep_bytes(dir, {"HEMIRAD_OCCLUSION=0 ", "HEMIRAD_OCCLUSION=1 HEMIRAD_OCCLUDER_SHARE=1 "});
     const std::vector<std::string> on_opencl = concat(kFast, {"--device", "opencl"});
-    bake_ok(dir, kClosedRoom, dir / "default", on_opencl);
-    const std::string reference = read_text(dir / "default" / "baked.bin");
-    int run = 0;
-    for (const std::string env : {"HEMIRAD_OCCLUSION=0 ", "HEMIRAD_OCCLUSION=1 HEMIRAD_OCCLUDER_SHARE=1 "}) {
-        INFO(env);
-        const fs::path out = dir / ("culled" + std::to_string(run++));
-        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, out, on_opencl), env);
-        INFO("stderr: " << r.err);
-        REQUIRE(r.code == 0);
-        CHECK(read_text(out / "baked.bin") == reference);
-    }
     const fs::path out = dir / "never";
     for (const auto& [variable, value] : std::vector<std::pair<std::string, std::string>>{
              {"HEMIRAD_OCCLUSION", "yes"}, {"HEMIRAD_OCCLUDER_SHARE", "0"}, {"HEMIRAD_OCCLUDER_SHARE", "4x"}}) {

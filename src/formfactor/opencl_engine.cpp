@@ -295,9 +295,10 @@ OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device) {
     }
     if (const char* share = std::getenv("HEMIRAD_OCCLUDER_SHARE"); share && *share) {
         const std::string_view value(share);
-        if (value.size() > 4 || value.find_first_not_of("0123456789") != std::string_view::npos || std::atoi(share) < 1)
+        const bool digits = value.size() <= 4 && value.find_first_not_of("0123456789") == std::string_view::npos;
+        tuning.occluder_share = digits ? std::atoi(share) : 0;
+        if (tuning.occluder_share < 1)
             throw InputError(fmt::format("HEMIRAD_OCCLUDER_SHARE={}: must be a whole number from 1 to 9999", value));
-        tuning.occluder_share = std::atoi(share);
     }
     return tuning;
 }
@@ -432,8 +433,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     };
     // The batch's shots but the first, which goes by value (batch_shot in the kernels).
     shots_ = cl::Buffer(cl_context, CL_MEM_READ_ONLY, std::max<std::size_t>(1, shots - 1) * sizeof(HrShot));
-    batch_capacity_ = shots;
-    allocate_records();
+    allocate_records(shots);
     group_records_ = buffer(setup_groups() * sizeof(hr_uint));
     tile_counts_ = buffer(counters * sizeof(hr_uint));
     counts_zero_ = false;
@@ -495,9 +495,9 @@ std::size_t OpenCLEngine::record_slots() const {
     return std::max<std::size_t>(1, mesh_.elements.size() * kFaces);  // a record per element and face at most
 }
 
-void OpenCLEngine::allocate_records() {
-    records_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE, batch_capacity_ * record_slots() * sizeof(HrRecord));
-    boxes_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE, batch_capacity_ * record_slots() * sizeof(HrBox));
+void OpenCLEngine::allocate_records(std::size_t shots) {
+    records_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE, shots * record_slots() * sizeof(HrRecord));
+    boxes_ = cl::Buffer(context_.context(), CL_MEM_READ_WRITE, shots * record_slots() * sizeof(HrBox));
 }
 
 std::size_t OpenCLEngine::setup_groups() const {
@@ -574,7 +574,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     if (tuning_.setup_lanes && groups > record_rows_) {  // more clusters in front than the regions hold: grow
         record_rows_ = std::min(setup_groups(), std::max(groups, record_rows_ + record_rows_ / 4));
         for (HrShot& shot : shots) shot.group_rows = static_cast<hr_uint>(record_rows_);
-        allocate_records();
+        allocate_records(batch_capacity_);
     }
     if (tuning_.setup_lanes)
         context_.queue().enqueueWriteBuffer(clusters_, CL_TRUE, 0, cluster_rows_.size() * sizeof(std::int32_t),
@@ -750,7 +750,7 @@ void OpenCLEngine::shoot_fitting(const std::vector<ShotRequest>& shots, std::vec
         if (regions_full) {  // at most a record per element and face
             group_capacity_ = static_cast<std::uint32_t>(std::min<std::size_t>(
                 kFaces * cluster_elements(), needed.group_records + needed.group_records / 4u));
-            allocate_records();
+            allocate_records(batch_capacity_);
         }
     }
     last_batch_ = shots.size();

@@ -219,7 +219,7 @@ private:
         std::uint32_t list_entries = 0, group_records = 0;
     };
     LaunchNeeds run_batch(const std::vector<ShotRequest>& shots);
-    void allocate_records();  // records_ and boxes_, for batch_capacity_ shots of record_slots()
+    void allocate_records(std::size_t shots);  // records_ and boxes_, for `shots` shots of record_slots()
 };
 
 }  // namespace hemirad::formfactor
