@@ -206,3 +206,56 @@ TEST_CASE("a furnace of finely tessellated walls gives the same flux with cluste
     // Σ B A over the six unit walls = E·1 / (1 − ρ) = 5.
     CHECK(total == Approx(5.0).epsilon(0.005));
 }
+
+TEST_CASE("no cluster shoots from across another face: a ball resting on the floor, a wall around a ledge", "[clusters]") {
+    // A closed room of single-sided surfaces, each facing into it: from any point a shooter may
+    // stand for, every cell sees the front of something, so a shot's form factors sum to 1 with
+    // nothing blocked. Two clusters' centroids break that: the bottom cap of a ball resting at its
+    // pole on the floor shoots from under the floor (nothing at all), and a wall panel clustered
+    // around a ledge shoots from inside the ledge (the backs of its faces).
+    scene::Scene s;
+    const std::uint32_t wall = scene::add_material(s, dvec3(0.6), dvec3(0.0));
+    const std::uint32_t lamp = scene::add_material(s, dvec3(0.0), dvec3(4.0));
+    const std::uint32_t ball = scene::add_material(s, dvec3(0.7), dvec3(0.0));
+    // x = 0: a panel of 8 × 8 cells over [0.25, 0.75]² with a ledge 0.1 deep where cells
+    // (2..5, 3..4) are, and four large quads around the panel.
+    add_tessellated_quad(s, {0, 0, 0}, {0, 1, 0}, {0, 0, 0.25}, 1, wall);
+    add_tessellated_quad(s, {0, 0, 0.75}, {0, 1, 0.75}, {0, 0, 1}, 1, wall);
+    add_tessellated_quad(s, {0, 0, 0.25}, {0, 0.25, 0.25}, {0, 0, 0.75}, 1, wall);
+    add_tessellated_quad(s, {0, 0.75, 0.25}, {0, 1, 0.25}, {0, 0.75, 0.75}, 1, wall);
+    const auto panel = static_cast<std::uint32_t>(s.nodes.size());
+    s.nodes.push_back({"panel", static_cast<int>(panel)});
+    const auto quad = [&](dvec3 a, dvec3 b, dvec3 c, dvec3 d) { scene::add_quad_to(s, a, b, c, d, wall, panel, panel); };
+    const auto at = [](int i) { return 0.25 + i / 16.0; };
+    for (int j = 0; j < 8; ++j)
+        for (int i = 0; i < 8; ++i)
+            if (i < 2 || i > 5 || j < 3 || j > 4)
+                quad({0, at(i), at(j)}, {0, at(i + 1), at(j)}, {0, at(i + 1), at(j + 1)}, {0, at(i), at(j + 1)});
+    const double y0 = at(2), y1 = at(6), z0 = at(3), z1 = at(5), d = 0.1;
+    quad({d, y0, z0}, {d, y1, z0}, {d, y1, z1}, {d, y0, z1});  // front, +x
+    quad({0, y0, z1}, {d, y0, z1}, {d, y1, z1}, {0, y1, z1});  // top, +z
+    quad({0, y0, z0}, {0, y1, z0}, {d, y1, z0}, {d, y0, z0});  // bottom, −z
+    quad({0, y0, z0}, {d, y0, z0}, {d, y0, z1}, {0, y0, z1});  // end, −y
+    quad({0, y1, z0}, {0, y1, z1}, {d, y1, z1}, {d, y1, z0});  // end, +y
+    add_tessellated_quad(s, {1, 0, 0}, {1, 0, 1}, {1, 1, 0}, 4, wall);
+    add_tessellated_quad(s, {0, 0, 0}, {0, 0, 1}, {1, 0, 0}, 4, wall);
+    add_tessellated_quad(s, {0, 1, 0}, {1, 1, 0}, {0, 1, 1}, 4, wall);
+    add_tessellated_quad(s, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 4, wall);
+    add_tessellated_quad(s, {0, 0, 1}, {0, 1, 1}, {1, 0, 1}, 4, lamp);
+    add_sphere(s, {0.7, 0.5, 0.2}, 0.2, 12, 24, ball, false);  // its south pole on the floor
+    scene::finish(s);
+
+    const mesh::Mesh m = mesh::build(s, {1.0, 0.25});
+    CHECK(m.split_clusters > 0);
+    CHECK(m.moved_clusters == 1);
+    formfactor::ReferenceEngine engine(m, formfactor::Settings{64, 7});
+    formfactor::ShotResult r;
+    std::size_t bad = 0;
+    for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
+        engine.shoot(p, 0, r);
+        const bool ok = std::abs(r.sum() + r.blocked - 1.0) < 1e-9 && r.blocked < 1e-9;
+        if (!ok) UNSCOPED_INFO("patch " << p << " (node " << m.patches[p].node << "): F " << r.sum() << ", blocked " << r.blocked);
+        bad += !ok;
+    }
+    CHECK(bad == 0);
+}

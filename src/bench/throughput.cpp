@@ -258,8 +258,9 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
         const auto t_mesh = Clock::now();
         const mesh::Mesh m = mesh::build(s, mesh_settings);
         if (m.patches.empty()) throw InputError(fmt::format("{}: every triangle has zero area", spec));
-        log << fmt::format("\n{}: {} triangles, {} patches, {} elements (meshed in {:.2f} s)\n", spec,
-                           s.triangles.size(), m.patches.size(), m.elements.size(), seconds_since(t_mesh));
+        log << fmt::format("\n{}: {} triangles, {} patches ({} clusters: {} moved, {} split), {} elements (meshed in {:.2f} s)\n",
+                           spec, s.triangles.size(), m.patches.size(), m.clusters, m.moved_clusters, m.split_clusters,
+                           m.elements.size(), seconds_since(t_mesh));
 
         const std::vector<formfactor::ShotRequest> shots = bench_shots(m, o.shots);
         const std::size_t sample = std::min(kSampleShots, shots.size());

@@ -773,6 +773,8 @@ void run_bake(const BakeOptions& options) {
                         {"elements_before_refinement", elements_before},
                         {"quads", mesh.quads},
                         {"clusters", mesh.clusters},
+                        {"split_clusters", mesh.split_clusters},
+                        {"moved_clusters", mesh.moved_clusters},
                         {"dropped_triangles", mesh.dropped_triangles},
                         {"skipped_primitives", scene.skipped_primitives}};
     report["plan"] = {{"solver", {{"name", solver_name}, {"why", solver_why}}},

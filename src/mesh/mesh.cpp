@@ -10,6 +10,7 @@
 #include <cstring>
 #include <limits>
 #include <map>
+#include <optional>
 #include <unordered_map>
 #include <utility>
 
@@ -352,7 +353,9 @@ struct Part {
 
 // Appends one patch of one side, followed by its contiguous elements: a cell of a face's grid
 // (one part), or a cluster of small faces (their cells' elements, poly.n = 0).
-void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Material& mat, bool back) {
+// `from`, where set, is the point a cluster shoots from instead (see split_blocked_clusters).
+void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Material& mat, bool back,
+                  const std::optional<dvec3>& from) {
     std::size_t count = 0;
     for (const Part& part : parts) count += part.cells->elements.size();
     if (mesh.patches.size() >= std::numeric_limits<std::uint32_t>::max() ||
@@ -409,7 +412,7 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Mater
             const Element& e = mesh.elements[k];
             lift = std::max(lift, glm::dot(e.centroid - centroid, e.normal) / glm::dot(patch.normal, e.normal));
         }
-        patch.centroid = centroid + lift * patch.normal;
+        patch.centroid = from ? *from : centroid + lift * patch.normal;
         patch.area = area;
         ++mesh.clusters;
     }
@@ -419,12 +422,13 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Mater
 
 // Appends a face's patches (or a cluster's one patch) on its front and, for a doubleSided
 // material, on its back, each side's patches the other's twins.
-void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const scene::Material& mat) {
+void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const scene::Material& mat,
+                  const std::optional<dvec3>& from = std::nullopt) {
     const std::size_t front = mesh.patches.size();
-    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, false);
+    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, false, from);
     if (!mat.double_sided) return;
     const std::size_t back = mesh.patches.size();
-    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, true);
+    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, true, from);
     for (std::size_t i = 0; i < patches.size(); ++i) {
         mesh.patches[front + i].twin = static_cast<std::uint32_t>(back + i);
         mesh.patches[back + i].twin = static_cast<std::uint32_t>(front + i);
@@ -440,6 +444,10 @@ void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, con
 struct Clusters {
     std::vector<std::int64_t> of;
     std::vector<std::vector<std::size_t>> faces;
+    std::vector<std::int64_t> from;  // per cluster: the face from whose centroid it shoots, or −1
+    // Per side, as Mesh::clusters: curved clusters split back into their faces and flat ones that
+    // shoot from a face's centroid instead (split_blocked_clusters).
+    std::size_t split = 0, moved = 0;
 };
 
 Clusters cluster_faces(const std::vector<Face>& faces, const std::vector<Grid>& grids, const Settings& settings) {
@@ -504,7 +512,175 @@ Clusters cluster_faces(const std::vector<Face>& faces, const std::vector<Grid>& 
         }
         c.faces.push_back(std::move(members));
     }
+    c.from.assign(c.faces.size(), -1);
     return c;
+}
+
+// Faces by the cells of a uniform grid that their planes pass through, for segment queries.
+class FaceGrid {
+public:
+    FaceGrid(const std::vector<Face>& faces, const dvec3& origin, double cell) : origin_(origin), cell_(cell) {
+        std::vector<std::pair<std::uint64_t, std::uint32_t>> entries;
+        for (std::size_t f = 0; f < faces.size(); ++f) {
+            const Polygon& poly = faces[f].poly;
+            dvec3 lo = poly.v[0], hi = poly.v[0];
+            for (int k = 1; k < poly.n; ++k) {
+                lo = glm::min(lo, poly.v[std::size_t(k)]);
+                hi = glm::max(hi, poly.v[std::size_t(k)]);
+            }
+            const dvec3 normal = shape_of(poly).normal;
+            const double offset = glm::dot(normal, poly.v[0]);
+            const double reach = 0.5 * cell_ * (std::abs(normal.x) + std::abs(normal.y) + std::abs(normal.z));
+            for_cells(lo, hi, [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+                const dvec3 centre = origin_ + (dvec3(double(i), double(j), double(k)) + 0.5) * cell_;
+                // Cells the face's plane misses are left out (a slanted face's box holds many).
+                if (!(std::abs(glm::dot(normal, centre) - offset) > reach * (1.0 + 1e-9)))
+                    entries.push_back({key(i, j, k), static_cast<std::uint32_t>(f)});
+            });
+        }
+        std::sort(entries.begin(), entries.end());
+        keys_.reserve(entries.size());
+        ids_.reserve(entries.size());
+        for (const auto& [k, f] : entries) {
+            keys_.push_back(k);
+            ids_.push_back(f);
+        }
+    }
+
+    // Calls hit(f) for faces in the cells of the segment's box (some more than once) until it
+    // returns true; returns whether one did.
+    template <class Hit>
+    bool any(const dvec3& a, const dvec3& b, Hit hit) const {
+        bool found = false;
+        for_cells(glm::min(a, b), glm::max(a, b), [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+            if (found) return;
+            const auto [first, last] = std::equal_range(keys_.begin(), keys_.end(), key(i, j, k));
+            for (auto it = first; it != last && !found; ++it) found = hit(ids_[std::size_t(it - keys_.begin())]);
+        });
+        return found;
+    }
+
+private:
+    static std::uint64_t key(std::int64_t i, std::int64_t j, std::int64_t k) {
+        constexpr std::int64_t kBias = 1 << 20;  // cell indices from the origin within ±2^20 (see the cell size)
+        return std::uint64_t(i + kBias) << 42 | std::uint64_t(j + kBias) << 21 | std::uint64_t(k + kBias);
+    }
+    template <class Visit>
+    void for_cells(const dvec3& lo, const dvec3& hi, Visit visit) const {
+        const auto index = [this](double x, double o) { return static_cast<std::int64_t>(std::floor((x - o) / cell_)); };
+        for (std::int64_t k = index(lo.z, origin_.z); k <= index(hi.z, origin_.z); ++k)
+            for (std::int64_t j = index(lo.y, origin_.y); j <= index(hi.y, origin_.y); ++j)
+                for (std::int64_t i = index(lo.x, origin_.x); i <= index(hi.x, origin_.x); ++i) visit(i, j, k);
+    }
+
+    dvec3 origin_;
+    double cell_;
+    std::vector<std::uint64_t> keys_;
+    std::vector<std::uint32_t> ids_;
+};
+
+// Whether segment a→b meets triangle (p, q, r), edges and far end included, its start excluded;
+// a segment parallel to the triangle's plane does not meet it (Möller and Trumbore 1997).
+bool segment_meets(const dvec3& a, const dvec3& b, const dvec3& p, const dvec3& q, const dvec3& r) {
+    const dvec3 d = b - a, e1 = q - p, e2 = r - p;
+    const dvec3 h = glm::cross(d, e2);
+    const double det = glm::dot(e1, h);
+    if (std::abs(det) <= 1e-12 * glm::length(d) * glm::length(e1) * glm::length(e2)) return false;
+    const dvec3 s = a - p;
+    const double u = glm::dot(s, h) / det;
+    if (u < 0.0 || u > 1.0) return false;
+    const dvec3 qv = glm::cross(s, e1);
+    const double v = glm::dot(d, qv) / det;
+    if (v < 0.0 || u + v > 1.0) return false;
+    const double t = glm::dot(e2, qv) / det;
+    return t > 1e-9 && t <= 1.0;
+}
+
+bool segment_meets(const dvec3& a, const dvec3& b, const Polygon& poly) {
+    for (int k = 1; k + 1 < poly.n; ++k)
+        if (segment_meets(a, b, poly.v[0], poly.v[std::size_t(k)], poly.v[std::size_t(k + 1)])) return true;
+    return false;
+}
+
+// A cluster shoots from one point (Patch): its area centroid raised along its mean normal until
+// it is in front of every face's plane. Where that point lies across other geometry (the bottom
+// cap of a ball resting on a floor shoots from under the floor, a rock's cap through the terrain
+// it sinks into, a wall clustered across a cornice from inside the cornice), its shots would see
+// the outside of the scene, another room or the inside of a solid. A flat cluster then shoots from
+// the centroid of its face nearest the point, a curved one is split back into a patch per face.
+// Checked for each side the material has: the segment from
+// the centroid of the cluster's face nearest the point to the point, both moved along the side's
+// normal by a margin (far above the engines' clip distance), must meet no face outside the cluster.
+void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& scene, const Settings& settings,
+                            Clusters& c) {
+    dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
+    for (const Face& face : faces)
+        for (int k = 0; k < face.poly.n; ++k) {
+            lo = glm::min(lo, face.poly.v[std::size_t(k)]);
+            hi = glm::max(hi, face.poly.v[std::size_t(k)]);
+        }
+    if (std::none_of(c.faces.begin(), c.faces.end(), [](const auto& m) { return m.size() > 1; })) return;
+    const double extent = std::max({std::abs(lo.x), std::abs(lo.y), std::abs(lo.z), std::abs(hi.x), std::abs(hi.y),
+                                    std::abs(hi.z), 1e-30});
+    // About four cells per patch, but at most 2^7 across the scene (and so far from the keys' range).
+    const FaceGrid grid(faces, lo, std::max({0.25 * settings.patch_size, glm::length(hi - lo) / 128.0, 1e-30}));
+    const double margin = 1e-6 * extent;
+
+    std::vector<std::int64_t> owner = c.of;
+    const std::size_t clusters = c.faces.size();
+    for (std::size_t id = 0; id < clusters; ++id) {
+        const std::vector<std::size_t>& members = c.faces[id];
+        if (members.size() < 2) continue;
+        dvec3 weighted_normal{0.0}, weighted_centroid{0.0};
+        double area = 0.0;
+        std::vector<Shape> shapes;
+        shapes.reserve(members.size());
+        for (const std::size_t f : members) {
+            shapes.push_back(shape_of(faces[f].poly));
+            weighted_normal += shapes.back().area * shapes.back().normal;
+            weighted_centroid += shapes.back().area * shapes.back().centroid;
+            area += shapes.back().area;
+        }
+        const dvec3 centroid = weighted_centroid / area, normal = glm::normalize(weighted_normal);
+        const bool double_sided = scene.materials[faces[members.front()].src[0]->material].double_sided;
+        bool flat = true;  // every face in the mean plane
+        for (const Shape& sh : shapes)
+            flat = flat && glm::dot(sh.normal, normal) > kCoplanarDot && std::abs(glm::dot(sh.centroid - centroid, normal)) <= margin;
+        bool blocked = false;
+        std::size_t nearest = 0;  // of the point, on the side found blocked
+        for (const double side : {1.0, -1.0}) {
+            if (side < 0.0 && !double_sided) break;
+            double lift = 0.0;
+            for (const Shape& sh : shapes)
+                lift = std::max(lift, side * glm::dot(sh.centroid - centroid, sh.normal) / glm::dot(normal, sh.normal));
+            const dvec3 point = centroid + side * lift * normal;
+            nearest = 0;
+            for (std::size_t i = 1; i < shapes.size(); ++i)
+                if (glm::length(shapes[i].centroid - point) < glm::length(shapes[nearest].centroid - point)) nearest = i;
+            // Both ends a margin in front, so that faces meeting the cluster's plane at an edge
+            // or in contact with it do not count.
+            const dvec3 off = side * margin * normal, a = shapes[nearest].centroid + off, b = point + off;
+            blocked = grid.any(a, b, [&](std::uint32_t f) { return owner[f] != std::int64_t(id) && segment_meets(a, b, faces[f].poly); });
+            if (blocked) break;
+        }
+        if (!blocked) continue;
+        if (flat) {
+            // A planar cluster around a hole or a ledge (a wall clustered across a cornice has its
+            // centroid inside the cornice): any point of its surface stands for it as well as the
+            // centroid does, so it shoots from its face nearest the centroid, on both sides.
+            c.from[id] = static_cast<std::int64_t>(members[nearest]);
+            c.moved += double_sided ? 2 : 1;
+            continue;
+        }
+        const std::vector<std::size_t> split(members.begin() + 1, members.end());  // push_back moves members
+        c.faces[id].resize(1);
+        for (const std::size_t f : split) {
+            c.of[f] = static_cast<std::int64_t>(c.faces.size());
+            c.faces.push_back({f});
+            c.from.push_back(-1);
+        }
+        c.split += double_sided ? 2 : 1;
+    }
 }
 
 // A directed edge a→b of a triangle, qualified by what may be paired with it.
@@ -635,7 +811,10 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
     std::vector<Grid> grids;
     grids.reserve(faces.size());
     for (const Face& face : faces) grids.push_back(grid_of(face.poly, settings));
-    const Clusters clusters = cluster_faces(faces, grids, settings);
+    Clusters clusters = cluster_faces(faces, grids, settings);
+    split_blocked_clusters(faces, scene, settings, clusters);
+    mesh.split_clusters = clusters.split;
+    mesh.moved_clusters = clusters.moved;
     if (before) {
         Counts counts;
         for (std::size_t f = 0; f < faces.size(); ++f) {
@@ -664,7 +843,9 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         for (const std::size_t g : members) cells.push_back(face_cells(grids[g]));
         std::vector<Part> parts;
         for (std::size_t i = 0; i < members.size(); ++i) parts.push_back({&faces[members[i]], &cells[i].front()});
-        append_sides(mesh, {parts}, mat);
+        const std::int64_t from = clusters.from[std::size_t(clusters.of[f])];
+        append_sides(mesh, {parts}, mat,
+                     from >= 0 ? std::optional<dvec3>(shape_of(faces[std::size_t(from)].poly).centroid) : std::nullopt);
     }
     return mesh;
 }
