@@ -670,6 +670,7 @@ void run_bake(const BakeOptions& options) {
         t_formfactors = engine.seconds();
         if (choice.verifier) verified = choice.verifier->summary();  // the engine ends with this call
         t_solve = seconds_since(t0) - engine.seconds();
+        base_engine.reset();  // refinement makes engines of its own: the solve's buffers go first
 
         // Adaptive refinement: split where the irradiance contrasts, re-gather onto the children.
         t0 = Clock::now();

@@ -316,7 +316,7 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
       context_(context),
       settings_(settings),
       tuning_(tuning),
-      delta_(std::max(settings.hemicube, 2)),
+      cells_(3 * static_cast<std::size_t>(std::max(settings.hemicube, 2)) * static_cast<std::size_t>(std::max(settings.hemicube, 2))),
       fault_(fault) {
     const ocl::DeviceInfo& info = context.info();
     if (settings.hemicube < 8 || settings.hemicube % 2 != 0 || settings.hemicube > kMaxHemicube)
@@ -370,7 +370,7 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
     tiles_x_ = (n + tuning.tile - 1) / tuning.tile;
     tile_base_[0] = 0;
     for (int face = 0; face < kFaces; ++face) {
-        const int tiles_y = (delta_.rows(face) + tuning.tile - 1) / tuning.tile;
+        const int tiles_y = (face_rows(face) + tuning.tile - 1) / tuning.tile;
         tile_base_[static_cast<std::size_t>(face) + 1] =
             tile_base_[static_cast<std::size_t>(face)] + tiles_x_ * tiles_y;
     }
@@ -388,16 +388,19 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
     // entries past the last cell.
     const std::size_t tile = static_cast<std::size_t>(tuning.tile);
     std::vector<hr_long> delta_fixed(static_cast<std::size_t>(tile_base_[kFaces]) * tile * tile + 8, 0);
+    {  // the table in doubles only while it is converted (25 MB at N = 1024)
+    const DeltaFormFactors delta(n);
     for (int face = 0; face < kFaces; ++face)
-        for (int j = 0; j < delta_.rows(face); ++j)
+        for (int j = 0; j < delta.rows(face); ++j)
             for (int i = 0; i < n; ++i) {
                 const std::size_t t = static_cast<std::size_t>(tile_base_[static_cast<std::size_t>(face)] +
                                                                (j / tuning.tile) * tiles_x_ + i / tuning.tile);
-                const double f = delta_.table()[delta_.offset(face) + static_cast<std::size_t>(j) * n + i];
+                const double f = delta.table()[delta.offset(face) + static_cast<std::size_t>(j) * n + i];
                 delta_fixed[t * tile * tile + static_cast<std::size_t>(j % tuning.tile) * tile +
                             static_cast<std::size_t>(i % tuning.tile)] =
                     static_cast<hr_long>(std::llround(std::ldexp(f, HR_FIXED_SHIFT)));
             }
+    }
 
     cl::Context& cl_context = context.context();
     cl::CommandQueue& queue = context.queue();
@@ -443,10 +446,10 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     block_depth_ = buffer(depth_blocks() * sizeof(hr_double));
     cursors_ = buffer(counters * sizeof(hr_uint));
     lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
-    ids_buffer_ = buffer(delta_.cells() * sizeof(hr_int));
+    ids_buffer_ = buffer(cells_ * sizeof(hr_int));
     sums_ = buffer(sum_stride() * sizeof(hr_long));
     sums_host_.assign(shots * sum_stride(), 0);
-    ids_.assign(shots, std::vector<std::int32_t>(delta_.cells(), kEmpty));
+    ids_.assign(shots, {});  // read back only when asked for (last_ids: tests and --verify)
     ids_stale_.assign(shots, false);
     batch_capacity_ = shots;
 }
@@ -473,17 +476,17 @@ double OpenCLEngine::shot_bytes(double elements, int hemicube) {
     // As allocate_batch sizes them on a CPU (lanes setup): records and boxes, the regions of
     // every cluster at their initial capacity (a quarter of them at first, grown with the clusters
     // in front of a shot: half the scene for most shooters, all of it for some), the initial lists,
-    // the ids (device and host), the sums (device and host).
+    // the ids (on the device; the host reads them back only when asked), the sums (device and host).
     const double records = std::max(1.0, elements * kInitialRecordsPerElement);
     const double lists = initial_list_entries(records);
     const double cells = 3.0 * double(hemicube) * double(hemicube);
     return records * double(sizeof(HrRecord) + sizeof(HrBox)) + lists * sizeof(hr_uint) +
-           2.0 * cells * sizeof(hr_int) + 2.0 * (elements + 5.0) * sizeof(hr_long);
+           cells * sizeof(hr_int) + 2.0 * (elements + 5.0) * sizeof(hr_long);
 }
 
 std::size_t OpenCLEngine::memory_batch() const {
     const std::size_t per_shot = record_slots() * (sizeof(HrRecord) + sizeof(HrBox)) +
-                                 std::size_t{list_capacity_} * sizeof(hr_uint) + delta_.cells() * sizeof(hr_int) +
+                                 std::size_t{list_capacity_} * sizeof(hr_uint) + cells_ * sizeof(hr_int) +
                                  sum_stride() * sizeof(hr_long);
     const std::size_t budget =
         tuning_.batch_memory > 0 ? tuning_.batch_memory : launch_budget(context_.info().type == "cpu", context_.info().global_memory);
@@ -783,9 +786,10 @@ void OpenCLEngine::shoot_fitting(const std::vector<ShotRequest>& shots, std::vec
 const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t shot) const {
     if (shot < ids_first_ || shot - ids_first_ >= last_batch_) return nullptr;
     const std::size_t i = shot - ids_first_;
-    if (ids_stale_[i]) {
-        context_.queue().enqueueReadBuffer(ids_buffer_, CL_TRUE, i * delta_.cells() * sizeof(std::int32_t),
-                                           delta_.cells() * sizeof(std::int32_t), ids_[i].data());
+    if (ids_stale_[i] || ids_[i].empty()) {
+        ids_[i].resize(cells_);
+        context_.queue().enqueueReadBuffer(ids_buffer_, CL_TRUE, i * cells_ * sizeof(std::int32_t),
+                                           cells_ * sizeof(std::int32_t), ids_[i].data());
         ids_stale_[i] = false;
     }
     return &ids_[i];

@@ -110,7 +110,6 @@ public:
     static constexpr std::int32_t kEmpty = -1;
     static constexpr std::int32_t kBlocker = -2;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
-    const DeltaFormFactors& delta() const { return delta_; }
     const std::string& build_options() const { return options_; }
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
@@ -148,7 +147,8 @@ private:
     Settings settings_;
     OpenCLTuning tuning_;
     std::string options_;
-    DeltaFormFactors delta_;
+    std::size_t cells_;               // of the hemicube: n² on the top face, n²/2 on each side
+    int face_rows(int face) const { return face == 0 ? settings_.hemicube : settings_.hemicube / 2; }
     double eps_;                      // base-plane clip distance, as the reference computes it
     std::array<int, 6> tile_base_{};  // first tile of each face, then the tile count
     int tiles_x_ = 0;
