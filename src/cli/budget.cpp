@@ -25,15 +25,23 @@ constexpr double kProgressivePerPatch = 2 * 24.0 + 2 * 8.0;  // unshot, shot; hi
 constexpr double kWeldedPerElement = 4 * 40.0;
 constexpr double kRenderPerPixel = 9 * 32.0 + 32.0;
 
-// The model's constants, measured on 2 cores of a Xeon through PoCL (ratios matter): a hemicube
-// shot at N = 256 over ~8k elements, host work per element per progressive pass (applying the
-// shot, the ambient share, the books), one Gauss–Seidel multiply-add, and a row's sparsification
-// per element.
-constexpr double kShotSeconds = 1.3e-3;
-constexpr double kPassSecondsPerElement = 1.7e-7;
+// The model's constants, fitted on 2 EPYC cores through PoCL after clusters, sparse rows and
+// occlusion culling (ratios matter): an OpenCL shot at N = 256 over ~8k elements, which grows
+// about as the square root of the elements (2.5 ms at 8k, 6.0 ms at 59k, 23.5 ms at 508k: culling
+// and clusters) and linearly with N (4.2× from 256 to 1024 on the Cornell box, 1.8× on the 1M
+// city); the reference's, which grows as N²; host work per element per progressive pass (a pass
+// walks only the elements its shot reached); one Gauss–Seidel multiply-add; a row's
+// sparsification per element.
+constexpr double kShotSeconds = 2.5e-3;
+constexpr double kReferenceShotSeconds = 6.8e-3;
+constexpr double kPassSecondsPerElement = 1e-9;
 constexpr double kSweepSecondsPerEntry = 1e-9;
 constexpr double kRowSecondsPerElement = 3e-9;
+// Progressive shots to converge: about 3 rounds of the patches on the Cornell box (2787 passes,
+// 924 patches), fewer rounds as scenes grow, whose patches mostly hold little light: 0.69 rounds
+// for a 15k-patch room, 0.35–0.62 for 28k–34k-patch cities and furniture. About 3·√(924·P).
 constexpr double kProgressiveRounds = 3.0;
+constexpr double kRoundsPatches = 924.0;
 constexpr double kOpenCLRuntimeBytes = 200e6;
 
 bool direct_only(const BakeShape& s) { return !s.matrix.interreflection; }
@@ -110,11 +118,14 @@ SolverTimes expected_times(const BakeShape& s) {
     const double E = s.counts.elements, P = s.counts.patches;
     const double channels = s.matrix.grey ? 1.0 : 3.0;
     // A shot's time grows with the elements it sets up and the cells it draws.
-    const double shot = kShotSeconds * (0.5 + 0.5 * E / 8316.0) * std::max(1.0, double(s.hemicube) * s.hemicube / (256.0 * 256.0));
+    const double scale = std::max(0.5, std::sqrt(E / 8316.0));
+    const double n = double(s.hemicube) / 256.0;
+    const double shot = s.opencl ? kShotSeconds * scale * std::max(1.0, n) : kReferenceShotSeconds * scale * std::max(1.0, n * n);
+    const double passes = kProgressiveRounds * std::sqrt(std::min(P, kRoundsPatches) * P);
     SolverTimes t;
     const double sweeps = direct_only(s) ? 0.0 : expected_sweeps(s);
     t.matrix = P * (shot + E * kRowSecondsPerElement) + sweeps * channels * P * P * kSweepSecondsPerEntry;
-    t.progressive = kProgressiveRounds * P * (shot + E * kPassSecondsPerElement);
+    t.progressive = passes * (shot + E * kPassSecondsPerElement);
     return t;
 }
 
