@@ -549,7 +549,9 @@ bool group_behind(const HrShot* shot, __global const HrElementLanes* group) {
 //   point of the bounding sphere (the plane's 1/depth scales by c/c_computed), with c_eff the
 //   smallest c less that and a group with c_eff <= 0 never hidden (a plane through the shooter);
 // - the rest is rounding of order 1e-15 relative, covered by the factor 1 + 1e-9, and a sphere
-//   within 1e-4 of its size from a face's eye plane is never hidden on it.
+//   within 1e-4 of its size from a face's eye plane is never hidden on it, unless it lies wholly
+//   outside the face's frustum (beyond a side plane by more than rounding: setup clips to the
+//   frustum, and a cell centre lies half a cell inside it), where it covers nothing on the face.
 // Triangles repeat their last vertex, so vertex 0 and the normal of live lanes suffice for c.
 bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __global const double* block_depth) {
     const Vec centre = to_local(shot, vec(group->bound[0], group->bound[1], group->bound[2]));
@@ -573,6 +575,12 @@ bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __gl
     for (int face = 0; face < HR_FACES; ++face) {
         const Vec f = to_face(face, centre);
         if (f.z + r <= 0.0) continue;                   // wholly behind this face's eye plane: not on it
+        // Wholly beyond one of the face's side planes (|x| = z, |y| = z; a side face's bottom is
+        // the base plane, y = 0): its elements, clipped to the frustum, cover none of its cells.
+        const double beyond = 1.4142135623730951 * r * (1.0 + 1e-9) + 1e-9 * size;
+        if (f.x - f.z > beyond || -f.x - f.z > beyond || f.y - f.z > beyond ||
+            (face == 0 ? -f.y - f.z > beyond : -f.y > r * (1.0 + 1e-9) + 1e-9 * size))
+            continue;
         if (f.z - r <= 1e-4 * size) return false;       // (near) the eye plane: no bound
         const double near_depth = f.z - r, far_depth = f.z + r;
         const double s_lo = fmin((f.x - r) / near_depth, (f.x - r) / far_depth) - delta;
