@@ -553,18 +553,26 @@ bool group_behind(const HrShot* shot, __global const HrElementLanes* group) {
 //   outside the face's frustum (beyond a side plane by more than rounding: setup clips to the
 //   frustum, and a cell centre lies half a cell inside it), where it covers nothing on the face.
 // Triangles repeat their last vertex, so vertex 0 and the normal of live lanes suffice for c.
-bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __global const double* block_depth) {
-    const Vec centre = to_local(shot, vec(group->bound[0], group->bound[1], group->bound[2]));
-    const double r = group->bound[3];
-    const double size = fabs(centre.x) + fabs(centre.y) + fabs(centre.z) + r;
-    const double extent = size + r;  // >= the 1-norm of any point of the sphere less the origin
+// The least distance |n . (v - origin)| of a lane group's live elements' planes from the shooter,
+// as computed (INFINITY when no lane is live).
+double group_plane_distance(const HrShot* shot, __global const HrElementLanes* group) {
     const llong live = convert_long8(vload8(0, group->n)) > 0;
     const ldouble c = fabs(vload8(0, group->normal) * (vload8(0, group->v) - shot->origin[0]) +
                            vload8(1, group->normal) * (vload8(1, group->v) - shot->origin[1]) +
                            vload8(2, group->normal) * (vload8(2, group->v) - shot->origin[2]));
     const ldouble c_live = select((ldouble)(INFINITY), c, live);
     const double4 c_half = fmin(c_live.lo, c_live.hi);
-    const double c_min = fmin(fmin(c_half.x, c_half.y), fmin(c_half.z, c_half.w)) - 1e-12 * extent;
+    return fmin(fmin(c_half.x, c_half.y), fmin(c_half.z, c_half.w));
+}
+
+// Whether every element inside the sphere bound = {x, y, z, radius} (world), whose planes lie at
+// least c_raw from the shooter as group_plane_distance computes it, is hidden (see above).
+bool sphere_hidden(const HrShot* shot, const double* bound, double c_raw, __global const double* block_depth) {
+    const Vec centre = to_local(shot, vec(bound[0], bound[1], bound[2]));
+    const double r = bound[3];
+    const double size = fabs(centre.x) + fabs(centre.y) + fabs(centre.z) + r;
+    const double extent = size + r;  // >= the 1-norm of any point of the sphere less the origin
+    const double c_min = c_raw - 1e-12 * extent;
     if (!(c_min > 0.0) || c_min == INFINITY) return false;
 
     const int n = shot->n;
@@ -603,6 +611,11 @@ bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __gl
                 if (!(bound < depth[by * depth_blocks_x(n) + bx])) return false;
     }
     return true;
+}
+
+bool group_hidden(const HrShot* shot, __global const HrElementLanes* group, __global const double* block_depth) {
+    const double bound[4] = {group->bound[0], group->bound[1], group->bound[2], group->bound[3]};
+    return sphere_hidden(shot, bound, group_plane_distance(shot, group), block_depth);
 }
 
 void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int first,
@@ -865,7 +878,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrElement* elements,
     __global const HrElementLanes* element_lanes, __global const HrPatch* patches, __global HrRecord* records,
     __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts, __global long* sums,
-    __global const int* clusters, __global const double* block_depth, const int occluded) {
+    __global const int* clusters, __global const double* block_depth, __global const double* cluster_bounds,
+    const int occluded) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
@@ -894,16 +908,33 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     if (cluster >= 0)
         for (int l = 0; l < HR_SETUP_LANES && p * HR_SETUP_LANES + l < shot->elements; ++l)
             sums[p * HR_SETUP_LANES + l] = 0;
-    // occluded: the occluder pass has drawn this shot's depth blocks (group_hidden); the groups
-    // tested and those hidden are counted for benchmarks, once per work-group.
+    // occluded: the occluder pass has drawn this shot's depth blocks. The whole cluster is tested
+    // first (its bounding sphere, cluster_bounds[cluster], and the least plane distance of its
+    // groups: the bound of group_hidden holds for any sphere holding the elements), then, where it
+    // is not hidden, each group (group_hidden). The groups tested and those hidden are counted
+    // for benchmarks, once per work-group.
     __local uint tested, hidden;
+    __local double plane_distance[HEMIRAD_WG];
+    __local int cluster_hidden;
     if (get_local_id(0) == 0) tested = hidden = 0;
+    const bool live_group = !kept && cluster >= 0 && p * HR_SETUP_LANES < shot->elements &&
+                            !(HEMIRAD_CULL && group_behind(shot, element_lanes + p));
+    if (occluded && !kept && cluster >= 0) {  // the same for the whole work-group
+        plane_distance[get_local_id(0)] = live_group ? group_plane_distance(shot, element_lanes + p) : INFINITY;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (get_local_id(0) == 0) {
+            double c = INFINITY;
+            for (int l = 0; l < HEMIRAD_WG; ++l) c = fmin(c, plane_distance[l]);
+            const double bound[4] = {cluster_bounds[4 * cluster], cluster_bounds[4 * cluster + 1],
+                                     cluster_bounds[4 * cluster + 2], cluster_bounds[4 * cluster + 3]};
+            cluster_hidden = sphere_hidden(shot, bound, c, block_depth + b * depth_stride(shot->n));
+        }
+    }
     barrier(CLK_LOCAL_MEM_FENCE);
-    if (!kept && cluster >= 0 && p * HR_SETUP_LANES < shot->elements &&
-        !(HEMIRAD_CULL && group_behind(shot, element_lanes + p))) {
+    if (live_group) {
         bool drop = false;
         if (occluded) {
-            drop = group_hidden(shot, element_lanes + p, block_depth + b * depth_stride(shot->n));
+            drop = cluster_hidden || group_hidden(shot, element_lanes + p, block_depth + b * depth_stride(shot->n));
             atomic_inc(&tested);
             if (drop) atomic_inc(&hidden);
         }

@@ -417,6 +417,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
         elements_ = upload(cl_context, queue, packed.elements);
         element_lanes_ = upload(cl_context, queue, packed.lanes);
         patches_ = upload(cl_context, queue, packed.patches);
+        std::vector<double> spheres;  // for setup's test of whole clusters
+        for (const std::array<double, 4>& b : cluster_bounds_) spheres.insert(spheres.end(), b.begin(), b.end());
+        cluster_spheres_ = upload(cl_context, queue, spheres);
         delta_fixed_ = upload(cl_context, queue, delta_fixed);
         allocate_batch(1);
     } catch (const cl::Error& e) {
@@ -587,7 +590,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
                                             occluder_rows_.data());
     const auto bind_setup = [&](const cl::Buffer& rows, bool occluded) {
         bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_,
-             tile_counts_, sums_, rows, block_depth_, hr_int{occluded ? 1 : 0});
+             tile_counts_, sums_, rows, block_depth_, cluster_spheres_, hr_int{occluded ? 1 : 0});
     };
     const auto bind_scan = [&](std::size_t launch_groups) {
         bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_, group_records_,

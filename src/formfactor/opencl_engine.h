@@ -164,7 +164,7 @@ private:
 
     cl::Kernel setup_, scan_, scatter_, raster_;  // raster_: raster or raster_records
     cl::Buffer shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_,
-        cursors_, lists_, delta_fixed_, ids_buffer_, sums_;
+        cursors_, lists_, delta_fixed_, ids_buffer_, sums_, cluster_spheres_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
     std::size_t batch_capacity_ = 0;       // shots the per-shot buffers hold
     bool counts_zero_ = false;             // tile_counts_ all zero (as every completed launch leaves them)
