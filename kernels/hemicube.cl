@@ -917,8 +917,12 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     __local double plane_distance[HEMIRAD_WG];
     __local int cluster_hidden;
     if (get_local_id(0) == 0) tested = hidden = 0;
-    const bool live_group = !kept && cluster >= 0 && p * HR_SETUP_LANES < shot->elements &&
-                            !(HEMIRAD_CULL && group_behind(shot, element_lanes + p));
+    const bool in_range = !kept && cluster >= 0 && p * HR_SETUP_LANES < shot->elements;
+#if HEMIRAD_CULL  // (not `HEMIRAD_CULL && …`: a constant operand draws a compiler warning on every build)
+    const bool live_group = in_range && !group_behind(shot, element_lanes + p);
+#else
+    const bool live_group = in_range;
+#endif
     if (occluded && !kept && cluster >= 0) {  // the same for the whole work-group
         plane_distance[get_local_id(0)] = live_group ? group_plane_distance(shot, element_lanes + p) : INFINITY;
         barrier(CLK_LOCAL_MEM_FENCE);
