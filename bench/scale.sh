@@ -145,6 +145,8 @@ def table():
         pe = f"{r['patches']} / {elements}" if elements else "–"
         passes = f"{r['solver']}, {r['passes']}" if r.get("passes") is not None else "–"
         status = r["status"] + (f" ({r['progress']})" if r["status"] == "timeout" and r.get("progress") else "")
+        if r["status"] == "ok" and r.get("converged") is False:  # stopped at --max-passes, not at the threshold
+            status += ", not converged" + (f" (error {r['error']:.2g})" if r.get("error") is not None else "")
         per = f"{r['peak_rss_bytes'] / elements:,.0f}" if elements else "–"
         load = f"{r['load_before']:.1f}, {r['load_after']:.1f}"
         rows.append(f"| {r['kind']}:{r['count']} | {r['triangles']:,} | {r['quality']} | {pe} | {passes} | {status} | "
@@ -182,7 +184,7 @@ for kind in kinds.split(","):
             c = rep["counts"]
             run.update({"patches": c["patches"], "elements": c["elements"],
                         "elements_before_refinement": c["elements_before_refinement"], "passes": rep["passes"],
-                        "solver": rep["settings"]["solver"], "converged": rep["converged"],
+                        "solver": rep["settings"]["solver"], "converged": rep["converged"], "error": rep.get("error"),
                         "device": rep["device"]["name"] or rep["device"]["backend"],
                         "memory_estimate_bytes": rep["plan"]["memory"]["estimate"],
                         # Where the time and the planned memory go: what the engine work needs to see.
