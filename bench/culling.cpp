@@ -29,25 +29,10 @@ using namespace hemirad;
 namespace {
 
 // procedural:10k with the objects of procedural:<count> moved 20 m down, under its floor, or
-// (beside) 20 m along +x, beyond its wall.
+// (beside) 20 m along +x, beyond its wall; procedural:10k alone for 0.
 scene::Scene room_with_clutter(std::size_t count, bool beside) {
-    scene::Scene s = scene::procedural_scene(10000);
-    if (count == 0) return s;
-    const scene::Scene clutter = scene::procedural_scene(count);
-    const auto nodes = static_cast<std::uint32_t>(s.nodes.size());
-    std::uint32_t primitives = 0;
-    for (const auto& t : s.triangles) primitives = std::max(primitives, t.primitive + 1);
-    for (scene::Triangle t : clutter.triangles) {
-        if (t.node < 2) continue;  // its room and light stay out
-        for (auto& p : t.p) (beside ? p.x : p.y) += beside ? 20.0 : -20.0;
-        t.node += nodes;
-        t.primitive += primitives;
-        s.triangles.push_back(t);
-    }
-    s.nodes.insert(s.nodes.end(), clutter.nodes.begin(), clutter.nodes.end());
-    if (beside) s.bbox_max.x += 20.0;
-    else s.bbox_min.y -= 20.0;
-    return s;
+    if (count == 0) return scene::procedural_scene(10000);
+    return scene::procedural_with_clutter(10000, count, beside ? scene::Clutter::beyond : scene::Clutter::below);
 }
 
 double ms_per_shot(formfactor::Engine& engine, const std::vector<std::uint32_t>& shooters, int repeats) {

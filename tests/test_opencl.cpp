@@ -124,20 +124,7 @@ TEST_CASE("opencl: occlusion culling hides lane groups and changes no cell", "[o
     {  // a room, and objects standing on its floor's level 20 m beyond its +x wall: from the floor
        // they lie near the base plane and across the side faces' eye planes, but outside those
        // faces' frusta (hemirad_bench_culling's scene, smaller)
-        scene::Scene s = scene::procedural_scene(2000);
-        const scene::Scene clutter = scene::procedural_scene(20000);
-        const auto nodes = static_cast<std::uint32_t>(s.nodes.size());
-        std::uint32_t primitives = 0;
-        for (const auto& t : s.triangles) primitives = std::max(primitives, t.primitive + 1);
-        for (scene::Triangle t : clutter.triangles) {
-            if (t.node < 2) continue;  // its room and light stay out
-            for (auto& p : t.p) p.x += 20.0;
-            t.node += nodes;
-            t.primitive += primitives;
-            s.triangles.push_back(t);
-        }
-        s.nodes.insert(s.nodes.end(), clutter.nodes.begin(), clutter.nodes.end());
-        s.bbox_max.x += 20.0;
+        scene::Scene s = scene::procedural_with_clutter(2000, 20000, scene::Clutter::beyond);
         const double patch = 10.0 * std::sqrt(3.0) / 16.0;
         cases.push_back({"beyond a wall", std::move(s), {patch, patch / 3.0}});
     }

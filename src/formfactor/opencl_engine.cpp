@@ -316,7 +316,6 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
       context_(context),
       settings_(settings),
       tuning_(tuning),
-      cells_(3 * static_cast<std::size_t>(std::max(settings.hemicube, 2)) * static_cast<std::size_t>(std::max(settings.hemicube, 2))),
       fault_(fault) {
     const ocl::DeviceInfo& info = context.info();
     if (settings.hemicube < 8 || settings.hemicube % 2 != 0 || settings.hemicube > kMaxHemicube)
@@ -449,7 +448,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     block_depth_ = buffer(depth_blocks() * sizeof(hr_double));
     cursors_ = buffer(counters * sizeof(hr_uint));
     lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
-    ids_buffer_ = buffer(cells_ * sizeof(hr_int));
+    ids_buffer_ = buffer(cells() * sizeof(hr_int));
     sums_ = buffer(sum_stride() * sizeof(hr_long));
     sums_host_.assign(shots * sum_stride(), 0);
     ids_.assign(shots, {});  // read back only when asked for (last_ids: tests and --verify)
@@ -489,7 +488,7 @@ double OpenCLEngine::shot_bytes(double elements, int hemicube) {
 
 std::size_t OpenCLEngine::memory_batch() const {
     const std::size_t per_shot = record_slots() * (sizeof(HrRecord) + sizeof(HrBox)) +
-                                 std::size_t{list_capacity_} * sizeof(hr_uint) + cells_ * sizeof(hr_int) +
+                                 std::size_t{list_capacity_} * sizeof(hr_uint) + cells() * sizeof(hr_int) +
                                  sum_stride() * sizeof(hr_long);
     const std::size_t budget =
         tuning_.batch_memory > 0 ? tuning_.batch_memory : launch_budget(context_.info().type == "cpu", context_.info().global_memory);
@@ -790,9 +789,9 @@ const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t shot) const 
     if (shot < ids_first_ || shot - ids_first_ >= last_batch_) return nullptr;
     const std::size_t i = shot - ids_first_;
     if (ids_stale_[i] || ids_[i].empty()) {
-        ids_[i].resize(cells_);
-        context_.queue().enqueueReadBuffer(ids_buffer_, CL_TRUE, i * cells_ * sizeof(std::int32_t),
-                                           cells_ * sizeof(std::int32_t), ids_[i].data());
+        ids_[i].resize(cells());
+        context_.queue().enqueueReadBuffer(ids_buffer_, CL_TRUE, i * cells() * sizeof(std::int32_t),
+                                           cells() * sizeof(std::int32_t), ids_[i].data());
         ids_stale_[i] = false;
     }
     return &ids_[i];

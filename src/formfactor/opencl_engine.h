@@ -147,7 +147,8 @@ private:
     Settings settings_;
     OpenCLTuning tuning_;
     std::string options_;
-    std::size_t cells_;               // of the hemicube: n² on the top face, n²/2 on each side
+    // Of the hemicube: n² on the top face, n²/2 on each side; a face's rows of n cells.
+    std::size_t cells() const { return 3 * std::size_t(settings_.hemicube) * std::size_t(settings_.hemicube); }
     int face_rows(int face) const { return face == 0 ? settings_.hemicube : settings_.hemicube / 2; }
     double eps_;                      // base-plane clip distance, as the reference computes it
     std::array<int, 6> tile_base_{};  // first tile of each face, then the tile count

@@ -351,6 +351,13 @@ struct Part {
     const PatchCells* cells;
 };
 
+// How far a cluster's shooting point must rise along its mean normal, from its area centroid, to
+// stand in front of the plane through `point` with unit normal `plane` (Patch): the cluster's
+// lift is the largest of these over its elements' planes, and no less than 0.
+double plane_lift(const dvec3& point, const dvec3& plane, const dvec3& centroid, const dvec3& normal) {
+    return glm::dot(point - centroid, plane) / glm::dot(normal, plane);
+}
+
 // Appends one patch of one side, followed by its contiguous elements: a cell of a face's grid
 // (one part), or a cluster of small faces (their cells' elements, poly.n = 0).
 // `from`, where set, is the point a cluster shoots from instead (see split_blocked_clusters).
@@ -410,7 +417,7 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Mater
         double lift = 0.0;
         for (std::uint32_t k = patch.first_element; k < patch.first_element + patch.element_count; ++k) {
             const Element& e = mesh.elements[k];
-            lift = std::max(lift, glm::dot(e.centroid - centroid, e.normal) / glm::dot(patch.normal, e.normal));
+            lift = std::max(lift, plane_lift(e.centroid, e.normal, centroid, patch.normal));
         }
         patch.centroid = from ? *from : centroid + lift * patch.normal;
         patch.area = area;
@@ -613,20 +620,21 @@ bool segment_meets(const dvec3& a, const dvec3& b, const Polygon& poly) {
 // normal by a margin (far above the engines' clip distance), must meet no face outside the cluster.
 void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& scene, const Settings& settings,
                             Clusters& c) {
+    if (std::none_of(c.faces.begin(), c.faces.end(), [](const auto& m) { return m.size() > 1; })) return;
     dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
     for (const Face& face : faces)
         for (int k = 0; k < face.poly.n; ++k) {
             lo = glm::min(lo, face.poly.v[std::size_t(k)]);
             hi = glm::max(hi, face.poly.v[std::size_t(k)]);
         }
-    if (std::none_of(c.faces.begin(), c.faces.end(), [](const auto& m) { return m.size() > 1; })) return;
     const double extent = std::max({std::abs(lo.x), std::abs(lo.y), std::abs(lo.z), std::abs(hi.x), std::abs(hi.y),
                                     std::abs(hi.z), 1e-30});
     // About four cells per patch, but at most 2^7 across the scene (and so far from the keys' range).
     const FaceGrid grid(faces, lo, std::max({0.25 * settings.patch_size, glm::length(hi - lo) / 128.0, 1e-30}));
     const double margin = 1e-6 * extent;
 
-    std::vector<std::int64_t> owner = c.of;
+    // Splitting gives a cluster's faces ids past `clusters`, so c.of still tells every later
+    // cluster's own faces from the rest.
     const std::size_t clusters = c.faces.size();
     for (std::size_t id = 0; id < clusters; ++id) {
         const std::vector<std::size_t>& members = c.faces[id];
@@ -651,8 +659,8 @@ void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& 
         for (const double side : {1.0, -1.0}) {
             if (side < 0.0 && !double_sided) break;
             double lift = 0.0;
-            for (const Shape& sh : shapes)
-                lift = std::max(lift, side * glm::dot(sh.centroid - centroid, sh.normal) / glm::dot(normal, sh.normal));
+            for (const Shape& sh : shapes)  // a back side's planes and mean normal are the front's reversed
+                lift = std::max(lift, plane_lift(sh.centroid, side * sh.normal, centroid, side * normal));
             const dvec3 point = centroid + side * lift * normal;
             nearest = 0;
             for (std::size_t i = 1; i < shapes.size(); ++i)
@@ -660,7 +668,7 @@ void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& 
             // Both ends a margin in front, so that faces meeting the cluster's plane at an edge
             // or in contact with it do not count.
             const dvec3 off = side * margin * normal, a = shapes[nearest].centroid + off, b = point + off;
-            blocked = grid.any(a, b, [&](std::uint32_t f) { return owner[f] != std::int64_t(id) && segment_meets(a, b, faces[f].poly); });
+            blocked = grid.any(a, b, [&](std::uint32_t f) { return c.of[f] != std::int64_t(id) && segment_meets(a, b, faces[f].poly); });
             if (blocked) break;
         }
         if (!blocked) continue;

@@ -373,6 +373,25 @@ Scene procedural_scene(std::size_t triangles, std::uint64_t seed) {
     return scene;
 }
 
+Scene procedural_with_clutter(std::size_t room, std::size_t clutter, Clutter where) {
+    Scene s = procedural_scene(room);
+    const Scene objects = procedural_scene(clutter);
+    const auto nodes = static_cast<std::uint32_t>(s.nodes.size());
+    std::uint32_t primitives = 0;
+    for (const auto& t : s.triangles) primitives = std::max(primitives, t.primitive + 1);
+    for (Triangle t : objects.triangles) {
+        if (t.node < 2) continue;  // its room and light stay out
+        for (auto& p : t.p) (where == Clutter::beyond ? p.x : p.y) += where == Clutter::beyond ? 20.0 : -20.0;
+        t.node += nodes;
+        t.primitive += primitives;
+        s.triangles.push_back(t);
+    }
+    s.nodes.insert(s.nodes.end(), objects.nodes.begin(), objects.nodes.end());
+    if (where == Clutter::beyond) s.bbox_max.x += 20.0;
+    else s.bbox_min.y -= 20.0;
+    return s;
+}
+
 std::optional<std::size_t> parse_procedural_spec(const std::string& spec) {
     return parse_count_spec(spec, "procedural:");
 }

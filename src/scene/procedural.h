@@ -25,6 +25,15 @@ inline constexpr std::size_t kMaxProceduralTriangles = 50'000'000;
 // "procedural:<count>" written as 1M, 100k or plain digits, for messages and reports.
 Scene procedural_scene(std::size_t triangles, std::uint64_t seed = 1);
 
+// Where procedural_with_clutter puts the extra objects: 20 m below the room's floor (behind every
+// floor shooter) or 20 m along +x, beyond its wall (in front of them, hidden by the wall).
+enum class Clutter { below, beyond };
+
+// procedural_scene(room) with the objects of procedural_scene(clutter) (not its room or light)
+// moved out of the room as `where` says, in nodes and primitives of their own: what hidden
+// geometry costs a shot (bench/culling.cpp) and what occlusion culling may hide (the tests).
+Scene procedural_with_clutter(std::size_t room, std::size_t clutter, Clutter where);
+
 // "procedural:<count>" with count a whole number, optionally with a k (×1000) or M (×10⁶) suffix
 // and then a decimal fraction ("procedural:100", "procedural:100k", "procedural:2.5M"). Returns
 // nullopt when `spec` does not start with "procedural:" (it names a file); throws InputError with
