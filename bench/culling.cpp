@@ -62,6 +62,17 @@ void check(formfactor::Engine& engine, formfactor::ReferenceEngine& reference,
     }
 }
 
+// Device time per stage (ms a shot) and the lane groups occlusion culling hid.
+std::string stage_line(const formfactor::OpenCLEngine& engine, double shots) {
+    std::string line;
+    for (std::size_t k = 0; k < formfactor::OpenCLEngine::kStages; ++k)
+        line += fmt::format("{} {:.3f} ms, ", formfactor::OpenCLEngine::kStageNames[k],
+                            1e3 * engine.stage_seconds()[k] / shots);
+    const double tested = static_cast<double>(engine.occlusion_tested());
+    return line + fmt::format("{:.0f}% of {:.0f} lane groups tested hidden", tested > 0 ? 100.0 * static_cast<double>(engine.occlusion_hidden()) / tested : 0.0,
+                              tested);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -80,9 +91,10 @@ int main(int argc, char** argv) {
         ocl::Context context(devices.front());
         std::cout << fmt::format("floor shooters of procedural:10k, N = {}, {} shots × {} repeats, {}\n\n", hemicube,
                                  shots, repeats, devices.front().name);
-        std::cout << "| hidden triangles | where | elements | OpenCL | OpenCL, no occlusion culling | OpenCL, no "
-                     "culling | Embree |\n|---|---|---|---|---|---|---|\n";
+        std::cout << "| hidden triangles | where | elements | OpenCL | OpenCL, occlusion culling every shot | "
+                     "OpenCL, no occlusion culling | OpenCL, no culling | Embree |\n|---|---|---|---|---|---|---|---|\n";
         const std::size_t room_triangles = room_with_clutter(0, false).triangles.size();
+        std::vector<std::string> stage_lines;
         struct Row {
             std::size_t count;
             bool beside;
@@ -99,14 +111,19 @@ int main(int argc, char** argv) {
             for (int i = 0; i < shots; ++i) shooters.push_back(floor[static_cast<std::size_t>(i) * 7 % floor.size()]);
             const formfactor::Settings settings{hemicube, 1};
             formfactor::ReferenceEngine reference(m, settings);
-            std::vector<double> cells;  // the default (occlusion culling where it pays), none, no culling at all
-            for (int variant = 0; variant < 3; ++variant) {
+            // The default (occlusion culling where it pays), on every shot, none, no culling at all.
+            std::vector<double> cells;
+            std::string stages;  // of occlusion culling on every shot
+            for (int variant = 0; variant < 4; ++variant) {
                 formfactor::OpenCLTuning tuning = formfactor::default_tuning(context.info());
-                if (variant > 0) tuning.occlusion = formfactor::Occlusion::off;
-                tuning.cull = variant < 2;
+                if (variant == 1) tuning.occlusion = formfactor::Occlusion::on;
+                if (variant > 1) tuning.occlusion = formfactor::Occlusion::off;
+                tuning.cull = variant < 3;
                 formfactor::OpenCLEngine engine(m, context, settings, tuning);
                 check(engine, reference, shooters, bench::kRasterizer);
                 cells.push_back(ms_per_shot(engine, shooters, repeats));
+                if (variant == 1)  // over every shot of the engine: checked, warm-up and timed
+                    stages = stage_line(engine, static_cast<double>(shooters.size()) * (2.0 + repeats) + 1.0);
             }
             std::string embree = "–";
 #if HEMIRAD_HAVE_EMBREE
@@ -114,11 +131,16 @@ int main(int argc, char** argv) {
             check(rays, reference, shooters, bench::kRayCaster);
             embree = fmt::format("{:.2f} ms", ms_per_shot(rays, shooters, repeats));
 #endif
-            std::cout << fmt::format("| {} | {} | {} | {:.2f} ms | {:.2f} ms | {:.2f} ms | {} |\n",
+            std::cout << fmt::format("| {} | {} | {} | {:.2f} ms | {:.2f} ms | {:.2f} ms | {:.2f} ms | {} |\n",
                                      s.triangles.size() - room_triangles,
                                      row.count == 0 ? "–" : row.beside ? "beyond a wall" : "below the floor",
-                                     m.elements.size(), cells[0], cells[1], cells[2], embree);
+                                     m.elements.size(), cells[0], cells[1], cells[2], cells[3], embree);
+            stage_lines.push_back(fmt::format("{} {}: {}", s.triangles.size() - room_triangles,
+                                              row.count == 0 ? "–" : row.beside ? "beyond a wall" : "below the floor",
+                                              stages));
         }
+        std::cout << "\nWith occlusion culling on every shot:\n";
+        for (const std::string& line : stage_lines) std::cout << "- " << line << "\n";
     } catch (const std::exception& e) {
         std::cerr << "hemirad_bench_culling: " << e.what() << "\n";
         return 1;

@@ -878,8 +878,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const HrShot first_shot, __global const HrShot* more_shots, __global const HrElement* elements,
     __global const HrElementLanes* element_lanes, __global const HrPatch* patches, __global HrRecord* records,
     __global HrBox* boxes, __global uint* group_records, __global uint* tile_counts, __global long* sums,
-    __global const int* clusters, __global const double* block_depth, __global const double* cluster_bounds,
-    const int occluded) {
+    __global const int* clusters, __global const double* block_depth, const int occluded) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
@@ -908,14 +907,10 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     if (cluster >= 0)
         for (int l = 0; l < HR_SETUP_LANES && p * HR_SETUP_LANES + l < shot->elements; ++l)
             sums[p * HR_SETUP_LANES + l] = 0;
-    // occluded: the occluder pass has drawn this shot's depth blocks. The whole cluster is tested
-    // first (its bounding sphere, cluster_bounds[cluster], and the least plane distance of its
-    // groups: the bound of group_hidden holds for any sphere holding the elements), then, where it
-    // is not hidden, each group (group_hidden). The groups tested and those hidden are counted
-    // for benchmarks, once per work-group.
+    // occluded: the occluder pass has drawn this shot's depth blocks, and the host launched only
+    // the clusters cull_clusters did not hide whole; each lane group is tested (group_hidden). The
+    // groups tested and those hidden are counted for benchmarks, once per work-group.
     __local uint tested, hidden;
-    __local double plane_distance[HEMIRAD_WG];
-    __local int cluster_hidden;
     if (get_local_id(0) == 0) tested = hidden = 0;
     const bool in_range = !kept && cluster >= 0 && p * HR_SETUP_LANES < shot->elements;
 #if HEMIRAD_CULL  // (not `HEMIRAD_CULL && …`: a constant operand draws a compiler warning on every build)
@@ -923,22 +918,11 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
 #else
     const bool live_group = in_range;
 #endif
-    if (occluded && !kept && cluster >= 0) {  // the same for the whole work-group
-        plane_distance[get_local_id(0)] = live_group ? group_plane_distance(shot, element_lanes + p) : INFINITY;
-        barrier(CLK_LOCAL_MEM_FENCE);
-        if (get_local_id(0) == 0) {
-            double c = INFINITY;
-            for (int l = 0; l < HEMIRAD_WG; ++l) c = fmin(c, plane_distance[l]);
-            const double bound[4] = {cluster_bounds[4 * cluster], cluster_bounds[4 * cluster + 1],
-                                     cluster_bounds[4 * cluster + 2], cluster_bounds[4 * cluster + 3]};
-            cluster_hidden = sphere_hidden(shot, bound, c, block_depth + b * depth_stride(shot->n));
-        }
-    }
     barrier(CLK_LOCAL_MEM_FENCE);
     if (live_group) {
         bool drop = false;
         if (occluded) {
-            drop = cluster_hidden || group_hidden(shot, element_lanes + p, block_depth + b * depth_stride(shot->n));
+            drop = group_hidden(shot, element_lanes + p, block_depth + b * depth_stride(shot->n));
             atomic_inc(&tested);
             if (drop) atomic_inc(&hidden);
         }
@@ -976,6 +960,44 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     if (get_local_id(0) == 0) group_records[get_group_id(0)] = count;
     bin_records(shot, patches, boxes, count, tile_counts, 0);
 }
+
+#if HEMIRAD_SETUP_LANES
+// Occlusion culling of whole clusters, between the occluder pass and the final pass: a work-item
+// per entry of a shot's row of clusters (clusters, row_length entries a shot): the cluster's
+// bounding sphere and the least plane distance of its live groups, the bound of group_hidden,
+// which holds for any sphere that holds the elements. hidden[entry] is the number of the cluster's live lane groups
+// (not wholly behind the base plane) where the occluder pass's depths hide it, else 0 (and 0 for
+// an entry that is no cluster to set up: -1, or an occluder, -2 - c). The host then launches
+// setup on the clusters not hidden alone: a hidden cluster costs no work-group, clear or read.
+__kernel void cull_clusters(const HrShot first_shot, __global const HrShot* more_shots,
+                            __global const HrElementLanes* element_lanes, __global const int* clusters,
+                            const int row_length, __global const double* block_depth,
+                            __global const double* cluster_bounds, __global int* hidden) {
+    const size_t b = get_global_id(1);
+    const int g = (int)get_global_id(0);
+    if (g >= row_length) return;
+    const HrShot shot_value = batch_shot(first_shot, more_shots, b);
+    const HrShot* shot = &shot_value;
+    const int cluster = clusters[b * row_length + g];
+    int live = 0;
+    if (cluster >= 0) {
+        double c = INFINITY;
+        for (int l = 0; l < HEMIRAD_WG; ++l) {
+            const int p = cluster * HEMIRAD_WG + l;
+            if (p * HR_SETUP_LANES >= shot->elements) break;
+#if HEMIRAD_CULL
+            if (group_behind(shot, element_lanes + p)) continue;
+#endif
+            ++live;
+            c = fmin(c, group_plane_distance(shot, element_lanes + p));
+        }
+        const double bound[4] = {cluster_bounds[4 * cluster], cluster_bounds[4 * cluster + 1],
+                                 cluster_bounds[4 * cluster + 2], cluster_bounds[4 * cluster + 3]};
+        if (!sphere_hidden(shot, bound, c, block_depth + b * depth_stride(shot->n))) live = 0;
+    }
+    hidden[b * row_length + g] = live;
+}
+#endif
 
 // One work-group: exclusive prefix sum of the tile counts, tile by tile and within a tile copy
 // by copy, into list offsets (and the scatter cursors, laid out as the counts): a tile's list is

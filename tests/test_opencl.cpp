@@ -148,6 +148,21 @@ TEST_CASE("opencl: occlusion culling hides lane groups and changes no cell", "[o
         CHECK(cl.occlusion_hidden() > (c.name == "grazing slabs" ? 0 : cl.occlusion_tested() / share));
         check_matches_reference(r);
         CHECK(r.worst_total <= 1e-12);
+        // Shots in one launch: each shot's row of clusters loses those it hides (cull_clusters),
+        // so the rows are cut and re-laid at the length of the longest.
+        std::vector<formfactor::ShotRequest> batch;
+        for (std::uint32_t i = 0; i < 6; ++i)
+            batch.push_back(formfactor::ShotRequest::of_patch(
+                static_cast<std::uint32_t>((std::size_t{i} * 104729u + 11u) % m.patches.size()), 2000u + i));
+        std::vector<formfactor::ShotResult> got;
+        const std::uint64_t hidden_before = cl.occlusion_hidden();
+        cl.shoot_batch(batch, got);
+        if (c.name != "grazing slabs") CHECK(cl.occlusion_hidden() > hidden_before);
+        for (std::size_t i = 0; i < batch.size(); ++i) {
+            formfactor::ShotResult want;
+            ref.shoot(batch[i].shooter.patch, batch[i].shot, want);
+            CHECK(formfactor::compare_shot(got[i], want).empty());
+        }
     }
 }
 

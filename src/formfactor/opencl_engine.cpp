@@ -126,7 +126,9 @@ std::size_t select_clusters(const std::vector<std::array<double, 4>>& bounds, co
 
 // The occluder pass's clusters: per shot, the one in `share` of its clusters in front (at least
 // one) whose bounding spheres come nearest the shooter, nearest first, those most likely to hide
-// the rest. Fills `rows` as select_clusters does and returns the row length; and rewrites
+// the rest. (Ranked by the angle they span instead, with those narrower than a depth block left
+// out, they hid less of city:1M: 41% of its lane groups against 51% at N = 64, 8.7 against 7.7 ms
+// a shot.) Fills `rows` as select_clusters does and returns the row length; and rewrites
 // `final_rows` (select_clusters' rows, of length `final_length`) to start with the same
 // clusters as -2 - c, at the same work-groups, so that the final pass keeps their records.
 std::size_t select_occluders(const std::vector<std::array<double, 4>>& bounds, const std::vector<HrShot>& shots,
@@ -347,6 +349,7 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
     scan_ = cl::Kernel(program, "scan");
     scatter_ = cl::Kernel(program, "scatter");
     raster_ = cl::Kernel(program, tuning.raster_per_record ? "raster_records" : "raster");
+    if (tuning.setup_lanes) cull_ = cl::Kernel(program, "cull_clusters");
     check_layout(context, program);
     const auto check_group = [&](cl::Kernel& kernel, const char* name, int size) {
         const std::size_t most = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(context.device());
@@ -375,7 +378,9 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
     }
 
     // Clusters, a setup work-group's elements each (lanes setup): their bounding spheres, for
-    // select_clusters on the host.
+    // select_clusters on the host. (Clusters of near lane groups, in the Morton order of their
+    // spheres, were tried: at city:1M their spheres hid fewer groups, 37% against 40% at N = 64,
+    // and setup, reading scattered groups, took 40% longer.)
     if (tuning.setup_lanes)
         for (std::size_t first = 0; first < mesh.elements.size(); first += cluster_elements())
             cluster_bounds_.push_back(bounding_sphere(mesh, first, cluster_elements()));
@@ -445,6 +450,8 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
     offsets_ = buffer((counters + 1) * sizeof(hr_uint));
     clusters_ = buffer(setup_groups() * sizeof(hr_int));
     occluders_ = buffer(setup_groups() * sizeof(hr_int));
+    hidden_ = buffer(setup_groups() * sizeof(hr_int));
+    hidden_host_.assign(shots * setup_groups(), 0);
     block_depth_ = buffer(depth_blocks() * sizeof(hr_double));
     cursors_ = buffer(counters * sizeof(hr_uint));
     lists_ = buffer(std::size_t{list_capacity_} * sizeof(hr_uint));
@@ -458,7 +465,7 @@ void OpenCLEngine::allocate_batch(std::size_t shots) {
 
 void OpenCLEngine::release_batch() {
     for (cl::Buffer* b : {&shots_, &records_, &boxes_, &group_records_, &tile_counts_, &offsets_, &clusters_,
-                          &occluders_, &block_depth_, &cursors_, &lists_, &ids_buffer_, &sums_})
+                          &occluders_, &hidden_, &block_depth_, &cursors_, &lists_, &ids_buffer_, &sums_})
         *b = cl::Buffer();
     batch_capacity_ = 0;
     counts_zero_ = false;
@@ -563,7 +570,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     // through shots_ (batch_shot in the kernels).
     const HrShot& first = shots[0];
     // Lanes setup: a work-group per cluster in front of the shooter (the most any shot has).
-    const std::size_t groups =
+    std::size_t groups =
         tuning_.setup_lanes ? select_clusters(cluster_bounds_, shots, tuning_.cull, shot_clusters_, cluster_rows_)
                             : setup_groups();
     // Occlusion culling: where shots have enough clusters in front for some to hide others, an
@@ -587,9 +594,10 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     if (occlusion)
         context_.queue().enqueueWriteBuffer(occluders_, CL_TRUE, 0, occluder_rows_.size() * sizeof(std::int32_t),
                                             occluder_rows_.data());
+    // occluded: the occluder pass has drawn the depths, and setup tests each lane group by them.
     const auto bind_setup = [&](const cl::Buffer& rows, bool occluded) {
         bind(setup_, first, shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_,
-             tile_counts_, sums_, rows, block_depth_, cluster_spheres_, hr_int{occluded ? 1 : 0});
+             tile_counts_, sums_, rows, block_depth_, hr_int{occluded ? 1 : 0});
     };
     const auto bind_scan = [&](std::size_t launch_groups) {
         bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_, group_records_,
@@ -609,7 +617,6 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     const std::size_t scan_wg = static_cast<std::size_t>(tuning_.scan_work_group);
     const std::size_t raster_wg = raster_group_size();
     const std::size_t raster_items = tuning_.raster_per_record ? round_up(tiles, raster_wg) : tiles * raster_wg;
-    std::array<cl::Event, kStages> events;
     // setup counts into the tile counts and scan leaves them at zero again, so they need
     // zeroing only when new, or when a launch before this one failed part-way.
     if (!counts_zero_)
@@ -627,6 +634,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     };
     // scatter reads the records of setup's work-groups, one work-group each.
     std::array<cl::Event, 4> occluder_events;
+    std::array<cl::Event, kStages> events;  // 0 unused (the occluder pass's, above)
     if (occlusion) {  // its raster writes every tile's depth, but for lists that overflowed: zero, no culling
         queue.enqueueFillBuffer(block_depth_, hr_double{0.0}, 0, batch * depth_blocks() * sizeof(hr_double));
         bind_setup(occluders_, false);
@@ -636,24 +644,32 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
         run(scatter_, occluder_groups * wg, wg, &occluder_events[2]);
         bind_raster(true);
         run(raster_, raster_items, raster_wg, &occluder_events[3]);
+        // Whole clusters against those depths, then the final pass's rows without the hidden ones.
+        bind(cull_, first, shots_, element_lanes_, clusters_, static_cast<hr_int>(groups),
+             block_depth_, cluster_spheres_, hidden_);
+        run(cull_, round_up(groups, wg), wg, &events[1]);
+        queue.enqueueReadBuffer(hidden_, CL_TRUE, 0, batch * groups * sizeof(hr_int), hidden_host_.data());
+        groups = drop_hidden_clusters(batch, groups);
+        context_.queue().enqueueWriteBuffer(clusters_, CL_TRUE, 0, batch * groups * sizeof(std::int32_t),
+                                            cluster_rows_.data());
     }
     bind_setup(clusters_, occlusion);
     bind_scan(groups);
     bind_raster(false);
     const std::size_t group_items = groups * wg;
-    run(setup_, group_items, wg, &events[1]);
-    run(scan_, scan_wg, scan_wg, &events[2]);
-    run(scatter_, group_items, wg, &events[3]);
-    run(raster_, raster_items, raster_wg, &events[4]);
+    run(setup_, group_items, wg, &events[2]);
+    run(scan_, scan_wg, scan_wg, &events[3]);
+    run(scatter_, group_items, wg, &events[4]);
+    run(raster_, raster_items, raster_wg, &events[5]);
     // The sums, then per shot the list entries it needed (from scan).
     queue.enqueueReadBuffer(sums_, CL_TRUE, 0, batch * sum_stride() * sizeof(hr_long), sums_host_.data(), nullptr,
-                            &events[5]);
+                            &events[6]);
     counts_zero_ = true;  // scan has run
     double device_seconds = 0.0;
     if (occlusion)
         for (const cl::Event& e : occluder_events) device_seconds += seconds(e);
     stage_seconds_[0] += device_seconds;
-    for (std::size_t s = 1; s < kStages; ++s) {
+    for (std::size_t s = occlusion ? 1 : 2; s < kStages; ++s) {
         const double t = seconds(events[s]);
         stage_seconds_[s] += t;
         device_seconds += t;
@@ -672,6 +688,44 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
             occlusion_hidden_ += static_cast<std::uint64_t>(sums_host_[i * sum_stride() + elements + 3]);
         }
     return needed;
+}
+
+std::size_t OpenCLEngine::drop_hidden_clusters(std::size_t batch, std::size_t length) {
+    const auto kept = [&](std::size_t i, std::size_t g) {
+        return cluster_rows_[i * length + g] != -1 && hidden_host_[i * length + g] == 0;
+    };
+    std::size_t most = 1;
+    for (std::size_t i = 0; i < batch; ++i) {
+        std::size_t count = 0;
+        for (std::size_t g = 0; g < length; ++g) count += kept(i, g) ? 1 : 0;
+        most = std::max(most, count);
+    }
+    // In place: row i moves from i * length to i * most <= it, each entry to an index <= its own,
+    // so nothing is overwritten before it is read.
+    std::vector<std::uint32_t> hidden;
+    for (std::size_t i = 0; i < batch; ++i) {
+        hidden.clear();
+        std::size_t k = i * most;
+        for (std::size_t g = 0; g < length; ++g) {
+            const std::int32_t entry = cluster_rows_[i * length + g];
+            if (kept(i, g)) {
+                cluster_rows_[k++] = entry;
+            } else if (entry >= 0) {
+                hidden.push_back(static_cast<std::uint32_t>(entry));
+                occlusion_tested_ += static_cast<std::uint64_t>(hidden_host_[i * length + g]);
+                occlusion_hidden_ += static_cast<std::uint64_t>(hidden_host_[i * length + g]);
+            }
+        }
+        std::fill(cluster_rows_.begin() + static_cast<std::ptrdiff_t>(k),
+                  cluster_rows_.begin() + static_cast<std::ptrdiff_t>((i + 1) * most), -1);
+        std::sort(hidden.begin(), hidden.end());
+        std::vector<std::uint32_t>& in_front = shot_clusters_[i];
+        in_front.erase(std::remove_if(in_front.begin(), in_front.end(),
+                                      [&](std::uint32_t c) { return std::binary_search(hidden.begin(), hidden.end(), c); }),
+                       in_front.end());
+    }
+    cluster_rows_.resize(batch * most);
+    return most;
 }
 
 bool OpenCLEngine::occlusion_pays() {

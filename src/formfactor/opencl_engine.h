@@ -130,9 +130,10 @@ public:
     static double shot_bytes(double elements, int hemicube);
 
     // Device time per stage, summed over every shot so far (OpenCL event profiling).
-    // "occluders": the occluder pass's four kernels together.
-    static constexpr int kStages = 6;
-    static constexpr std::array<const char*, kStages> kStageNames = {"occluders", "setup",   "scan",
+    // "occluders": the occluder pass's four kernels together; "cull": the test of whole clusters
+    // against its depths (cull_clusters).
+    static constexpr int kStages = 7;
+    static constexpr std::array<const char*, kStages> kStageNames = {"occluders", "cull",   "setup", "scan",
                                                                      "scatter",   "raster", "read"};
 
     const std::array<double, kStages>& stage_seconds() const { return stage_seconds_; }
@@ -164,6 +165,7 @@ private:
     std::size_t batch_limit_ = std::numeric_limits<std::size_t>::max();  // lowered when the device ran out
 
     cl::Kernel setup_, scan_, scatter_, raster_;  // raster_: raster or raster_records
+    cl::Kernel cull_;                             // cull_clusters (lanes setup only)
     cl::Buffer shots_, elements_, element_lanes_, patches_, records_, boxes_, group_records_, tile_counts_, offsets_,
         cursors_, lists_, delta_fixed_, ids_buffer_, sums_, cluster_spheres_;
     std::vector<std::int64_t> sums_host_;  // per shot: per element, blocked (fixed point), list entries needed
@@ -180,6 +182,10 @@ private:
     std::vector<std::int32_t> cluster_rows_;  // the launch's table: per shot, its clusters then −1
     std::vector<std::int32_t> occluder_rows_;  // likewise, the occluder pass's: per shot, its nearest clusters
     cl::Buffer clusters_, occluders_;
+    // Per entry of the final pass's rows, cull_clusters' verdict: the live lane groups of a cluster
+    // the occluder pass hides, else 0. Read back, and the hidden clusters dropped from the rows.
+    cl::Buffer hidden_;
+    std::vector<std::int32_t> hidden_host_;
     cl::Buffer block_depth_;  // per shot and depth block: the least 1/depth the occluder pass drew (0: an empty cell)
 
     std::array<double, kStages> stage_seconds_{};
@@ -220,6 +226,11 @@ private:
         std::uint32_t list_entries = 0, group_records = 0;
     };
     LaunchNeeds run_batch(const std::vector<ShotRequest>& shots);
+    // After cull_clusters (hidden_host_ read back): each shot's row of cluster_rows_, `length`
+    // entries a shot, without the clusters it hid, the rest in order (the occluder pass's at the
+    // same work-groups), and shot_clusters_ without them, so that they are neither set up nor
+    // read. Counts their lane groups as tested and hidden. Returns the new row length.
+    std::size_t drop_hidden_clusters(std::size_t batch, std::size_t length);
     void allocate_records(std::size_t shots);  // records_ and boxes_, for `shots` shots of record_slots()
 };
 
