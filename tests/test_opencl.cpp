@@ -5,6 +5,7 @@
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <optional>
 #include <random>
 #include <stdexcept>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "cl/runtime.h"
+#include "formfactor/device_mesh.h"
 #include "formfactor/near_field.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
@@ -209,6 +211,47 @@ TEST_CASE("opencl: the same shot twice gives bit-identical results", "[opencl]")
         CHECK(ra.blocked == rc.blocked);
         CHECK(ids_a == *a.last_ids());
         CHECK(ids_a == *b.last_ids());
+    }
+}
+
+// An engine packs the layout its setup reads piece by piece (pack_lanes or pack_elements over
+// runs of groups); a DeviceMesh packs the whole mesh at once, for engines that share it.
+TEST_CASE("opencl: the mesh packed piece by piece is the mesh packed whole", "[opencl]") {
+    const scene::Scene city = scene::content_scene(scene::ContentKind::kCity, 3000);
+    const double patch = city.diagonal() / 16.0;
+    mesh::Mesh m;
+    for (double per_patch = 3.0; per_patch < 4.0; per_patch += 0.1) {  // a mesh whose last lane group is padded
+        m = mesh::build(city, {patch, patch / per_patch});
+        if (m.elements.size() % HR_SETUP_LANES != 0) break;
+    }
+    REQUIRE(m.elements.size() % HR_SETUP_LANES != 0);
+    const formfactor::DeviceMesh whole(m);
+    REQUIRE(whole.lanes.size() == formfactor::lane_groups(m));
+    std::vector<HrElementLanes> lanes(whole.lanes.size());
+    std::vector<HrElement> elements(whole.elements.size());
+    for (std::size_t first = 0, piece = 1; first < lanes.size(); first += piece, piece = piece * 3 + 1) {
+        const std::size_t n = std::min(piece, lanes.size() - first);
+        formfactor::pack_lanes(m, first, n, lanes.data() + first);
+        formfactor::pack_elements(m, first * HR_SETUP_LANES, n * HR_SETUP_LANES, elements.data() + first * HR_SETUP_LANES);
+    }
+    CHECK(std::memcmp(lanes.data(), whole.lanes.data(), lanes.size() * sizeof(HrElementLanes)) == 0);
+    CHECK(std::memcmp(elements.data(), whole.elements.data(), elements.size() * sizeof(HrElement)) == 0);
+    const formfactor::DeviceMesh only_lanes(m, formfactor::Packing::lanes);
+    CHECK(only_lanes.elements.empty());
+    CHECK(std::memcmp(only_lanes.lanes.data(), whole.lanes.data(), lanes.size() * sizeof(HrElementLanes)) == 0);
+
+    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
+    formfactor::OpenCLEngine shared(m, whole, *ctx, {128, 9}, tuning);
+    formfactor::OpenCLEngine own(m, *ctx, {128, 9}, tuning);
+    formfactor::ShotResult a, b;
+    for (std::uint32_t patch : {0u, 5u, static_cast<std::uint32_t>(m.patches.size() - 1)}) {
+        shared.shoot(patch, 3, a);
+        own.shoot(patch, 3, b);
+        CAPTURE(patch);
+        CHECK(a == b);
+        CHECK(a.blocked == b.blocked);
+        CHECK(*shared.last_ids() == *own.last_ids());
     }
 }
 

@@ -37,14 +37,10 @@ std::array<double, 4> bounding_sphere(const mesh::Mesh& mesh, std::size_t first,
     return {centre.x, centre.y, centre.z, radius};
 }
 
-DeviceMesh::DeviceMesh(const mesh::Mesh& mesh)
-    : elements(mesh.elements.size()),
-      lanes((mesh.elements.size() + HR_SETUP_LANES - 1) / HR_SETUP_LANES),
-      patches(mesh.patches.size()),
-      eps(base_plane_epsilon(mesh)) {
-    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
+void pack_elements(const mesh::Mesh& mesh, std::size_t first, std::size_t count, HrElement* out) {
+    for (std::size_t k = first; k < std::min(mesh.elements.size(), first + count); ++k) {
         const mesh::Element& e = mesh.elements[k];
-        HrElement& h = elements[k];
+        HrElement& h = out[k - first];
         h = {};
         copy_polygon(e.poly, h.v);
         copy3(e.normal, h.normal);
@@ -52,29 +48,37 @@ DeviceMesh::DeviceMesh(const mesh::Mesh& mesh)
         h.n = e.poly.n;
         h.has_twin = e.has_twin ? 1 : 0;
     }
-    // Lanes: a triangle repeats its last vertex; lanes past the last element stay n = 0.
-    for (HrElementLanes& group : lanes) group = {};
-    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
-        const mesh::Element& e = mesh.elements[k];
-        HrElementLanes& group = lanes[k / HR_SETUP_LANES];
-        const std::size_t lane = k % HR_SETUP_LANES;
-        for (int i = 0; i < 4; ++i)
-            for (int c = 0; c < 3; ++c)
-                group.v[(3 * i + c) * HR_SETUP_LANES + lane] =
-                    e.poly.v[static_cast<std::size_t>(std::min(i, e.poly.n - 1))][c];
-        for (int c = 0; c < 3; ++c) {
-            group.normal[c * HR_SETUP_LANES + lane] = e.normal[c];
-            group.centroid[c * HR_SETUP_LANES + lane] = e.centroid[c];
+}
+
+void pack_lanes(const mesh::Mesh& mesh, std::size_t first, std::size_t count, HrElementLanes* out) {
+    // A triangle repeats its last vertex; lanes past the last element stay n = 0.
+    for (std::size_t g = first; g < first + count; ++g) {
+        HrElementLanes& group = out[g - first];
+        group = {};
+        for (std::size_t lane = 0; lane < HR_SETUP_LANES; ++lane) {
+            const std::size_t k = g * HR_SETUP_LANES + lane;
+            if (k >= mesh.elements.size()) break;
+            const mesh::Element& e = mesh.elements[k];
+            for (int i = 0; i < 4; ++i)
+                for (int c = 0; c < 3; ++c)
+                    group.v[(3 * i + c) * HR_SETUP_LANES + lane] =
+                        e.poly.v[static_cast<std::size_t>(std::min(i, e.poly.n - 1))][c];
+            for (int c = 0; c < 3; ++c) {
+                group.normal[c * HR_SETUP_LANES + lane] = e.normal[c];
+                group.centroid[c * HR_SETUP_LANES + lane] = e.centroid[c];
+            }
+            group.n[lane] = e.poly.n;
+            group.has_twin[lane] = e.has_twin ? 1 : 0;
+            group.patch[lane] = static_cast<hr_int>(e.patch);
         }
-        group.n[lane] = e.poly.n;
-        group.has_twin[lane] = e.has_twin ? 1 : 0;
-        group.patch[lane] = static_cast<hr_int>(e.patch);
-    }
-    // Each lane group's bounding sphere, for group_behind in setup.
-    for (std::size_t g = 0; g < lanes.size(); ++g) {
+        // The group's bounding sphere, for group_behind in setup.
         const std::array<double, 4> bound = bounding_sphere(mesh, g * HR_SETUP_LANES, HR_SETUP_LANES);
-        std::copy(bound.begin(), bound.end(), lanes[g].bound);
+        std::copy(bound.begin(), bound.end(), group.bound);
     }
+}
+
+std::vector<HrPatch> pack_patches(const mesh::Mesh& mesh) {
+    std::vector<HrPatch> patches(mesh.patches.size());
     for (std::size_t p = 0; p < mesh.patches.size(); ++p) {
         patches[p] = {};
         copy_polygon(mesh.patches[p].poly, patches[p].v);
@@ -82,10 +86,28 @@ DeviceMesh::DeviceMesh(const mesh::Mesh& mesh)
         patches[p].first_element = static_cast<hr_int>(mesh.patches[p].first_element);
         patches[p].elements = static_cast<hr_int>(mesh.patches[p].element_count);
     }
+    return patches;
+}
+
+std::size_t lane_groups(const mesh::Mesh& mesh) {
+    return (mesh.elements.size() + HR_SETUP_LANES - 1) / HR_SETUP_LANES;
+}
+
+DeviceMesh::DeviceMesh(const mesh::Mesh& mesh, Packing packing)
+    : patches(pack_patches(mesh)), eps(base_plane_epsilon(mesh)), packing_(packing) {
+    if (has(Packing::elements)) {
+        elements.resize(mesh.elements.size());
+        pack_elements(mesh, 0, elements.size(), elements.data());
+    }
+    if (has(Packing::lanes)) {
+        lanes.resize(lane_groups(mesh));
+        pack_lanes(mesh, 0, lanes.size(), lanes.data());
+    }
 }
 
 double DeviceMesh::bytes(double elements, double patches) {
-    return elements * (sizeof(HrElement) + double(sizeof(HrElementLanes)) / HR_SETUP_LANES) + patches * sizeof(HrPatch);
+    return elements * std::max(double(sizeof(HrElement)), double(sizeof(HrElementLanes)) / HR_SETUP_LANES) +
+           patches * sizeof(HrPatch);
 }
 
 }  // namespace hemirad::formfactor

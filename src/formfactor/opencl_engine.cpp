@@ -13,6 +13,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string_view>
+#include <type_traits>
 #include <vector>
 
 #include "core/error.h"
@@ -306,13 +307,17 @@ OpenCLTuning tuning_from_environment(const ocl::DeviceInfo& device) {
 }
 
 OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings)
-    : OpenCLEngine(mesh, DeviceMesh(mesh), context, settings, default_tuning(context.info())) {}
+    : OpenCLEngine(mesh, context, settings, default_tuning(context.info())) {}
 
 OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings,
                            const OpenCLTuning& tuning, const OpenCLFault& fault)
-    : OpenCLEngine(mesh, DeviceMesh(mesh), context, settings, tuning, fault) {}
+    : OpenCLEngine(mesh, nullptr, context, settings, tuning, fault) {}
 
 OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl::Context& context,
+                           const Settings& settings, const OpenCLTuning& tuning, const OpenCLFault& fault)
+    : OpenCLEngine(mesh, &packed, context, settings, tuning, fault) {}
+
+OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh* packed, ocl::Context& context,
                            const Settings& settings, const OpenCLTuning& tuning, const OpenCLFault& fault)
     : mesh_(mesh),
       context_(context),
@@ -333,9 +338,12 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
         (tuning.scan_work_group & (tuning.scan_work_group - 1)) != 0)
         throw InternalError("OpenCL tuning: tile and work-group sizes must be positive, the scan's a power of two");
 
-    if (packed.elements.size() != mesh.elements.size() || packed.patches.size() != mesh.patches.size())
-        throw InternalError("OpenCL engine: the packed mesh is not this mesh's");
-    eps_ = packed.eps;  // exactly the reference's clip distance
+    const bool lanes = tuning.setup_lanes;  // the layout setup reads; the other is not uploaded
+    if (packed && (!packed->has(lanes ? Packing::lanes : Packing::elements) ||
+                   packed->patches.size() != mesh.patches.size() ||
+                   (lanes ? packed->lanes.size() != lane_groups(mesh) : packed->elements.size() != mesh.elements.size())))
+        throw InternalError("OpenCL engine: the packed mesh is not this mesh's, or lacks the layout this device reads");
+    eps_ = packed ? packed->eps : base_plane_epsilon(mesh);  // exactly the reference's clip distance
 
     // Never -cl-fast-relaxed-math or -cl-mad-enable: the kernel must round like the reference.
     options_ = fmt::format(
@@ -418,9 +426,29 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl
                          ? tuning.list_capacity
                          : static_cast<std::uint32_t>(initial_list_entries(double(record_slots())));
     try {
-        elements_ = upload(cl_context, queue, packed.elements);
-        element_lanes_ = upload(cl_context, queue, packed.lanes);
-        patches_ = upload(cl_context, queue, packed.patches);
+        // The layout setup reads (the other a buffer of one entry: it is still an argument). Without
+        // a packing given, packed here piece by piece, so that the mesh is never held twice.
+        const auto upload_packed = [&](auto* tag, std::size_t count, const auto* whole, auto pack) {
+            using T = std::remove_pointer_t<decltype(tag)>;
+            cl::Buffer buffer(cl_context, CL_MEM_READ_ONLY, std::max<std::size_t>(1, count) * sizeof(T));
+            if (whole) {
+                if (count > 0) queue.enqueueWriteBuffer(buffer, CL_TRUE, 0, count * sizeof(T), whole);
+                return buffer;
+            }
+            const std::size_t piece = std::max<std::size_t>(1, (std::size_t{4} << 20) / sizeof(T));
+            std::vector<T> staging(std::min(piece, count));
+            for (std::size_t first = 0; first < count; first += piece) {
+                const std::size_t n = std::min(piece, count - first);
+                pack(mesh, first, n, staging.data());
+                queue.enqueueWriteBuffer(buffer, CL_TRUE, first * sizeof(T), n * sizeof(T), staging.data());
+            }
+            return buffer;
+        };
+        elements_ = upload_packed(static_cast<HrElement*>(nullptr), lanes ? 0 : mesh.elements.size(),
+                                  packed ? packed->elements.data() : nullptr, pack_elements);
+        element_lanes_ = upload_packed(static_cast<HrElementLanes*>(nullptr), lanes ? lane_groups(mesh) : 0,
+                                       packed ? packed->lanes.data() : nullptr, pack_lanes);
+        patches_ = packed ? upload(cl_context, queue, packed->patches) : upload(cl_context, queue, pack_patches(mesh));
         std::vector<double> spheres;  // for setup's test of whole clusters
         for (const std::array<double, 4>& b : cluster_bounds_) spheres.insert(spheres.end(), b.begin(), b.end());
         cluster_spheres_ = upload(cl_context, queue, spheres);

@@ -85,8 +85,8 @@ public:
     OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings);
     OpenCLEngine(const mesh::Mesh& mesh, ocl::Context& context, const Settings& settings, const OpenCLTuning& tuning,
                  const OpenCLFault& fault = {});
-    // With the mesh packed already (DeviceMesh(mesh)), as several devices' engines share one
-    // packing; uploaded here and not kept.
+    // With the mesh packed already (DeviceMesh(mesh), holding at least the layout this device's
+    // setup reads), as several devices' engines share one packing; uploaded here and not kept.
     OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh& packed, ocl::Context& context, const Settings& settings,
                  const OpenCLTuning& tuning, const OpenCLFault& fault = {});
 
@@ -114,13 +114,13 @@ public:
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
 
-    // The per-shot buffers one launch may hold: on a CPU (host memory) 32 MiB, since a shot of a
+    // The per-shot buffers one launch may hold: on a CPU (host memory) 16 MiB, since a shot of a
     // few thousand elements already gives its cores hundreds of work-groups and more shots only
-    // cost memory (the Cornell box's bake peaked at 1.2 GB with 1 GiB launches, 350 MB with these,
-    // of which PoCL itself holds 195 MB, in the same time); on a GPU 1 GiB or a quarter of its
-    // memory, for the parallelism a batch brings.
+    // cost memory (the Cornell box's bake peaked at 1.2 GB with 1 GiB launches, 305 MB with 32 MiB
+    // and 293-302 MB with 16 MiB, of which PoCL itself holds 70 MB and the libraries 126 MB, in
+    // the same time); on a GPU 1 GiB or a quarter of its memory, for the parallelism a batch brings.
     static std::size_t launch_budget(bool cpu, std::size_t device_memory) {
-        return cpu ? std::size_t{32} << 20 : std::min<std::size_t>(std::size_t{1} << 30, device_memory / 4);
+        return cpu ? std::size_t{16} << 20 : std::min<std::size_t>(std::size_t{1} << 30, device_memory / 4);
     }
     // Memory each shot of a launch holds for a mesh of `elements` elements at resolution
     // `hemicube` (on the device, and the host's copies of its ids and sums), besides the uploaded
@@ -143,6 +143,10 @@ public:
     std::uint64_t occlusion_hidden() const { return occlusion_hidden_; }
 
 private:
+    // packed: a packing to upload, or nullptr to pack the layout setup reads here, piece by piece.
+    OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh* packed, ocl::Context& context, const Settings& settings,
+                 const OpenCLTuning& tuning, const OpenCLFault& fault);
+
     const mesh::Mesh& mesh_;
     ocl::Context& context_;
     Settings settings_;

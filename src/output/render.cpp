@@ -259,14 +259,18 @@ Image render(const scene::Scene& scene, const mesh::Mesh& mesh, const std::vecto
         throw InternalError(fmt::format("output: cannot render a {}x{} image", width, height));
     }
     Image image{width, height, std::vector<float>(std::size_t(width) * height * 3, 0.0f)};
-    const WeldedMesh welded = weld(scene.nodes.size(), mesh, radiosity);
-    const double diagonal = mesh_diagonal(welded);
-    if (diagonal <= 0.0) return image;  // nothing (or nothing with extent) to draw
-
-    const TriangleSetup setup(view, width, height, kNearFraction * diagonal);
     std::vector<ScreenTriangle> triangles;
-    for (const WeldedNode& node : welded.nodes) {
-        for (std::size_t t = 0; t < node.triangle_count(); ++t) setup.add(node, t, triangles);
+    {  // the welded mesh only while its triangles are set up: it is freed before they are drawn
+        const WeldedMesh welded = weld(scene.nodes.size(), mesh, radiosity);
+        const double diagonal = mesh_diagonal(welded);
+        if (diagonal <= 0.0) return image;  // nothing (or nothing with extent) to draw
+        const TriangleSetup setup(view, width, height, kNearFraction * diagonal);
+        std::size_t count = 0;  // (reserved: a vector doubling as it grows holds both copies at once)
+        for (const WeldedNode& node : welded.nodes) count += node.triangle_count();
+        triangles.reserve(count);
+        for (const WeldedNode& node : welded.nodes) {
+            for (std::size_t t = 0; t < node.triangle_count(); ++t) setup.add(node, t, triangles);
+        }
     }
 
     // Bin triangles by strip (in order, so z ties resolve the same way in every strip).
