@@ -5,6 +5,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
+#include "cli/bake.h"
 #include "cli/budget.h"
 #include "cli_support.h"
 #include "formfactor/near_field.h"
@@ -152,4 +153,15 @@ TEST_CASE("budget: the sweep model against Gauss-Seidel's own sweeps", "[budget]
         CHECK(solver.iterations() >= 0.5 * model);
     }
     CHECK(std::isinf(solve::Matrix::expected_sweeps(1.0, 1e-4)));
+}
+
+TEST_CASE("the pass cap: --max-passes, else 100,000 or twice the patches", "[budget]") {
+    cli::BakeOptions o;  // --max-passes not given
+    CHECK(cli::max_passes_for(o, 924) == 100000);
+    CHECK(cli::max_passes_for(o, 50000) == 100000);
+    CHECK(cli::max_passes_for(o, 364391) == 728782);  // city:1M at draft, which needs 150,795
+    o.max_passes = 0;  // no limit
+    CHECK(cli::max_passes_for(o, 364391) == 0);
+    o.max_passes = 7;
+    CHECK(cli::max_passes_for(o, 364391) == 7);
 }

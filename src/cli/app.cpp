@@ -130,9 +130,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "progressive: stop when the share of final flux not yet placed is below this; matrix: iterate until "
                     "a bound on the error is below min(1e-4, T/100) (default: the quality's; 0 would never stop)")
         ->transform(real_in(0.0, 1.0, true));
-    bake.add_option("--max-passes", o.max_passes, "stop after this many shots (0: no limit)")
-        ->transform(integer_from(0L))
-        ->capture_default_str();
+    bake.add_option("--max-passes", o.max_passes,
+                    "stop after this many shots (0: no limit; default: 100000 or twice the patches, whichever is more)")
+        ->transform(integer_from(0L));
     bake.add_option("--batch", o.batch,
                     "shoot the K patches with the most unshot flux together (one launch on OpenCL); "
                     "each still shoots its flux at the time it is applied")

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <ostream>
@@ -28,7 +29,7 @@ struct BakeOptions {
     double patch_size = 0.0;      // 0: scene diagonal × the quality's patch fraction
     double element_size = 0.0;    // 0: patch size / the quality's elements per patch edge
     double threshold = -1.0;      // < 0: from the quality
-    long max_passes = 100000;
+    long max_passes = -1;         // < 0: kDefaultMaxPasses or twice the patches, whichever is more (max_passes_for)
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
     std::string solver = "auto";  // auto | matrix | progressive
     std::string effects;          // overrides: "occlusion=off,colour=on,…" (scene::parse_effect_overrides)
@@ -60,6 +61,10 @@ struct Interrupted : std::runtime_error {
 // Runs a bake. Throws InputError (exit 2), Interrupted, or other exceptions (exit 1). On any
 // throw, whatever this run wrote under the output directory has been removed.
 void run_bake(const BakeOptions& options);
+
+// The progressive solver's cap on passes for a mesh of `patches` patches: options.max_passes, or
+// where it is < 0 (not given), 100,000 or twice the patches, whichever is more.
+long max_passes_for(const BakeOptions& options, std::size_t patches);
 
 void list_devices(std::ostream& out, bool json);
 
