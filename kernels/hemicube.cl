@@ -963,12 +963,13 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
 
 #if HEMIRAD_SETUP_LANES
 // Occlusion culling of whole clusters, between the occluder pass and the final pass: a work-item
-// per entry of a shot's row of clusters (clusters, row_length entries a shot): the cluster's
-// bounding sphere and the least plane distance of its live groups, the bound of group_hidden,
-// which holds for any sphere that holds the elements. hidden[entry] is the number of the cluster's live lane groups
-// (not wholly behind the base plane) where the occluder pass's depths hide it, else 0 (and 0 for
-// an entry that is no cluster to set up: -1, or an occluder, -2 - c). The host then launches
-// setup on the clusters not hidden alone: a hidden cluster costs no work-group, clear or read.
+// per entry of a shot's row of clusters (clusters, row_length entries a shot), testing the
+// cluster's bounding sphere with the least plane distance of its live groups (the bound of
+// group_hidden, which holds for any sphere that holds the elements). hidden[entry] is the number
+// of the cluster's live lane groups (not wholly behind the base plane) where the occluder pass's
+// depths hide it, else 0 (and 0 for an entry that is no cluster to set up: -1, or an occluder,
+// -2 - c). The host then launches setup on the clusters not hidden alone: a hidden cluster costs
+// no work-group, clear or read.
 __kernel void cull_clusters(const HrShot first_shot, __global const HrShot* more_shots,
                             __global const HrElementLanes* element_lanes, __global const int* clusters,
                             const int row_length, __global const double* block_depth,

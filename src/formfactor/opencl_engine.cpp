@@ -130,9 +130,10 @@ std::size_t select_clusters(const std::vector<std::array<double, 4>>& bounds, co
 // the rest. (Ranked by the angle they span instead, with those narrower than a depth block left
 // out, they hid less of city:1M: 41% of its lane groups against 51% at N = 64, 8.7 against 7.7 ms
 // a shot. Two passes, the nearest quarter first and the rest culled against its depths, cost
-// city:1M more in the second raster than they saved: 7.8-9.7 against 6.2-7.2 ms at N = 64.) Fills `rows` as select_clusters does and returns the row length; and rewrites
-// `final_rows` (select_clusters' rows, of length `final_length`) to start with the same
-// clusters as -2 - c, at the same work-groups, so that the final pass keeps their records.
+// city:1M more in the second raster than they saved: 7.8-9.7 against 6.2-7.2 ms at N = 64.)
+// Fills `rows` as select_clusters does and returns the row length; and rewrites `final_rows`
+// (select_clusters' rows, of length `final_length`) to start with the same clusters as -2 - c, at
+// the same work-groups, so that the final pass keeps their records.
 std::size_t select_occluders(const std::vector<std::array<double, 4>>& bounds, const std::vector<HrShot>& shots,
                              const std::vector<std::vector<std::uint32_t>>& per_shot, int share,
                              std::vector<std::int32_t>& rows, std::vector<std::int32_t>& final_rows,
