@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/timing.h"
 #include "hemicube_types.h"
 
 namespace hemirad::formfactor {
@@ -573,6 +574,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     if (++launches_ > fault_.fail_after)
         throw cl::Error(CL_INVALID_COMMAND_QUEUE, "clEnqueueNDRangeKernel (HEMIRAD_FAULT fail-after)");
     const std::size_t batch = requests.size();
+    const auto launch_start = Clock::now();
     std::vector<HrShot> shots(batch);
     for (std::size_t i = 0; i < batch; ++i) {
         const Frame frame = make_frame(mesh_.patches.at(requests[i].shooter.patch), settings_.seed, requests[i].shot);
@@ -704,8 +706,10 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
         stage_seconds_[s] += t;
         device_seconds += t;
     }
+    // Wall time, not device time: occlusion culling's host work (the occluders' choice, the
+    // verdicts read back and the rows cut between the passes) is part of its cost.
     if (can_cull && tuning_.occlusion == Occlusion::measured)
-        record_occlusion_cost(occlusion, device_seconds / static_cast<double>(batch));
+        record_occlusion_cost(occlusion, seconds_since(launch_start) / static_cast<double>(batch));
     LaunchNeeds needed;
     for (std::size_t i = 0; i < batch; ++i) {
         const hr_long* tail = sums_host_.data() + i * sum_stride() + elements;

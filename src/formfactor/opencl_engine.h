@@ -200,7 +200,7 @@ private:
     // Occlusion culling needs clusters in front enough for some to hide others (a room's few do
     // not pay for the occluder pass).
     static constexpr std::size_t kOcclusionMinClusters = 8;
-    // Occlusion::measured: device seconds per shot of launches with and without occlusion
+    // Occlusion::measured: wall seconds per shot of launches with and without occlusion
     // culling (a mean over the first kOcclusionWarm, then a moving average), each mode measured
     // first; then the cheaper mode, and the other once every kOcclusionProbe launches, as scenes
     // and shooters change. Either mode gives the same results, so the choice never shows in them.
