@@ -69,7 +69,8 @@ std::string stage_line(const formfactor::OpenCLEngine& engine, double shots) {
         line += fmt::format("{} {:.3f} ms, ", formfactor::OpenCLEngine::kStageNames[k],
                             1e3 * engine.stage_seconds()[k] / shots);
     const double tested = static_cast<double>(engine.occlusion_tested());
-    return line + fmt::format("{:.0f}% of {:.0f} lane groups tested hidden", tested > 0 ? 100.0 * static_cast<double>(engine.occlusion_hidden()) / tested : 0.0,
+    const double hidden = static_cast<double>(engine.occlusion_hidden());
+    return line + fmt::format("{:.0f}% of {:.0f} lane groups tested hidden", tested > 0 ? 100.0 * hidden / tested : 0.0,
                               tested);
 }
 
@@ -102,6 +103,7 @@ int main(int argc, char** argv) {
         for (const Row row : {Row{0, false}, Row{100000, false}, Row{1000000, false}, Row{100000, true},
                               Row{1000000, true}}) {
             const scene::Scene s = room_with_clutter(row.count, row.beside);
+            const char* where = row.count == 0 ? "–" : row.beside ? "beyond a wall" : "below the floor";
             const double patch = 10.0 * std::sqrt(3.0) / 16.0;  // the room's default, whatever lies below
             const mesh::Mesh m = mesh::build(s, {patch, patch / 3.0});
             std::vector<std::uint32_t> floor;  // upward patches of the room (node 0): its floor
@@ -132,12 +134,9 @@ int main(int argc, char** argv) {
             embree = fmt::format("{:.2f} ms", ms_per_shot(rays, shooters, repeats));
 #endif
             std::cout << fmt::format("| {} | {} | {} | {:.2f} ms | {:.2f} ms | {:.2f} ms | {:.2f} ms | {} |\n",
-                                     s.triangles.size() - room_triangles,
-                                     row.count == 0 ? "–" : row.beside ? "beyond a wall" : "below the floor",
-                                     m.elements.size(), cells[0], cells[1], cells[2], cells[3], embree);
-            stage_lines.push_back(fmt::format("{} {}: {}", s.triangles.size() - room_triangles,
-                                              row.count == 0 ? "–" : row.beside ? "beyond a wall" : "below the floor",
-                                              stages));
+                                     s.triangles.size() - room_triangles, where, m.elements.size(), cells[0],
+                                     cells[1], cells[2], cells[3], embree);
+            stage_lines.push_back(fmt::format("{} {}: {}", s.triangles.size() - room_triangles, where, stages));
         }
         std::cout << "\nWith occlusion culling on every shot:\n";
         for (const std::string& line : stage_lines) std::cout << "- " << line << "\n";

@@ -620,9 +620,11 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
         for (HrShot& shot : shots) shot.group_rows = static_cast<hr_uint>(record_rows_);
         allocate_records(batch_capacity_);
     }
-    if (tuning_.setup_lanes)
+    const auto write_clusters = [&] {  // cluster_rows_ as it stands
         context_.queue().enqueueWriteBuffer(clusters_, CL_TRUE, 0, cluster_rows_.size() * sizeof(std::int32_t),
                                             cluster_rows_.data());
+    };
+    if (tuning_.setup_lanes) write_clusters();
     if (occlusion)
         context_.queue().enqueueWriteBuffer(occluders_, CL_TRUE, 0, occluder_rows_.size() * sizeof(std::int32_t),
                                             occluder_rows_.data());
@@ -682,8 +684,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
         run(cull_, round_up(groups, wg), wg, &events[1]);
         queue.enqueueReadBuffer(hidden_, CL_TRUE, 0, batch * groups * sizeof(hr_int), hidden_host_.data());
         groups = drop_hidden_clusters(batch, groups);
-        context_.queue().enqueueWriteBuffer(clusters_, CL_TRUE, 0, batch * groups * sizeof(std::int32_t),
-                                            cluster_rows_.data());
+        write_clusters();
     }
     bind_setup(clusters_, occlusion);
     bind_scan(groups);
@@ -697,15 +698,9 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     queue.enqueueReadBuffer(sums_, CL_TRUE, 0, batch * sum_stride() * sizeof(hr_long), sums_host_.data(), nullptr,
                             &events[6]);
     counts_zero_ = true;  // scan has run
-    double device_seconds = 0.0;
     if (occlusion)
-        for (const cl::Event& e : occluder_events) device_seconds += seconds(e);
-    stage_seconds_[0] += device_seconds;
-    for (std::size_t s = occlusion ? 1 : 2; s < kStages; ++s) {
-        const double t = seconds(events[s]);
-        stage_seconds_[s] += t;
-        device_seconds += t;
-    }
+        for (const cl::Event& e : occluder_events) stage_seconds_[0] += seconds(e);
+    for (std::size_t s = occlusion ? 1 : 2; s < kStages; ++s) stage_seconds_[s] += seconds(events[s]);
     // Wall time, not device time: occlusion culling's host work (the occluders' choice, the
     // verdicts read back and the rows cut between the passes) is part of its cost.
     if (can_cull && tuning_.occlusion == Occlusion::measured)
