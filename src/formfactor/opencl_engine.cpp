@@ -695,12 +695,12 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     run(scatter_, group_items, wg, &events[4]);
     run(raster_, raster_items, raster_wg, &events[5]);
     // The sums, then per shot the list entries it needed (from scan).
-    queue.enqueueReadBuffer(sums_, CL_TRUE, 0, batch * sum_stride() * sizeof(hr_long), sums_host_.data(), nullptr,
-                            &events[6]);
+    const std::vector<cl::Event> reads = read_sums(batch);
     counts_zero_ = true;  // scan has run
     if (occlusion)
         for (const cl::Event& e : occluder_events) stage_seconds_[0] += seconds(e);
-    for (std::size_t s = occlusion ? 1 : 2; s < kStages; ++s) stage_seconds_[s] += seconds(events[s]);
+    for (std::size_t s = occlusion ? 1 : 2; s + 1 < kStages; ++s) stage_seconds_[s] += seconds(events[s]);
+    for (const cl::Event& e : reads) stage_seconds_[kStages - 1] += seconds(e);
     // Wall time, not device time: occlusion culling's host work (the occluders' choice, the
     // verdicts read back and the rows cut between the passes) is part of its cost.
     if (can_cull && tuning_.occlusion == Occlusion::measured)
@@ -717,6 +717,40 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
             occlusion_hidden_ += static_cast<std::uint64_t>(sums_host_[i * sum_stride() + elements + 3]);
         }
     return needed;
+}
+
+std::vector<cl::Event> OpenCLEngine::read_sums(std::size_t batch) {
+    cl::CommandQueue& queue = context_.queue();
+    std::vector<cl::Event> reads;
+    const auto read = [&](std::size_t first, std::size_t count) {
+        reads.emplace_back();
+        queue.enqueueReadBuffer(sums_, CL_FALSE, first * sizeof(hr_long), count * sizeof(hr_long),
+                                sums_host_.data() + first, nullptr, &reads.back());
+    };
+    if (!tuning_.setup_lanes) {  // setup per patch clears and fills every element's sum
+        read(0, batch * sum_stride());
+    } else {
+        // Only the clusters set up hold this shot's sums (the host reads no others), so a shot
+        // that culled most of a large scene reads what it kept, not a sum per element: runs of
+        // kept clusters, joined across gaps of up to kReadGap clusters (a read command costs
+        // PoCL about as much as that many clusters' bytes), then the shot's tail.
+        constexpr std::size_t kReadGap = 32;
+        const std::size_t elements = mesh_.elements.size(), size = cluster_elements();
+        for (std::size_t i = 0; i < batch; ++i) {
+            const std::size_t base = i * sum_stride();
+            const std::vector<std::uint32_t>& kept = shot_clusters_[i];  // ascending
+            for (std::size_t k = 0; k < kept.size();) {
+                std::size_t last = k;
+                while (last + 1 < kept.size() && kept[last + 1] - kept[last] <= kReadGap) ++last;
+                const std::size_t first = kept[k] * size, end = std::min(elements, (kept[last] + 1) * size);
+                read(base + first, end - first);
+                k = last + 1;
+            }
+            read(base + elements, sum_stride() - elements);
+        }
+    }
+    reads.back().wait();  // an in-order queue: the reads before it are done too
+    return reads;
 }
 
 std::size_t OpenCLEngine::drop_hidden_clusters(std::size_t batch, std::size_t length) {

@@ -219,6 +219,9 @@ private:
     std::size_t cluster_elements() const;  // elements per cluster (a setup work-group's, lanes setup)
     std::size_t counter_entries() const;   // per shot: tile counters of every copy
     std::size_t sum_stride() const;
+    // Reads back the batch's sums the host looks at: all of them, or the kept clusters' and each
+    // shot's tail (lanes setup); returns the read commands, done.
+    std::vector<cl::Event> read_sums(std::size_t batch);
     std::size_t depth_blocks() const;  // per shot: occlusion culling's depth blocks (HR_DEPTH_BLOCK² cells)
     std::size_t memory_batch() const;  // shots per launch within the memory budget
     void allocate_batch(std::size_t shots);
