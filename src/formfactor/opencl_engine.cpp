@@ -668,7 +668,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     };
     // scatter reads the records of setup's work-groups, one work-group each.
     std::array<cl::Event, 4> occluder_events;
-    std::array<cl::Event, kStages> events;  // 0 unused (the occluder pass's, above)
+    std::array<cl::Event, kStages> events;  // 0 and 6 unused (the occluder pass's, above; the reads', read_sums)
     if (occlusion) {  // its raster writes every tile's depth, but for lists that overflowed: zero, no culling
         queue.enqueueFillBuffer(block_depth_, hr_double{0.0}, 0, batch * depth_blocks() * sizeof(hr_double));
         bind_setup(occluders_, false);
