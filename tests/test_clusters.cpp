@@ -242,12 +242,23 @@ TEST_CASE("no cluster shoots from across another face: a ball resting on the flo
     add_tessellated_quad(s, {0, 1, 0}, {1, 1, 0}, {0, 1, 1}, 4, wall);
     add_tessellated_quad(s, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, 4, wall);
     add_tessellated_quad(s, {0, 0, 1}, {0, 1, 1}, {1, 0, 1}, 4, lamp);
+    const auto ball_node = static_cast<std::uint32_t>(s.nodes.size());
     add_sphere(s, {0.7, 0.5, 0.2}, 0.2, 12, 24, ball, false);  // its south pole on the floor
     scene::finish(s);
 
     const mesh::Mesh m = mesh::build(s, {1.0, 0.25});
     CHECK(m.split_clusters > 0);
     CHECK(m.moved_clusters == 1);
+    std::size_t ball_patches = 0, ball_clusters = 0;
+    for (const mesh::Patch& p : m.patches) {
+        ball_patches += p.node == ball_node;
+        ball_clusters += p.node == ball_node && p.cluster();
+    }
+    // Its bottom cap is halved until the halves shoot from above the floor, not split into its
+    // 15 faces: of the ball's 50 shooters, only one is a lone face (60 with 15 before halving).
+    CAPTURE(ball_patches, ball_clusters, m.split_clusters);
+    CHECK(ball_patches - ball_clusters <= 2);
+    CHECK(ball_patches <= 52);
     formfactor::ReferenceEngine engine(m, formfactor::Settings{64, 7});
     formfactor::ShotResult r;
     std::size_t bad = 0;

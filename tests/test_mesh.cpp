@@ -166,28 +166,47 @@ TEST_CASE("a 2x1 rectangle with patch size 0.5 gives a 4x2 patch grid", "[mesh]"
     CHECK(centres == expected);
 }
 
-TEST_CASE("a lone right triangle splits into n^2 congruent patches", "[mesh]") {
+TEST_CASE("a lone right triangle splits into n^2 congruent cells, paired into parallelogram patches", "[mesh]") {
     const Scene s = scene_of({tri({0, 0, 0}, {1, 0, 0}, {0, 1, 0})});
-    // n = ceil(sqrt2 / 0.5) = 3; patch hypotenuse sqrt2/3 = 0.471 → m = ceil(0.471 / 0.25) = 2.
+    // n = ceil(sqrt2 / 0.5) = 3; cell hypotenuse sqrt2/3 = 0.471 → m = ceil(0.471 / 0.25) = 2.
+    // Of the 9 cells, the 3 downward ones each pair with the upward one beside them: 3
+    // parallelograms and the 3 upward cells along the hypotenuse, n(n + 1)/2 = 6 patches.
     const Mesh m = build(s, {0.5, 0.25});
 
     REQUIRE(m.quads == 0);
-    REQUIRE(m.patches.size() == 9);
+    REQUIRE(m.patches.size() == 6);
     REQUIRE(m.elements.size() == 9 * 4);
+    int parallelograms = 0;
+    double area = 0.0;
     for (const Patch& p : m.patches) {
-        REQUIRE(p.poly.n == 3);
-        CHECK(p.area == Approx(1.0 / 18).epsilon(1e-13));
+        REQUIRE((p.poly.n == 3 || p.poly.n == 4));
+        const bool pair = p.poly.n == 4;
+        parallelograms += pair;
+        area += p.area;
+        CHECK(p.area == Approx(pair ? 1.0 / 9 : 1.0 / 18).epsilon(1e-13));
+        CHECK(p.element_count == (pair ? 8u : 4u));
         auto len = edge_lengths(p.poly);
         std::sort(len.begin(), len.end());
+        // A parallelogram's sides are two legs of a cell, each 1/3 (no longer than the patch size).
         CHECK(len[0] == Approx(1.0 / 3).epsilon(1e-13));
         CHECK(len[1] == Approx(1.0 / 3).epsilon(1e-13));
-        CHECK(len[2] == Approx(std::sqrt(2.0) / 3).epsilon(1e-13));
+        CHECK(len.back() == Approx(pair ? 1.0 / 3 : std::sqrt(2.0) / 3).epsilon(1e-13));
         CHECK(glm::dot(winding_normal(p.poly), dvec3(0, 0, 1)) > 0.999999);
+        if (pair) {  // its corners in order: opposite sides parallel and equal
+            CHECK(glm::length(p.poly.v[1] - p.poly.v[0] - (p.poly.v[2] - p.poly.v[3])) < 1e-15);
+        }
         for (std::uint32_t e = p.first_element; e < p.first_element + p.element_count; ++e) {
             CHECK(m.elements[e].area == Approx(1.0 / 72).epsilon(1e-13));
-            CHECK(inside_triangle(p.poly, m.elements[e].centroid));
+            const dvec3 c = m.elements[e].centroid;
+            Polygon first = p.poly, second = p.poly;  // a parallelogram as two triangles
+            first.n = second.n = 3;
+            second.v[1] = p.poly.v[2];
+            second.v[2] = p.poly.v[3];
+            CHECK((inside_triangle(first, c) || (pair && inside_triangle(second, c))));
         }
     }
+    CHECK(parallelograms == 3);
+    CHECK(area == Approx(0.5).epsilon(1e-13));
     check_ranges(m);
     CHECK(euler_characteristic(m.elements) == 1);
 }

@@ -166,14 +166,17 @@ Polygon make_polygon(std::initializer_list<dvec3> corners) {
 // shortest side needs at most half the patch divisions of its longest, likewise as the quad
 // (B, C, A, A) collapsed at the corner A opposite its shortest side BC: strips across it, where n²
 // congruent cells would be n² slivers as thin as the needle (a 1:100 fan of 200 needles made
-// 25,590 patches). Any other triangle: n² congruent patches (nu = n) of m² elements (mu = m), n
-// from its longest side. Counts are doubles, so that counting never overflows.
+// 25,590 patches). Any other triangle: n² congruent cells (nu = n) of m² elements (mu = m), n
+// from its longest side, paired into n(n + 1)/2 patches. Counts are doubles, so that counting
+// never overflows.
 struct Grid {
     bool quad_like = false;
     Polygon poly;
     double nu = 1.0, nv = 1.0, mu = 1.0, mv = 1.0;
 
-    double patches() const { return quad_like ? nu * nv : nu * nu; }
+    // A triangle's n² cells pair up into parallelograms, with the n cells along its third side
+    // left over (face_cells).
+    double patches() const { return quad_like ? nu * nv : nu * (nu + 1.0) / 2.0; }
     double elements() const { return quad_like ? nu * nv * mu * mv : nu * nu * mu * mu; }
 };
 
@@ -273,8 +276,8 @@ Polygon without_repeated_corner(const Polygon& poly) {
 }
 
 // Cells of a face by its grid. A needle's quad is collapsed at its apex: the cells there are
-// triangles. A triangle's n² congruent patches are each cut into m² congruent elements, all taken
-// from one fine lattice of n·m divisions.
+// triangles. A triangle's n² congruent cells are each cut into m² congruent elements, all taken
+// from one fine lattice of n·m divisions, and pair up into patches.
 std::vector<PatchCells> face_cells(const Grid& grid) {
     if (grid.quad_like) {
         std::vector<PatchCells> cells = quad_cells(grid);
@@ -291,16 +294,22 @@ std::vector<PatchCells> face_cells(const Grid& grid) {
 
     const Lattice g = triangle_lattice(grid.poly, n * m);
     std::vector<PatchCells> cells;
-    auto add_patch = [&](Node2 A, Node2 B, Node2 C) {
-        PatchCells pc;
-        pc.poly = make_polygon({g.at(A.i, A.j), g.at(B.i, B.j), g.at(C.i, C.j)});
-        subdivide_triangle(g, A, B, C, m, pc.elements);
-        cells.push_back(std::move(pc));
-    };
+    const auto at = [&g](Node2 A) -> const dvec3& { return g.at(A.i, A.j); };
     for (int b = 0; b < n; ++b) {
         for (int a = 0; a + b < n; ++a) {
-            add_patch({a * m, b * m}, {(a + 1) * m, b * m}, {a * m, (b + 1) * m});
-            if (a + b < n - 1) add_patch({(a + 1) * m, b * m}, {(a + 1) * m, (b + 1) * m}, {a * m, (b + 1) * m});
+            // The upward cell and the downward one beside it make a parallelogram patch: half as
+            // many shooters as cells, each no longer along a side than a cell. The last upward cell
+            // of a row, on the triangle's third side, stays a triangle.
+            const Node2 A{a * m, b * m}, B{(a + 1) * m, b * m}, C{a * m, (b + 1) * m}, D{(a + 1) * m, (b + 1) * m};
+            PatchCells pc;
+            subdivide_triangle(g, A, B, C, m, pc.elements);
+            if (a + b < n - 1) {
+                pc.poly = make_polygon({at(A), at(B), at(D), at(C)});
+                subdivide_triangle(g, B, D, C, m, pc.elements);
+            } else {
+                pc.poly = make_polygon({at(A), at(B), at(C)});
+            }
+            cells.push_back(std::move(pc));
         }
     }
     return cells;
@@ -452,8 +461,8 @@ struct Clusters {
     std::vector<std::int64_t> of;
     std::vector<std::vector<std::size_t>> faces;
     std::vector<std::int64_t> from;  // per cluster: the face from whose centroid it shoots, or −1
-    // Per side, as Mesh::clusters: curved clusters split back into their faces and flat ones that
-    // shoot from a face's centroid instead (split_blocked_clusters).
+    // Per side, as Mesh::clusters: halvings of curved clusters and flat ones that shoot from a
+    // face's centroid instead (split_blocked_clusters).
     std::size_t split = 0, moved = 0;
 };
 
@@ -609,12 +618,35 @@ bool segment_meets(const dvec3& a, const dvec3& b, const Polygon& poly) {
     return false;
 }
 
+// Cuts a cluster's faces (with their shapes) in two across the longest side of the box of their
+// centroids, at the median: `members` keeps the lower half, the upper one is returned. Both keep
+// the faces' order, and ties go by that order, so the cut is the same on every run.
+std::vector<std::size_t> halve(std::vector<std::size_t>& members, const std::vector<Shape>& shapes) {
+    dvec3 lo = shapes.front().centroid, hi = lo;
+    for (const Shape& sh : shapes) {
+        lo = glm::min(lo, sh.centroid);
+        hi = glm::max(hi, sh.centroid);
+    }
+    const dvec3 extent = hi - lo;
+    const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : (extent.y >= extent.z ? 1 : 2);
+    std::vector<std::size_t> rank(members.size());
+    for (std::size_t i = 0; i < rank.size(); ++i) rank[i] = i;
+    std::stable_sort(rank.begin(), rank.end(),
+                     [&](std::size_t a, std::size_t b) { return shapes[a].centroid[axis] < shapes[b].centroid[axis]; });
+    std::vector<bool> upper(members.size(), false);
+    for (std::size_t i = members.size() / 2; i < rank.size(); ++i) upper[rank[i]] = true;
+    std::vector<std::size_t> lower_half, upper_half;
+    for (std::size_t i = 0; i < members.size(); ++i) (upper[i] ? upper_half : lower_half).push_back(members[i]);
+    members = std::move(lower_half);
+    return upper_half;
+}
+
 // A cluster shoots from one point (Patch): its area centroid raised along its mean normal until
 // it is in front of every face's plane. Where that point lies across other geometry (the bottom
 // cap of a ball resting on a floor shoots from under the floor, a rock's cap through the terrain
 // it sinks into, a wall clustered across a cornice from inside the cornice), its shots would see
 // the outside of the scene, another room or the inside of a solid. A flat cluster then shoots from
-// the centroid of its face nearest the point, a curved one is split back into a patch per face.
+// the centroid of its face nearest the point; a curved one is halved, and each half checked again.
 // Checked for each side the material has: the segment from
 // the centroid of the cluster's face nearest the point to the point, both moved along the side's
 // normal by a margin (far above the engines' clip distance), must meet no face outside the cluster.
@@ -633,12 +665,12 @@ void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& 
     const FaceGrid grid(faces, lo, std::max({0.25 * settings.patch_size, glm::length(hi - lo) / 128.0, 1e-30}));
     const double margin = 1e-6 * extent;
 
-    // Splitting gives a cluster's faces ids past `clusters`, so c.of still tells every later
-    // cluster's own faces from the rest.
-    const std::size_t clusters = c.faces.size();
-    for (std::size_t id = 0; id < clusters; ++id) {
-        const std::vector<std::size_t>& members = c.faces[id];
-        if (members.size() < 2) continue;
+    // Settles cluster `id`: returns false when it was halved, so that its first half (which keeps
+    // the id) is checked again. The second half gets a new id past the others, checked in its
+    // turn, so c.of always tells a cluster's own faces from the rest.
+    const auto settle = [&](std::size_t id) {
+        std::vector<std::size_t>& members = c.faces[id];
+        if (members.size() < 2) return true;
         dvec3 weighted_normal{0.0}, weighted_centroid{0.0};
         double area = 0.0;
         std::vector<Shape> shapes;
@@ -671,24 +703,26 @@ void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& 
             blocked = grid.any(a, b, [&](std::uint32_t f) { return c.of[f] != std::int64_t(id) && segment_meets(a, b, faces[f].poly); });
             if (blocked) break;
         }
-        if (!blocked) continue;
+        if (!blocked) return true;
         if (flat) {
             // A planar cluster around a hole or a ledge (a wall clustered across a cornice has its
             // centroid inside the cornice): any point of its surface stands for it as well as the
             // centroid does, so it shoots from its face nearest the centroid, on both sides.
             c.from[id] = static_cast<std::int64_t>(members[nearest]);
             c.moved += double_sided ? 2 : 1;
-            continue;
+            return true;
         }
-        const std::vector<std::size_t> split(members.begin() + 1, members.end());  // push_back moves members
-        c.faces[id].resize(1);
-        for (const std::size_t f : split) {
-            c.of[f] = static_cast<std::int64_t>(c.faces.size());
-            c.faces.push_back({f});
-            c.from.push_back(-1);
-        }
+        // A curved one is cut in two across its longest extent, at the median face; each half
+        // is checked again (and cut again if it is blocked), down to single faces if need be.
+        std::vector<std::size_t> second = halve(members, shapes);
+        for (const std::size_t f : second) c.of[f] = static_cast<std::int64_t>(c.faces.size());
+        c.faces.push_back(std::move(second));  // invalidates members
+        c.from.push_back(-1);
         c.split += double_sided ? 2 : 1;
-    }
+        return false;
+    };
+    for (std::size_t id = 0; id < c.faces.size();)
+        if (settle(id)) ++id;
 }
 
 // A directed edge a→b of a triangle, qualified by what may be paired with it.

@@ -39,12 +39,13 @@ struct Element {
 
 inline constexpr std::uint32_t kNoPatch = 0xffffffffu;
 
-// A shooter: one cell of a face's grid (a planar polygon), or a cluster of small faces (adjacent,
-// of one material and node, their normals within kClusterCos of each other's), whose shape is
-// only the union of its elements and which shoots along its mean normal from its area centroid,
-// raised where needed to be in front of all of its elements' planes. Where that point lies across
-// another face, a flat cluster shoots from its face nearest the point instead (a wall clustered
-// across a cornice), a curved one is split into its faces (a ball's bottom cap on a floor).
+// A shooter: one cell of a face's grid, or two of a triangle's side by side (a planar polygon), or
+// a cluster of small faces (adjacent, of one material and node, their normals within kClusterCos
+// of each other's), whose shape is only the union of its elements and which shoots along its mean
+// normal from its area centroid, raised where needed to be in front of all of its elements'
+// planes. Where that point lies across another face, a flat cluster shoots from its face nearest
+// the point instead (a wall clustered across a cornice), a curved one is halved until its halves'
+// points are clear (a ball's bottom cap on a floor).
 struct Patch {
     Polygon poly;              // the cell; n = 0 for a cluster of faces (see elements)
     glm::dvec3 normal{0.0};    // unit: the cell's normal, or a cluster's area-weighted mean
@@ -79,7 +80,7 @@ struct Mesh {
     std::size_t dropped_triangles = 0;  // zero or near-zero area
     std::size_t quads = 0;              // triangle pairs meshed as quads
     std::size_t clusters = 0;           // patches that are clusters of several faces (per side)
-    std::size_t split_clusters = 0;     // curved clusters split back into a patch per face: see Patch
+    std::size_t split_clusters = 0;     // halvings of curved clusters (per side): see Patch
     std::size_t moved_clusters = 0;     // flat clusters that shoot from a face's centroid: see Patch
 };
 

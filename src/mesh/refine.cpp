@@ -37,6 +37,8 @@ Refined split_elements(const Mesh& mesh, const std::vector<bool>& split) {
     out.mesh.dropped_triangles = mesh.dropped_triangles;
     out.mesh.quads = mesh.quads;
     out.mesh.clusters = mesh.clusters;
+    out.mesh.split_clusters = mesh.split_clusters;
+    out.mesh.moved_clusters = mesh.moved_clusters;
     std::size_t count = mesh.elements.size();
     for (bool s : split) count += s ? 3 : 0;
     if (count >= std::numeric_limits<std::uint32_t>::max())
