@@ -171,6 +171,25 @@ TEST_CASE("default path: a closed room at rho = 0.999 lit by one wall holds sum(
     CHECK_THAT(total_flux(report), WithinRel(1.2 / (1.0 - rho), 0.005));
 }
 
+TEST_CASE("default path: light shot to the last bounce comes from kept rows, and the books still close", "[default][row_cache]") {
+    // A closed room at ρ = 0.9 lit by one wall, on the hemicube and the progressive solver, shot
+    // until 1e-6 of the light is left (convergence off): every patch shoots dozens of times, so
+    // most shots repeat a kept row (report.json row_cache). Σ A·B is still emitted / (1 − ρ).
+    TempDir dir;
+    const double rho = 0.9;
+    const json report =
+        bake_default(dir, lit_box({1.0, 0.8, 1.2}, rho, rho), "box",
+                     {"--effects", "occlusion=on,convergence=off", "--solver", "progressive", "--patch-size", "0.5"});
+    check_books(report);
+    CHECK_THAT(total_flux(report), WithinRel(1.2 / (1.0 - rho), 0.005));
+    const json& memo = report.at("row_cache");
+    CAPTURE(memo.dump(), report.at("counts").at("patches").get<long>());
+    CHECK(memo.at("requests").get<long>() == report.at("passes").get<long>());
+    CHECK(memo.at("reused").get<long>() + memo.at("shot").get<long>() == memo.at("requests").get<long>());
+    CHECK(memo.at("reused").get<long>() > 4 * memo.at("shot").get<long>());
+    CHECK(memo.at("peak_bytes").get<double>() <= memo.at("budget_bytes").get<double>());
+}
+
 TEST_CASE("default path: perpendicular squares sharing an edge", "[default]") {
     // A unit floor emitting E = 1 (ρ = 0) lights a unit wall along their shared edge: the wall's
     // irradiance is F(wall → floor) = 0.2000437761 (REFERENCES.md); nothing else reflects.

@@ -32,6 +32,7 @@
 #include "core/memory.h"
 #include "core/timing.h"
 #include "formfactor/near_field.h"
+#include "formfactor/row_cache.h"
 #include "mesh/mesh.h"
 #include "output/finite.h"
 #include "output/output.h"
@@ -643,6 +644,8 @@ void run_bake(const BakeOptions& options) {
     std::vector<solve::RefineLevel> levels;
     double t_formfactors = 0.0, t_solve = 0.0, t_refine = 0.0;
     std::optional<formfactor::VerifySummary> verified;  // what --verify compared
+    formfactor::RowCacheEngine* row_cache = nullptr;      // the progressive solve's, while it runs
+    std::optional<formfactor::RowCacheStats> row_cache_stats;
 
     // The solve, then adaptive refinement, on the engines `choice` makes.
     const auto solve_and_refine = [&] {
@@ -651,6 +654,12 @@ void run_bake(const BakeOptions& options) {
             plan.occlusion.on
                 ? observed(std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice.engine)), o.on_shot)
                 : make_engine(mesh, 0);
+        // Progressive shooting asks for a patch's row again each time it shoots: keep them.
+        if (solver_name == "progressive") {
+            auto cached = std::make_unique<formfactor::RowCacheEngine>(std::move(base_engine), row_cache_bytes(shape));
+            row_cache = cached.get();
+            base_engine = std::move(cached);
+        }
         TimedEngine engine(*base_engine);
 
         t0 = Clock::now();
@@ -675,6 +684,8 @@ void run_bake(const BakeOptions& options) {
 
         t_formfactors = engine.seconds();
         if (choice.verifier) verified = choice.verifier->summary();  // the engine ends with this call
+        if (row_cache) row_cache_stats = row_cache->stats();
+        row_cache = nullptr;  // ends with the engine
         t_solve = seconds_since(t0) - engine.seconds();
         base_engine.reset();  // refinement makes engines of its own: the solve's buffers go first
 
@@ -803,6 +814,16 @@ void run_bake(const BakeOptions& options) {
     if (solution.converged) report["converged_by"] = solution.convergence_rule;
     report["error"] = solution.error;
     if (solver_name == "matrix") report["iterations"] = solution.iterations;
+    if (row_cache_stats) {
+        const formfactor::RowCacheStats& r = *row_cache_stats;
+        report["row_cache"] = {{"requests", r.requests},
+                               {"reused", r.hits},
+                               {"shot", r.shot},
+                               {"kept", r.kept},
+                               {"dropped", r.dropped},
+                               {"peak_bytes", r.peak_bytes},
+                               {"budget_bytes", r.budget_bytes}};
+    }
     report["energy"] = {{"emitted", energy.emitted},
                         {"absorbed", energy.absorbed},
                         {"escaped", energy.escaped},

@@ -19,7 +19,12 @@ constexpr double kRefinedGrowth = 2.0;
 // Per element of the progressive solver: incident light, the round's snapshot, and the two
 // per-element vectors its queries return (dvec3 each).
 constexpr double kProgressivePerElement = 4 * 24.0;
-constexpr double kProgressivePerPatch = 2 * 24.0 + 2 * 8.0;  // unshot, shot; hit share, round's unshot
+// unshot, shot; hit share, round's unshot; shots, the counters of the first few (Settings::rotations)
+const double kProgressivePerPatch = 2 * 24.0 + 2 * 8.0 + 4.0 + solve::Settings{}.rotations * 8.0;
+// The progressive solve's row memo (formfactor::RowCacheEngine): this much per element, within
+// [kRowCacheMin, kRowCacheMax].
+constexpr double kRowCachePerElement = 256.0;
+constexpr double kRowCacheMin = 64.0 * (1 << 20), kRowCacheMax = 512.0 * (1 << 20);
 // Output: the welded mesh (about four vertices per element: position, normal, radiosity, index)
 // and the renderer's supersampled strip and image (3 × 3 samples of depth and colour per pixel).
 constexpr double kWeldedPerElement = 4 * 40.0;
@@ -94,6 +99,7 @@ MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
     } else {
         m.parts.push_back({"solver", E * kProgressivePerElement + P * kProgressivePerPatch +
                                          std::max(1, s.batch) * E * sizeof(double)});
+        m.parts.push_back({"row cache", row_cache_bytes(s)});
     }
     if (s.refine_levels > 0) {
         const double refined = E * kRefinedGrowth;
@@ -104,6 +110,10 @@ MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
     m.parts.push_back({"output", E * (s.refine_levels > 0 ? kRefinedGrowth : 1.0) * kWeldedPerElement +
                                      s.pixels * kRenderPerPixel});
     return m;
+}
+
+double row_cache_bytes(const BakeShape& s) {
+    return std::clamp(s.counts.elements * kRowCachePerElement, kRowCacheMin, kRowCacheMax);
 }
 
 double refinement_room(const BakeShape& s, const std::string& solver, double limit) {

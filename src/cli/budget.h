@@ -43,6 +43,9 @@ struct MemoryEstimate {
 };
 MemoryEstimate estimate_memory(const BakeShape& shape, const std::string& solver);
 
+// The progressive solve's budget for kept form-factor rows (formfactor::RowCacheEngine).
+double row_cache_bytes(const BakeShape& shape);
+
 // Refined elements the budget leaves room for once the rest of the estimate is spent (at least
 // the elements as built).
 double refinement_room(const BakeShape& shape, const std::string& solver, double limit);

@@ -23,7 +23,10 @@ Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, con
       H_(mesh.elements.size(), glm::dvec3(0.0)),
       shot_(mesh.patches.size(), glm::dvec3(0.0)),
       hit_(mesh.patches.size(), 1.0),
-      round_unshot_(mesh.patches.size(), 0.0) {
+      round_unshot_(mesh.patches.size(), 0.0),
+      rotations_(static_cast<std::size_t>(std::max(0, settings.rotations))),
+      shots_(mesh.patches.size(), 0),
+      counters_(mesh.patches.size() * rotations_, kNotShot) {
     unshot_.reserve(mesh.patches.size());
     for (const auto& p : mesh.patches) {
         unshot_.push_back(p.emission);
@@ -85,8 +88,16 @@ bool Progressive::step() {
     while (static_cast<long>(requests.size()) < count) {
         if (nothing_unshot()) break;
         const std::size_t best = pick_.top();
-        requests.push_back(formfactor::ShotRequest::of_patch(static_cast<std::uint32_t>(best),
-                                                            static_cast<std::uint64_t>(passes_) + requests.size()));
+        // The k-th shot of a patch takes the counter (the hemicube's rotation) of its
+        // (k mod rotations)-th: the first are the passes' own, later ones repeat those rows.
+        const std::uint64_t pass = static_cast<std::uint64_t>(passes_) + requests.size();
+        std::uint64_t counter = pass;
+        if (rotations_ > 0) {
+            std::uint64_t& slot = counters_[best * rotations_ + shots_[best] % rotations_];
+            if (slot == kNotShot) slot = pass;
+            counter = slot;
+        }
+        requests.push_back(formfactor::ShotRequest::of_patch(static_cast<std::uint32_t>(best), counter));
         pick_.set(best, -1.0);
     }
     for (const formfactor::ShotRequest& r : requests) pick_.set(r.shooter.patch, flux_key(r.shooter.patch));
@@ -108,6 +119,7 @@ void Progressive::apply(std::size_t best, const formfactor::ShotResult& shot) {
     unshot_flux_ -= flux;
     unshot_[best] = glm::dvec3(0.0);
     shot_[best] += u;
+    ++shots_[best];
     round_unshot_[best] = 0.0;  // what it held at the round's start has now been shot
 
     // ΔH_j = ΔB_i F_ij A_i / A_j; what element j reflects, ρ_j ΔH_j A_j, joins its patch's pool.
@@ -253,6 +265,8 @@ void Progressive::save(std::ostream& out) const {
     put_vector(out, snapshot_);
     put_vector(out, hit_);
     put_vector(out, round_unshot_);
+    put_vector(out, shots_);
+    put_vector(out, counters_);
     for (const glm::dvec3& v :
          {emitted_, absorbed_, escaped_, recent_shot_, recent_reflected_, incident_flux_, unshot_flux_, landing_})
         put(out, v);
@@ -271,6 +285,8 @@ void Progressive::load(std::istream& in) {
     get_vector(in, snapshot_, snapshot_.size());
     get_vector(in, hit_, hit_.size());
     get_vector(in, round_unshot_, round_unshot_.size());
+    get_vector(in, shots_, shots_.size());
+    get_vector(in, counters_, counters_.size());
     for (glm::dvec3* v : {&emitted_, &absorbed_, &escaped_, &recent_shot_, &recent_reflected_, &incident_flux_,
                           &unshot_flux_, &landing_})
         get(in, *v);

@@ -31,6 +31,13 @@ struct Settings {
     // together (one launch on the OpenCL engine), then are applied in turn, each shooting
     // the unshot flux it holds by then. 1 is Southwell's order exactly.
     int batch = 1;
+    // Rotations of a patch's hemicube: its k-th shot takes the shot counter (the rotation) of its
+    // (k mod rotations)-th, so that a patch which shoots again and again (light trapped between a
+    // few patches) cycles through this many rows, which an engine may keep
+    // (formfactor::RowCacheEngine), while its light still averages the aliasing of that many
+    // rotations. Patches that shoot at most this many times shoot as with a new rotation every
+    // pass. 0: a new rotation every pass.
+    int rotations = 8;
 };
 
 // Flux bookkeeping, as radiosity × area summed over elements, averaged over r, g, b.
@@ -132,6 +139,12 @@ private:
     std::vector<double> round_unshot_;
     double round_held_ = 0.0;
     double round_change_ = 0.0;
+    // Per patch, its shots so far, and the shot counters of its first settings_.rotations shots,
+    // kNotShot until taken (Settings::rotations).
+    static constexpr std::uint64_t kNotShot = ~std::uint64_t{0};
+    std::size_t rotations_ = 0;
+    std::vector<std::uint32_t> shots_;
+    std::vector<std::uint64_t> counters_;
 };
 
 }  // namespace hemirad::solve
