@@ -57,11 +57,12 @@ void RowCacheEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vec
 }
 
 void RowCacheEngine::keep(const Key& key, const ShotResult& row) {
+    if (rows_.count(key) > 0) return;  // the same request twice in one batch
     ShotResult copy = row;
     copy.element.shrink_to_fit();
     copy.F.shrink_to_fit();
     const double bytes = row_bytes(copy);
-    if (bytes > stats_.budget_bytes || rows_.count(key) > 0) return;
+    if (bytes > stats_.budget_bytes) return;
     while (bytes_ + bytes > stats_.budget_bytes && !use_.empty()) {
         const auto last = rows_.find(use_.back());
         bytes_ -= row_bytes(last->second.result);
