@@ -117,7 +117,7 @@ int main(int argc, char** argv) {
             std::vector<double> cells;
             std::string stages;  // of occlusion culling on every shot
             for (int variant = 0; variant < 4; ++variant) {
-                formfactor::OpenCLTuning tuning = formfactor::default_tuning(context.info());
+                formfactor::OpenCLTuning tuning = formfactor::tuning_from_environment(context.info());
                 if (variant == 1) tuning.occlusion = formfactor::Occlusion::on;
                 if (variant > 1) tuning.occlusion = formfactor::Occlusion::off;
                 tuning.cull = variant < 3;
