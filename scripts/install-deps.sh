@@ -7,6 +7,8 @@ packages=(
   ocl-icd-opencl-dev opencl-clhpp-headers pocl-opencl-icd clinfo
   libglm-dev
   libtinygltf-dev nlohmann-json3-dev libstb-dev
+  # Compressed glTF geometry: EXT_meshopt_compression and KHR_draco_mesh_compression.
+  libmeshoptimizer-dev libdraco-dev
   # OpenImageIO's CMake config also names openimageio-tools, python3-imath and OpenCV's headers.
   libopenimageio-dev openimageio-tools python3-imath libopencv-core-dev
   catch2 libcli11-dev libfmt-dev

@@ -16,6 +16,7 @@
 #include <glm/gtc/type_ptr.hpp>
 #include <limits>
 #include <map>
+#include <memory>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -26,6 +27,7 @@
 
 #include "core/error.h"
 #include "core/regular_file.h"
+#include "scene/gltf_compression.h"
 #include "scene/image_mean.h"
 
 namespace hemirad::scene {
@@ -274,7 +276,8 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     if (ext != ".gltf" && ext != ".glb") {
         throw InputError(name + ": not a glTF file (expected a .gltf or .glb extension)");
     }
-    const std::vector<unsigned char> bytes = ext == ".glb" ? read_glb(file, name) : read_gltf(file, name);
+    std::vector<unsigned char> bytes = ext == ".glb" ? read_glb(file, name) : read_gltf(file, name);
+    const MeshoptFallbacks fallbacks = stand_in_for_compressed_data(bytes, ext == ".glb", name);
 
     tinygltf::TinyGLTF gltf;
     gltf.SetFsCallbacks({&file_exists, &tinygltf::ExpandFilePath, &read_file, &tinygltf::WriteWholeFile, nullptr});
@@ -309,12 +312,16 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     if (model.asset.version.rfind("2.", 0) != 0) {
         throw InputError(name + ": glTF version '" + model.asset.version + "' is not supported (need 2.x)");
     }
-    // These change what accessors mean; reading the raw buffers anyway would give garbage.
-    for (const std::string& required : model.extensionsRequired) {
-        if (required == "KHR_draco_mesh_compression" || required == "EXT_meshopt_compression") {
-            throw InputError(fmt::format("{}: required extension {} is not supported", name, required));
-        }
-    }
+    decode_meshopt(model, fallbacks, name);
+    decode_draco(model, name);
+    // A required extension the loader does not know may change what the file means: said, not
+    // silently ignored (those that change geometry are all decoded above).
+    static const std::set<std::string> kRead = {"KHR_mesh_quantization", "EXT_meshopt_compression",
+                                                "KHR_draco_mesh_compression", "KHR_materials_emissive_strength"};
+    for (const std::string& required : model.extensionsRequired)
+        if (kRead.count(required) == 0)
+            warnings.push_back(fmt::format("{}: required extension {} is not supported; the scene is read without it",
+                                           name, required));
     return model;
 }
 
@@ -364,7 +371,31 @@ struct AccessorView {
     std::size_t count = 0;
     int components = 0;
     int component_type = 0;
+    bool normalized = false;
     std::string what;  // "mesh 'x' primitive 0 POSITION (accessor 3)", for messages
+    // A sparse accessor's elements, or an accessor's without a bufferView, made here: `data`
+    // points into it.
+    std::shared_ptr<const std::vector<unsigned char>> owned;
+
+    // The value an attribute means: an integer component of a normalized accessor mapped to
+    // [0, 1] or [-1, 1] as glTF defines (KHR_mesh_quantization stores positions so), else the
+    // stored value.
+    double value(std::size_t element, int c) const {
+        const double x = get(element, c);
+        if (!normalized) return x;
+        switch (component_type) {
+            case TINYGLTF_COMPONENT_TYPE_BYTE:
+                return std::max(x / 127.0, -1.0);
+            case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+                return x / 255.0;
+            case TINYGLTF_COMPONENT_TYPE_SHORT:
+                return std::max(x / 32767.0, -1.0);
+            case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+                return x / 65535.0;
+            default:
+                return x;
+        }
+    }
 
     // The stored value, not normalised. memcpy because glTF data need not be aligned in memory.
     double get(std::size_t element, int c) const {
@@ -398,6 +429,80 @@ struct AccessorView {
     }
 };
 
+// The bytes [offset, offset + count elements at `stride`) of bufferView `index`, checked against
+// its buffer and its byteLength: for an accessor's elements and a sparse accessor's indices and
+// values.
+const unsigned char* view_bytes(const Loader& L, int index, std::size_t offset, std::size_t count,
+                                std::size_t element, std::size_t stride, const std::string& what) {
+    const tinygltf::Model& m = L.model;
+    if (index < 0 || std::size_t(index) >= m.bufferViews.size()) {
+        L.fail(fmt::format("{}: bufferView {} out of range ({} bufferViews)", what, index, m.bufferViews.size()));
+    }
+    const tinygltf::BufferView& bv = m.bufferViews[std::size_t(index)];
+    if (bv.buffer < 0 || std::size_t(bv.buffer) >= m.buffers.size()) {
+        L.fail(fmt::format("{}: bufferView {} names buffer {}, out of range", what, index, bv.buffer));
+    }
+    const std::vector<unsigned char>& bytes = m.buffers[std::size_t(bv.buffer)].data;
+    if (bv.byteOffset > bytes.size() || bv.byteLength > bytes.size() - bv.byteOffset) {
+        L.fail(fmt::format("{}: bufferView {} (offset {}, length {}) runs past the end of buffer {} ({} bytes)", what,
+                           index, bv.byteOffset, bv.byteLength, bv.buffer, bytes.size()));
+    }
+    // Written as divisions so a huge count in the file cannot overflow the check itself.
+    if (count > 0 && (offset > bv.byteLength || element > bv.byteLength - offset ||
+                      (count - 1) > (bv.byteLength - offset - element) / stride)) {
+        L.fail(fmt::format("{}: {} elements at offset {} with stride {} run past the end of bufferView {} ({} bytes)",
+                           what, count, offset, stride, index, bv.byteLength));
+    }
+    return bytes.data() + bv.byteOffset + offset;
+}
+
+// A sparse accessor, or one without a bufferView, as glTF defines it: the elements of its
+// bufferView (zeros without one), then each of `sparse.count` values written over the element
+// its index names.
+std::shared_ptr<const std::vector<unsigned char>> materialize(const Loader& L, const tinygltf::Accessor& a,
+                                                              std::size_t element, const std::string& what) {
+    constexpr std::size_t kMaxBytes = std::size_t{1} << 32;  // what a bufferView may hold, at most
+    if (a.count > kMaxBytes / element)
+        L.fail(fmt::format("{}: {} elements of {} bytes are more than an accessor may hold", what, a.count, element));
+    auto out = std::make_shared<std::vector<unsigned char>>(a.count * element, 0);
+    if (a.bufferView >= 0) {
+        const std::size_t stride =
+            L.model.bufferViews.size() > std::size_t(a.bufferView) &&
+                    L.model.bufferViews[std::size_t(a.bufferView)].byteStride != 0
+                ? L.model.bufferViews[std::size_t(a.bufferView)].byteStride
+                : element;
+        if (stride < element)
+            L.fail(fmt::format("{}: byteStride {} is shorter than one element ({} bytes)", what, stride, element));
+        const unsigned char* dense = view_bytes(L, a.bufferView, a.byteOffset, a.count, element, stride, what);
+        for (std::size_t i = 0; i < a.count; ++i) std::memcpy(out->data() + i * element, dense + i * stride, element);
+    }
+    if (!a.sparse.isSparse) return out;
+    const auto& sp = a.sparse;
+    if (sp.count < 1 || std::size_t(sp.count) > a.count)
+        L.fail(fmt::format("{}: sparse count {} must be from 1 to the accessor's count ({})", what, sp.count, a.count));
+    if (sp.indices.byteOffset < 0 || sp.values.byteOffset < 0)
+        L.fail(what + ": a sparse byteOffset is negative");
+    const std::size_t n = std::size_t(sp.count);
+    const std::size_t index_size = component_size(sp.indices.componentType);
+    if (sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+        sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+        L.fail(fmt::format("{}: sparse indices must be unsigned byte, short or int (componentType {})", what,
+                           sp.indices.componentType));
+    const unsigned char* indices = view_bytes(L, sp.indices.bufferView, std::size_t(sp.indices.byteOffset), n,
+                                              index_size, index_size, what + " sparse indices");
+    const unsigned char* values = view_bytes(L, sp.values.bufferView, std::size_t(sp.values.byteOffset), n, element,
+                                             element, what + " sparse values");
+    const AccessorView index_view{indices, index_size, n, 1, sp.indices.componentType, false, what, nullptr};
+    for (std::size_t i = 0; i < n; ++i) {
+        const double target = index_view.get(i, 0);
+        if (target >= double(a.count))
+            L.fail(fmt::format("{}: sparse index {} is {}, past the accessor's {} elements", what, i, target, a.count));
+        std::memcpy(out->data() + std::size_t(target) * element, values + i * element, element);
+    }
+    return out;
+}
+
 AccessorView view_accessor(const Loader& L, int index, const std::string& where) {
     const tinygltf::Model& m = L.model;
     if (index < 0 || std::size_t(index) >= m.accessors.size()) {
@@ -405,47 +510,34 @@ AccessorView view_accessor(const Loader& L, int index, const std::string& where)
     }
     const tinygltf::Accessor& a = m.accessors[std::size_t(index)];
     const std::string what = fmt::format("{} (accessor {})", where, index);
-    if (a.sparse.isSparse) L.fail(what + ": sparse accessors are not supported");
-    if (a.bufferView < 0) L.fail(what + ": accessors without a bufferView are not supported");
-    if (std::size_t(a.bufferView) >= m.bufferViews.size()) {
-        L.fail(
-            fmt::format("{}: bufferView {} out of range ({} bufferViews)", what, a.bufferView, m.bufferViews.size()));
-    }
-    const tinygltf::BufferView& bv = m.bufferViews[std::size_t(a.bufferView)];
-    if (bv.buffer < 0 || std::size_t(bv.buffer) >= m.buffers.size()) {
-        L.fail(fmt::format("{}: bufferView {} names buffer {}, out of range", what, a.bufferView, bv.buffer));
-    }
-    const std::vector<unsigned char>& bytes = m.buffers[std::size_t(bv.buffer)].data;
-    if (bv.byteOffset > bytes.size() || bv.byteLength > bytes.size() - bv.byteOffset) {
-        L.fail(fmt::format("{}: bufferView {} (offset {}, length {}) runs past the end of buffer {} ({} bytes)", what,
-                           a.bufferView, bv.byteOffset, bv.byteLength, bv.buffer, bytes.size()));
-    }
-
     const std::size_t csize = component_size(a.componentType);
     const int n = component_count(a.type);
     if (csize == 0 || n == 0) L.fail(fmt::format("{}: invalid componentType {} or type", what, a.componentType));
     const std::size_t element = csize * std::size_t(n);
-    const std::size_t stride = bv.byteStride != 0 ? bv.byteStride : element;
+    if (a.sparse.isSparse || a.bufferView < 0) {
+        auto owned = materialize(L, a, element, what);
+        return {owned->data(), element, a.count, n, a.componentType, a.normalized, what, owned};
+    }
+    const std::size_t view_stride =
+        std::size_t(a.bufferView) < m.bufferViews.size() ? m.bufferViews[std::size_t(a.bufferView)].byteStride : 0;
+    const std::size_t stride = view_stride != 0 ? view_stride : element;
     if (stride < element) {
         L.fail(fmt::format("{}: byteStride {} is shorter than one element ({} bytes)", what, stride, element));
     }
-    // Written as divisions so a huge count in the file cannot overflow the check itself.
-    if (a.count > 0 && (a.byteOffset > bv.byteLength || element > bv.byteLength - a.byteOffset ||
-                        (a.count - 1) > (bv.byteLength - a.byteOffset - element) / stride)) {
-        L.fail(fmt::format("{}: {} elements at offset {} with stride {} run past the end of bufferView {} ({} bytes)",
-                           what, a.count, a.byteOffset, stride, a.bufferView, bv.byteLength));
-    }
-    return {bytes.data() + bv.byteOffset + a.byteOffset, stride, a.count, n, a.componentType, what};
+    const unsigned char* data = view_bytes(L, a.bufferView, a.byteOffset, a.count, element, stride, what);
+    return {data, stride, a.count, n, a.componentType, a.normalized, what, nullptr};
 }
 
 std::vector<dvec3> read_positions(const Loader& L, int index, const std::string& where) {
     const AccessorView v = view_accessor(L, index, where);
-    if (v.components != 3 || v.component_type != TINYGLTF_COMPONENT_TYPE_FLOAT) {
-        L.fail(v.what + ": POSITION must be VEC3 FLOAT");
+    // FLOAT, or (KHR_mesh_quantization) signed or unsigned bytes or shorts, normalized or not:
+    // the node's transform takes the values back to the model's units.
+    if (v.components != 3 || v.component_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) {
+        L.fail(v.what + ": POSITION must be VEC3 of FLOAT, or of bytes or shorts (KHR_mesh_quantization)");
     }
     std::vector<dvec3> out(v.count);
     for (std::size_t i = 0; i < v.count; ++i) {
-        out[i] = dvec3(v.get(i, 0), v.get(i, 1), v.get(i, 2));
+        out[i] = dvec3(v.value(i, 0), v.value(i, 1), v.value(i, 2));
         if (!std::isfinite(out[i].x) || !std::isfinite(out[i].y) || !std::isfinite(out[i].z)) {
             L.fail(fmt::format("{}: position {} is not finite (NaN or Inf)", v.what, i));
         }
