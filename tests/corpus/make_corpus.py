@@ -167,6 +167,29 @@ def cases():
     out.append(("missing_texture.gltf", textured({"uri": "missing_texture.png"}), "missing_texture.png"))
     out.append(("undecodable_texture.gltf", textured({"uri": "undecodable_texture.png"}), "undecodable_texture.png"))
     out.append(("texture_without_source.gltf", textured(None), "texture 0"))
+
+    # Compressed geometry whose data does not decode (bytes no encoder writes), or whose
+    # extension names what cannot be: exit 2 naming the bufferView or the primitive.
+    garbage = bytes([0xff] * 64)
+    def compressed(mode="ATTRIBUTES"):
+        g = base_scene()
+        g["buffers"].append({"byteLength": len(garbage),
+                             "uri": "data:application/octet-stream;base64," + base64.b64encode(garbage).decode()})
+        g["bufferViews"][0]["byteStride"] = 12
+        g["bufferViews"][0]["extensions"] = {"EXT_meshopt_compression": {
+            "buffer": 1, "byteLength": len(garbage), "byteStride": 12, "count": len(POSITIONS), "mode": mode}}
+        g["extensionsUsed"] = g["extensionsRequired"] = ["EXT_meshopt_compression"]
+        return dump(g)
+    out.append(("meshopt_garbage.gltf", compressed(), "do not decode"))
+    out.append(("meshopt_unknown_mode.gltf", compressed("POINTS"), "unknown mode"))
+    g = base_scene()
+    g["buffers"].append({"byteLength": len(garbage),
+                         "uri": "data:application/octet-stream;base64," + base64.b64encode(garbage).decode()})
+    g["bufferViews"].append({"buffer": 1, "byteLength": len(garbage)})
+    g["meshes"][0]["primitives"][0]["extensions"] = {"KHR_draco_mesh_compression": {
+        "bufferView": 2, "attributes": {"POSITION": 0}}}
+    g["extensionsUsed"] = g["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+    out.append(("draco_garbage.gltf", dump(g), "does not decode"))
     return out
 
 
