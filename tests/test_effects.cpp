@@ -128,6 +128,46 @@ TEST_CASE("effects: a block inside a box needs occlusion and the reason names it
     CHECK_THAT(plan.occlusion.why, Contains("behind the plane of triangle") && Contains("'block"));
 }
 
+TEST_CASE("effects: see-through surfaces are left out, and the other effects judged without them", "[effects]") {
+    std::uint32_t grey = 0, light = 0;
+    scene::Scene s = unit_box(grey, light);
+    const std::size_t box_triangles = s.triangles.size();
+    const std::uint32_t glass = test::add_material(s, glm::dvec3(0.9), glm::dvec3(0.0));
+    s.materials[glass].name = "glass";
+    s.materials[glass].see_through = "alphaMode BLEND, mean opacity 0.20";
+    add_block(s, glm::dvec3(0.4), glm::dvec3(0.6), glass);  // a glass block inside the box
+
+    const scene::EffectsPlan plan = scene::plan_effects(s, {});
+    CAPTURE(plan.see_through.why, plan.occlusion.why);
+    CHECK(plan.see_through.on);
+    CHECK_FALSE(plan.see_through.forced);
+    CHECK_THAT(plan.see_through.why, Contains("12 of 24 triangles") && Contains("'glass'") &&
+                                          Contains("alphaMode BLEND") && Contains("see_through=off"));
+    CHECK_FALSE(plan.occlusion.on);  // the empty box is convex: the block does not count
+    scene::Scene meshed = s;
+    scene::apply_see_through(meshed, plan);
+    CHECK(meshed.triangles.size() == box_triangles);
+    for (const scene::Triangle& t : meshed.triangles) CHECK(t.material != glass);
+
+    // Forced off: the block is an opaque surface, which hides parts of the box from others.
+    scene::EffectOverrides opaque;
+    opaque.see_through = scene::Force::off;
+    const scene::EffectsPlan forced = scene::plan_effects(s, opaque);
+    CHECK_FALSE(forced.see_through.on);
+    CHECK(forced.see_through.forced);
+    CHECK(forced.occlusion.on);
+    scene::Scene kept = s;
+    scene::apply_see_through(kept, forced);
+    CHECK(kept.triangles.size() == s.triangles.size());
+
+    // A scene without any: nothing to leave out.
+    std::uint32_t g2 = 0, l2 = 0;
+    const scene::EffectsPlan none = scene::plan_effects(unit_box(g2, l2), {});
+    CHECK_FALSE(none.see_through.on);
+    CHECK_THAT(none.see_through.why, Contains("every surface is opaque"));
+    CHECK(scene::parse_effect_overrides("see_through=off").see_through == scene::Force::off);
+}
+
 TEST_CASE("effects: the Cornell box", "[effects]") {
     const scene::Scene s = scene::load(kSourceDir / "scenes" / "cornell_box.gltf");
     const scene::EffectsPlan plan = scene::plan_effects(s, {});

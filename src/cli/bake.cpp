@@ -212,16 +212,24 @@ private:
 
 ordered_json vec3(const glm::dvec3& v) { return ordered_json::array({v.x, v.y, v.z}); }
 
+bool emits(const scene::Scene& scene, const scene::Triangle& t) {
+    const glm::dvec3& e = scene.materials[t.material].emission;
+    return e.x > 0.0 || e.y > 0.0 || e.z > 0.0;
+}
+
 void check_scene(const scene::Scene& scene) {
     if (scene.triangles.empty())
         throw InputError(fmt::format("{}: no triangles to bake (no mesh with TRIANGLES primitives)", scene.path.string()));
-    bool emits = false;
-    for (const auto& t : scene.triangles) {
-        const glm::dvec3& e = scene.materials[t.material].emission;
-        emits = emits || e.x > 0.0 || e.y > 0.0 || e.z > 0.0;
-    }
-    if (!emits)
-        throw InputError(fmt::format("{}: nothing emits light (no triangle's material has emission > 0)", scene.path.string()));
+    if (std::none_of(scene.triangles.begin(), scene.triangles.end(),
+                     [&](const scene::Triangle& t) { return emits(scene, t); }))
+        throw InputError(fmt::format(
+            "{}: nothing emits light: 0 emissive triangles (no material has emissiveFactor > 0){}; hemirad bakes the "
+            "light of emissive materials",
+            scene.path.string(),
+            scene.punctual_lights == 0
+                ? std::string()
+                : fmt::format(", and {} KHR_lights_punctual light{}, which it does not bake yet", scene.punctual_lights,
+                              scene.punctual_lights == 1 ? "" : "s")));
 }
 
 void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const solve::Progressive& solver,
@@ -488,6 +496,7 @@ void run_bake(const BakeOptions& options) {
 
     // Which effects this scene calls for (report.json `effects` says why).
     scene::EffectsPlan plan = scene::plan_effects(scene, overrides);
+    scene::apply_see_through(scene, plan);
     scene::apply_two_sided(scene, plan, overrides);
     scene::apply_colour(scene, plan);
     if (o.verify && !plan.occlusion.on) {
@@ -847,6 +856,7 @@ void run_bake(const BakeOptions& options) {
         {"colour", effect_json(plan.colour)},
         {"interreflection", effect_json(plan.interreflection)},
         {"two_sided", effect_json(plan.two_sided)},
+        {"see_through", effect_json(plan.see_through)},
         {"refinement", effect_json({plan.refinement.on && !levels.empty(), plan.refinement.forced, refine_why})},
         {"convergence", effect_json({plan.convergence.on, plan.convergence.forced,
                                      plan.convergence.why + fmt::format(" (solver {}, threshold {:g})", solver_name, threshold)})},

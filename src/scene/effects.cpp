@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <optional>
+#include <set>
 #include <stdexcept>
 #include <vector>
 
@@ -362,6 +363,29 @@ EffectDecision analyse_two_sided(const Scene& scene) {
                                        node_name(scene, example)));
 }
 
+EffectDecision analyse_see_through(const Scene& scene) {
+    std::size_t count = 0, example = 0;
+    std::set<std::uint32_t> materials;
+    for (std::size_t i = 0; i < scene.triangles.size(); ++i) {
+        const Material* m = material_of(scene, scene.triangles[i]);
+        if (m && !m->see_through.empty()) {
+            if (count++ == 0) example = i;
+            materials.insert(scene.triangles[i].material);
+        }
+    }
+    if (count == 0)
+        return automatic(false, "no material is see-through (alphaMode BLEND below half opacity, or "
+                                "KHR_materials_transmission above one half, without emitting), so every surface is "
+                                "opaque");
+    const std::uint32_t material = scene.triangles[example].material;
+    return automatic(true, fmt::format("{} of {} triangles use {} see-through material{} (e.g. '{}' on node '{}', {}): "
+                                       "like fake light shafts and glass they neither block, emit nor receive light "
+                                       "(see_through=off bakes them as opaque surfaces)",
+                                       count, scene.triangles.size(), materials.size(), materials.size() == 1 ? "" : "s",
+                                       material_name(scene, material), node_name(scene, example),
+                                       scene.materials[material].see_through));
+}
+
 }  // namespace
 
 const char* to_string(Force force) {
@@ -376,10 +400,12 @@ const char* to_string(Force force) {
 EffectOverrides parse_effect_overrides(const std::string& spec) {
     EffectOverrides out;
     if (trim(spec).empty()) return out;
-    const char* const names[] = {"occlusion", "colour", "interreflection", "two_sided", "refinement", "convergence"};
-    Force* const slots[] = {&out.occlusion,  &out.colour,     &out.interreflection,
-                            &out.two_sided,  &out.refinement, &out.convergence};
-    bool seen[6] = {};
+    const char* const names[] = {"occlusion",  "colour",      "interreflection", "two_sided",
+                                 "refinement", "convergence", "see_through"};
+    Force* const slots[] = {&out.occlusion,  &out.colour,      &out.interreflection, &out.two_sided,
+                            &out.refinement, &out.convergence, &out.see_through};
+    constexpr int kEffects = 7;
+    bool seen[kEffects] = {};
     std::size_t start = 0;
     while (true) {
         const std::size_t comma = spec.find(',', start);
@@ -391,11 +417,11 @@ EffectOverrides parse_effect_overrides(const std::string& spec) {
         const std::string name = lower(trim(item.substr(0, eq)));
         const std::string value = lower(trim(item.substr(eq + 1)));
         int index = -1;
-        for (int i = 0; i < 6; ++i)
+        for (int i = 0; i < kEffects; ++i)
             if (name == names[i]) index = i;
         if (index < 0)
             throw std::invalid_argument(fmt::format("effects '{}': unknown effect '{}' in '{}' (expected occlusion, "
-                                                    "colour, interreflection, two_sided, refinement or convergence)",
+                                                    "colour, interreflection, two_sided, refinement, convergence or see_through)",
                                                     spec, name, item));
         Force force;
         if (value == "on") force = Force::on;
@@ -415,6 +441,19 @@ EffectOverrides parse_effect_overrides(const std::string& spec) {
 
 EffectsPlan plan_effects(const Scene& scene, const EffectOverrides& overrides) {
     EffectsPlan plan;
+    plan.see_through = decide(overrides.see_through, analyse_see_through(scene));
+    // The other effects are judged on the surfaces that take part.
+    if (plan.see_through.on) {
+        Scene opaque = scene;
+        apply_see_through(opaque, plan);
+        EffectsPlan rest = plan_effects(opaque, [&] {
+            EffectOverrides o = overrides;
+            o.see_through = Force::off;
+            return o;
+        }());
+        rest.see_through = plan.see_through;
+        return rest;
+    }
     plan.occlusion = decide(overrides.occlusion, analyse_occlusion(scene, overrides.two_sided));
     plan.colour = decide(overrides.colour, analyse_colour(scene));
     plan.interreflection = decide(overrides.interreflection, analyse_interreflection(scene));
@@ -433,6 +472,16 @@ void apply_two_sided(Scene& scene, const EffectsPlan& plan, const EffectOverride
     } else if (!plan.two_sided.on) {
         for (Material& m : scene.materials) m.double_sided = false;
     }
+}
+
+void apply_see_through(Scene& scene, const EffectsPlan& plan) {
+    if (!plan.see_through.on) return;
+    scene.triangles.erase(std::remove_if(scene.triangles.begin(), scene.triangles.end(),
+                                         [&](const Triangle& t) {
+                                             return t.material < scene.materials.size() &&
+                                                    !scene.materials[t.material].see_through.empty();
+                                         }),
+                          scene.triangles.end());
 }
 
 void apply_colour(Scene& scene, const EffectsPlan& plan) {

@@ -19,10 +19,11 @@ struct EffectOverrides {
     Force two_sided = Force::automatic;
     Force refinement = Force::automatic;
     Force convergence = Force::automatic;
+    Force see_through = Force::automatic;
 };
 
 // Parses a comma-separated list of name=value items, e.g. "occlusion=off,colour=on,refinement=auto"
-// (names: occlusion, colour, interreflection, two_sided, refinement, convergence; values:
+// (names: occlusion, colour, interreflection, two_sided, refinement, convergence, see_through; values:
 // on, off, auto). Spaces around items, names and values are ignored; an empty or all-blank
 // spec leaves every effect automatic. Throws std::invalid_argument naming the bad item (an
 // unknown name or value, an item without '=', an empty item, a name given twice).
@@ -41,6 +42,9 @@ struct EffectsPlan {
     EffectDecision two_sided;        // doubleSided materials make back-face patches
     EffectDecision refinement;       // elements are split where the radiosity contrast is high
     EffectDecision convergence;      // stop once the unshot light can no longer show
+    // Alpha-blended and transmissive surfaces (fake light shafts, glass) are seen through: left
+    // out, so they neither block, emit nor receive (off: baked as opaque surfaces).
+    EffectDecision see_through;
 };
 
 // Decides every effect for `scene` (automatic ones from the scene, forced ones from
@@ -58,6 +62,10 @@ EffectsPlan plan_effects(const Scene& scene, const EffectOverrides& overrides);
 // meshed): two_sided forced on → every material double-sided; two_sided off (forced or
 // automatic) → every material one-sided; otherwise unchanged.
 void apply_two_sided(Scene& scene, const EffectsPlan& plan, const EffectOverrides& overrides);
+
+// Applies the see_through decision (on the copy that will be meshed): on → the triangles of
+// see-through materials are removed (their nodes stay, with no surface); off → kept as opaque.
+void apply_see_through(Scene& scene, const EffectsPlan& plan);
 
 // "on", "off" or "auto".
 // Applies the colour decision: off (planned for a grey scene, or forced) replaces every

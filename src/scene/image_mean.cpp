@@ -117,41 +117,46 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size) {
                                                                                          : 32;
     const OIIO::TypeDesc type = bits == 8 ? OIIO::TypeDesc::UINT8 : bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::FLOAT;
     const int colour = spec.nchannels >= 3 ? 3 : 1;  // grey (+alpha): one channel for all three
+    const bool has_alpha = spec.nchannels == colour + 1;
+    const int channels = colour + (has_alpha ? 1 : 0);  // read: the colour, then alpha
     const std::size_t value_bytes = std::size_t(bits / 8);
-    const std::size_t row_values = std::size_t(spec.width) * std::size_t(colour);
+    const std::size_t row_values = std::size_t(spec.width) * std::size_t(channels);
     const int band = int(std::clamp<std::size_t>(kBandBytes / (row_values * value_bytes), 1, std::size_t(spec.height)));
     std::vector<unsigned char> rows(std::size_t(band) * row_values * value_bytes);
 
     const std::size_t levels = bits == 8 ? 256 : bits == 16 ? 65536 : 0;
-    std::vector<std::uint64_t> histogram(std::size_t(colour) * levels, 0);
-    glm::dvec3 sum(0.0);
+    std::vector<std::uint64_t> histogram(std::size_t(channels) * levels, 0);
+    double sums[4] = {0.0, 0.0, 0.0, 0.0};  // per channel read
     for (int y = 0; y < spec.height; y += band) {
         const int n = std::min(band, spec.height - y);
-        if (!in->read_scanlines(0, 0, spec.y + y, spec.y + y + n, 0, 0, colour, type, rows.data()))
+        if (!in->read_scanlines(0, 0, spec.y + y, spec.y + y + n, 0, 0, channels, type, rows.data()))
             return fail(fmt::format("the image does not decode past row {} ({})", y, first_line(in->geterror())));
         const std::size_t values = std::size_t(n) * row_values;
         if (bits == 8) {
-            for (std::size_t i = 0; i < values; ++i) ++histogram[(i % std::size_t(colour)) * levels + rows[i]];
+            for (std::size_t i = 0; i < values; ++i) ++histogram[(i % std::size_t(channels)) * levels + rows[i]];
         } else if (bits == 16) {
             for (std::size_t i = 0; i < values; ++i) {
                 std::uint16_t v;
                 std::memcpy(&v, rows.data() + 2 * i, 2);
-                ++histogram[(i % std::size_t(colour)) * levels + v];
+                ++histogram[(i % std::size_t(channels)) * levels + v];
             }
         } else {
             for (std::size_t i = 0; i < values; ++i) {
                 float v;
                 std::memcpy(&v, rows.data() + 4 * i, 4);
-                sum[int(i % std::size_t(colour))] += double(v);
+                sums[i % std::size_t(channels)] += double(v);
             }
         }
     }
-    for (int c = 0; c < colour && levels > 0; ++c)
+    for (int c = 0; c < channels && levels > 0; ++c)
         for (std::size_t level = 0; level < levels; ++level)
-            if (const std::uint64_t count = histogram[std::size_t(c) * levels + level]; count != 0)
-                sum[c] += double(count) * srgb_to_linear(double(level) / double(levels - 1));
-    if (colour == 1) sum = glm::dvec3(sum[0]);
+            if (const std::uint64_t count = histogram[std::size_t(c) * levels + level]; count != 0) {
+                const double value = double(level) / double(levels - 1);
+                sums[c] += double(count) * (c < colour ? srgb_to_linear(value) : value);  // alpha is linear
+            }
+    const glm::dvec3 sum = colour == 1 ? glm::dvec3(sums[0]) : glm::dvec3(sums[0], sums[1], sums[2]);
     out.mean = sum / double(pixels);
+    if (has_alpha) out.alpha = std::clamp(sums[colour] / double(pixels), 0.0, 1.0);
     for (int c = 0; c < 3; ++c)
         if (!std::isfinite(out.mean[c]) || out.mean[c] < 0.0)
             return fail(fmt::format("its mean colour has channel {} = {}, not a finite value >= 0", c, out.mean[c]));

@@ -30,11 +30,13 @@ struct ImageMean {
     bool ok = false;
     std::string problem;    // when !ok: "not an image OpenImageIO can decode (…)", …
     glm::dvec3 mean{1.0};   // linear RGB; a grey image's one channel in all three
+    double alpha = 1.0;     // the mean alpha (linear, as glTF stores it); 1 without an alpha channel
     int width = 0, height = 0, channels = 0, bits = 0;
 };
 
 // 8- and 16-bit values are sRGB-encoded and decoded to linear before averaging (averaging the
-// encoded values would darken the result); float images are linear already. Alpha is ignored.
+// encoded values would darken the result); float images are linear already. Alpha (a channel
+// after the colour ones: grey + alpha, RGBA) is averaged as it is stored, linear.
 // The format is the bytes' own (PNG, JPEG or WebP), whatever the uri or mime type says.
 ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size);
 

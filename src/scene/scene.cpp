@@ -607,8 +607,14 @@ std::string percent_decoded(const std::string& uri) {
 // The mean linear colour of a material's texture: 1 when it has none. A texture whose image is
 // missing, unreadable or does not decode is an error (exit 2, naming the image): a bake that went
 // on with some stand-in colour would be silently wrong.
-dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
-    if (info.index < 0) return dvec3(1.0);
+// The decoded mean of the image a material's texture names (a white opaque one for none).
+const ImageMean& texture_image(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
+    static const ImageMean kWhite = [] {
+        ImageMean white;
+        white.ok = true;
+        return white;
+    }();
+    if (info.index < 0) return kWhite;
     const tinygltf::Model& m = L.model;
     if (std::size_t(info.index) >= m.textures.size()) {
         L.fail(fmt::format("{}: texture {} out of range ({} textures)", what, info.index, m.textures.size()));
@@ -652,7 +658,11 @@ dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::s
         L.fail(fmt::format("{}: {}: {}", what, image, problem));
     }
     if (!decoded->second.ok) L.fail(fmt::format("{}: {}: {}", what, image, decoded->second.problem));
-    return decoded->second.mean;
+    return decoded->second;
+}
+
+dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
+    return texture_image(L, info, what).mean;
 }
 
 std::string material_label(const tinygltf::Material& mat, int index) {
@@ -680,6 +690,38 @@ double emissive_strength(const Loader& L, const tinygltf::Material& mat, const s
     return strength;
 }
 
+// Whether light passes the material's surfaces (Material::see_through): alphaMode BLEND with a
+// mean opacity (baseColorFactor alpha x the base colour texture's mean alpha) below one half,
+// or KHR_materials_transmission with transmissionFactor above one half. Exporters mark many
+// opaque materials BLEND (an alpha channel in the texture is enough: lanterns, windows, decals
+// at 95-100% opacity), so the opacity decides. A see-through material that emits stays an
+// opaque emitter, said in a warning: a lamp exported as a blended glow (botanists-study's only
+// light, mean opacity 0.32) is still the scene's light, and a surface that emits without
+// blocking needs a shooter the kernels do not yet have.
+void see_through(Loader& L, const tinygltf::Material& mat, const std::string& label, Material& out) {
+    std::string why;
+    if (mat.alphaMode == "BLEND") {
+        const std::vector<double>& base = mat.pbrMetallicRoughness.baseColorFactor;
+        const double opacity = base[3] * texture_image(L, mat.pbrMetallicRoughness.baseColorTexture,
+                                                        label + " baseColorTexture").alpha;
+        if (opacity < 0.5) why = fmt::format("alphaMode BLEND, mean opacity {:.2f}", opacity);
+    }
+    if (const auto it = mat.extensions.find("KHR_materials_transmission"); it != mat.extensions.end()) {
+        // transmissionFactor defaults to 0: a texture alone transmits nothing.
+        const tinygltf::Value& factor = it->second.IsObject() && it->second.Has("transmissionFactor")
+                                            ? it->second.Get("transmissionFactor")
+                                            : tinygltf::Value();
+        if (factor.IsNumber() && factor.GetNumberAsDouble() > 0.5)
+            why = fmt::format("KHR_materials_transmission {:g}", factor.GetNumberAsDouble());
+    }
+    if (why.empty()) return;
+    if (out.emission != dvec3(0.0)) {
+        L.warn(fmt::format("{}: see-through ({}) but emissive: baked as an opaque emitter", label, why));
+        return;
+    }
+    out.see_through = why;
+}
+
 Material convert_material(Loader& L, int index) {
     const tinygltf::Material& mat = L.model.materials[std::size_t(index)];
     const std::string label = material_label(mat, index);
@@ -701,6 +743,7 @@ Material convert_material(Loader& L, int index) {
         out.emission = dvec3(emissive[0], emissive[1], emissive[2]) * strength *
                        texture_average(L, mat.emissiveTexture, label + " emissiveTexture");
     }
+    see_through(L, mat, label, out);
     for (int c = 0; c < 3; ++c) {
         if (!(out.emission[c] <= kMaxEmission)) {
             L.fail(fmt::format("{}: emission {:g} (emissiveFactor x emissiveStrength x texture) is above {:g}: the "
@@ -1052,6 +1095,7 @@ Scene load(const std::filesystem::path& file) {
             }
             add_camera(L, inst);
         }
+        if (node.extensions.count("KHR_lights_punctual") != 0) ++scene.punctual_lights;
         if (node.mesh < 0) continue;
         if (std::size_t(node.mesh) >= model.meshes.size()) {
             L.fail(fmt::format("node {}: mesh {} out of range ({} meshes)", inst.node, node.mesh, model.meshes.size()));

@@ -17,6 +17,9 @@ struct Material {
     glm::dvec3 base_color{1.0};   // baseColorFactor.rgb × base colour texture average (linear)
     glm::dvec3 emission{0.0};     // emissiveFactor × KHR_materials_emissive_strength × emissive texture average
     bool double_sided = false;
+    // Why light passes through this surface ("alphaMode BLEND", "KHR_materials_transmission
+    // 0.9"); empty for an opaque one. The see_through effect leaves such surfaces out.
+    std::string see_through;
 };
 
 // One world-space triangle. Its front is the counter-clockwise side (after the node's
@@ -68,6 +71,7 @@ struct Scene {
     std::vector<Camera> cameras;
     std::vector<std::string> warnings;  // each already names the file
     std::size_t skipped_primitives = 0; // non-triangle modes
+    std::size_t punctual_lights = 0;    // KHR_lights_punctual lights the scene's nodes place (not baked yet)
     glm::dvec3 bbox_min{0.0}, bbox_max{0.0};
 
     double diagonal() const { return glm::length(bbox_max - bbox_min); }
