@@ -124,9 +124,38 @@ TEST_CASE("blended materials that are mostly opaque, or that emit, stay opaque s
     bool warned = false;
     for (const json& w : lit["warnings"])
         warned = warned || w.get<std::string>().find("material 'lamp': see-through (alphaMode BLEND, mean opacity "
-                                                     "0.30) but emissive: baked as an opaque emitter") !=
-                               std::string::npos;
+                                                     "0.30) but emitting, and denser than a fake light shaft: baked "
+                                                     "as an opaque emitter") != std::string::npos;
     CHECK(warned);
+}
+
+TEST_CASE("a faint blended emitter (a fake light shaft) is left out; the scene's lamp still lights it",
+          "[see_through][cli]") {
+    TempDir dir;
+    // A glowing slab at 10% opacity between the lamp and the floor: decoration, not a light.
+    const json shaft = {{"name", "shaft"}, {"alphaMode", "BLEND"}, {"doubleSided", true},
+                        {"emissiveFactor", {1.0, 0.8, 0.3}},
+                        {"pbrMetallicRoughness", {{"baseColorFactor", {1.0, 1.0, 1.0, 0.1}}}}};
+    write_json(dir / "bare.gltf", room(dir, kLamp));
+    write_json(dir / "shaft.gltf", room(dir, kLamp, shaft));
+    const json bare = bake_ok(dir, dir / "bare.gltf", dir / "bare");
+    const json seen = bake_ok(dir, dir / "shaft.gltf", dir / "seen");
+    CHECK(seen["effects"]["see_through"]["on"] == true);
+    CHECK(floor_radiosity(seen) == Approx(floor_radiosity(bare)).epsilon(1e-12));
+    CHECK(seen["energy"]["emitted"].get<double>() == Approx(bare["energy"]["emitted"].get<double>()).epsilon(1e-12));
+    // Forced opaque, it lights the floor as the glowing slab the exporter's file describes.
+    const json opaque = bake_ok(dir, dir / "shaft.gltf", dir / "opaque", concat(kFast, {"--effects", "see_through=off"}));
+    CHECK(floor_radiosity(opaque) > 1.5 * floor_radiosity(bare));
+    // Alone, it lights nothing: the scene has no light to bake, and the error says what to do.
+    json dark = kLamp;
+    dark.erase("emissiveFactor");
+    write_json(dir / "alone.gltf", room(dir, dark, shaft));
+    const RunResult r = run_hemirad(dir, bake_args(dir / "alone.gltf", dir / "out"));
+    INFO(r.err);
+    CHECK(r.code == 2);
+    CHECK(r.err.find("alone.gltf: nothing emits light once see-through surfaces are left out") != std::string::npos);
+    CHECK(r.err.find("--effects see_through=off") != std::string::npos);
+    CHECK(!fs::exists(dir / "out"));
 }
 
 TEST_CASE("a scene with no emissive material names the punctual lights it holds", "[see_through][cli]") {

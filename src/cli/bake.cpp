@@ -223,13 +223,25 @@ void check_scene(const scene::Scene& scene) {
     if (std::none_of(scene.triangles.begin(), scene.triangles.end(),
                      [&](const scene::Triangle& t) { return emits(scene, t); }))
         throw InputError(fmt::format(
-            "{}: nothing emits light: 0 emissive triangles (no material has emissiveFactor > 0){}; hemirad bakes the "
+            "{}: nothing emits light: 0 emissive triangles (no triangle's material has emission > 0){}; hemirad bakes the "
             "light of emissive materials",
             scene.path.string(),
             scene.punctual_lights == 0
                 ? std::string()
                 : fmt::format(", and {} KHR_lights_punctual light{}, which it does not bake yet", scene.punctual_lights,
                               scene.punctual_lights == 1 ? "" : "s")));
+}
+
+// After the see_through decision: a scene whose only emitters were see-through (faint blended
+// glows) has nothing left to light it, which the user can change.
+void check_emitters_left(const scene::Scene& scene, const scene::EffectsPlan& plan) {
+    if (!plan.see_through.on) return;
+    if (std::none_of(scene.triangles.begin(), scene.triangles.end(),
+                     [&](const scene::Triangle& t) { return emits(scene, t); }))
+        throw InputError(fmt::format("{}: nothing emits light once see-through surfaces are left out: every emissive "
+                                     "triangle is a faint alpha-blended or transmissive glow; --effects see_through=off "
+                                     "bakes them as opaque emitters",
+                                     scene.path.string()));
 }
 
 void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const solve::Progressive& solver,
@@ -497,6 +509,7 @@ void run_bake(const BakeOptions& options) {
     // Which effects this scene calls for (report.json `effects` says why).
     scene::EffectsPlan plan = scene::plan_effects(scene, overrides);
     scene::apply_see_through(scene, plan);
+    check_emitters_left(scene, plan);
     scene::apply_two_sided(scene, plan, overrides);
     scene::apply_colour(scene, plan);
     if (o.verify && !plan.occlusion.on) {

@@ -374,12 +374,11 @@ EffectDecision analyse_see_through(const Scene& scene) {
         }
     }
     if (count == 0)
-        return automatic(false, "no material is see-through (alphaMode BLEND below half opacity, or "
-                                "KHR_materials_transmission above one half, without emitting), so every surface is "
-                                "opaque");
+        return automatic(false, "no material is see-through (alphaMode BLEND or KHR_materials_transmission below "
+                                "half opacity, a quarter for an emitter), so every surface is opaque");
     const std::uint32_t material = scene.triangles[example].material;
     return automatic(true, fmt::format("{} of {} triangles use {} see-through material{} (e.g. '{}' on node '{}', {}): "
-                                       "like fake light shafts and glass they neither block, emit nor receive light "
+                                       "like glass and fake light shafts they neither block, emit nor receive light "
                                        "(see_through=off bakes them as opaque surfaces)",
                                        count, scene.triangles.size(), materials.size(), materials.size() == 1 ? "" : "s",
                                        material_name(scene, material), node_name(scene, example),

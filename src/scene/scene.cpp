@@ -604,10 +604,10 @@ std::string percent_decoded(const std::string& uri) {
     return out;
 }
 
-// The mean linear colour of a material's texture: 1 when it has none. A texture whose image is
-// missing, unreadable or does not decode is an error (exit 2, naming the image): a bake that went
-// on with some stand-in colour would be silently wrong.
-// The decoded mean of the image a material's texture names (a white opaque one for none).
+// The decoded means (linear colour, alpha) of the image a material's texture names: white and
+// opaque when it has none. A texture whose image is missing, unreadable or does not decode is an
+// error (exit 2, naming the image): a bake that went on with some stand-in colour would be
+// silently wrong.
 const ImageMean& texture_image(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
     static const ImageMean kWhite = [] {
         ImageMean white;
@@ -690,33 +690,39 @@ double emissive_strength(const Loader& L, const tinygltf::Material& mat, const s
     return strength;
 }
 
-// Whether light passes the material's surfaces (Material::see_through): alphaMode BLEND with a
-// mean opacity (baseColorFactor alpha x the base colour texture's mean alpha) below one half,
-// or KHR_materials_transmission with transmissionFactor above one half. Exporters mark many
-// opaque materials BLEND (an alpha channel in the texture is enough: lanterns, windows, decals
-// at 95-100% opacity), so the opacity decides. A see-through material that emits stays an
-// opaque emitter, said in a warning: a lamp exported as a blended glow (botanists-study's only
-// light, mean opacity 0.32) is still the scene's light, and a surface that emits without
-// blocking needs a shooter the kernels do not yet have.
+// Whether light passes the material's surfaces (Material::see_through), by its opacity: for
+// alphaMode BLEND, baseColorFactor alpha x the base colour texture's mean alpha; for
+// KHR_materials_transmission, 1 - transmissionFactor. Exporters mark many opaque materials BLEND
+// (an alpha channel in the texture is enough: lanterns, windows, decals at 95-100% opacity), so
+// the opacity decides: below one half, see-through. An emitter must be fainter, below a quarter
+// (a fake light shaft or glow sprite: botanists-study's light cone, 0.07); a denser one stays an
+// opaque emitter, said in a warning (a lamp exported as a blended glow is still the scene's
+// light: botanists-study's only lamp, 0.32), since a surface that emits without blocking needs a
+// shooter the kernels do not yet have.
 void see_through(Loader& L, const tinygltf::Material& mat, const std::string& label, Material& out) {
+    double opacity = 1.0;
     std::string why;
     if (mat.alphaMode == "BLEND") {
         const std::vector<double>& base = mat.pbrMetallicRoughness.baseColorFactor;
-        const double opacity = base[3] * texture_image(L, mat.pbrMetallicRoughness.baseColorTexture,
-                                                        label + " baseColorTexture").alpha;
-        if (opacity < 0.5) why = fmt::format("alphaMode BLEND, mean opacity {:.2f}", opacity);
+        opacity = base[3] * texture_image(L, mat.pbrMetallicRoughness.baseColorTexture, label + " baseColorTexture").alpha;
+        why = fmt::format("alphaMode BLEND, mean opacity {:.2f}", opacity);
     }
     if (const auto it = mat.extensions.find("KHR_materials_transmission"); it != mat.extensions.end()) {
         // transmissionFactor defaults to 0: a texture alone transmits nothing.
         const tinygltf::Value& factor = it->second.IsObject() && it->second.Has("transmissionFactor")
                                             ? it->second.Get("transmissionFactor")
                                             : tinygltf::Value();
-        if (factor.IsNumber() && factor.GetNumberAsDouble() > 0.5)
+        if (factor.IsNumber() && 1.0 - factor.GetNumberAsDouble() < opacity) {
+            opacity = 1.0 - factor.GetNumberAsDouble();
             why = fmt::format("KHR_materials_transmission {:g}", factor.GetNumberAsDouble());
+        }
     }
-    if (why.empty()) return;
-    if (out.emission != dvec3(0.0)) {
-        L.warn(fmt::format("{}: see-through ({}) but emissive: baked as an opaque emitter", label, why));
+    const bool emits = out.emission != dvec3(0.0);
+    if (opacity >= (emits ? 0.25 : 0.5)) {
+        if (emits && opacity < 0.5)
+            L.warn(fmt::format("{}: see-through ({}) but emitting, and denser than a fake light shaft: baked as an "
+                               "opaque emitter",
+                               label, why));
         return;
     }
     out.see_through = why;
