@@ -494,6 +494,20 @@ TEST_CASE("malformed EXT_meshopt_compression views are one line naming the file 
             }
     });
 
+    // A fallback buffer declared huge, with a view far into it: refused before it is made.
+    {
+        json gltf = good;
+        gltf["buffers"][0]["uri"] = "bad.bin";
+        gltf["buffers"][1]["byteLength"] = std::uint64_t{1} << 40;
+        gltf["bufferViews"][0]["byteOffset"] = std::uint64_t{1} << 39;
+        write_json(dir / "huge.gltf", gltf);
+        write_bytes(dir / "bad.bin", compressed);
+        const std::string message = load_error(dir / "huge.gltf");
+        INFO(message);
+        CHECK(message.rfind((dir / "huge.gltf").string() + ": buffer 1 (EXT_meshopt_compression fallback)", 0) == 0);
+        CHECK(message.find("above the limit") != std::string::npos);
+    }
+
     // From the command line: exit 2, one line, nothing written.
     json gltf = good;
     std::vector<unsigned char> bin = compressed;

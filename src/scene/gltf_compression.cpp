@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <new>
 #include <nlohmann/json.hpp>
 #include <string_view>
 
@@ -20,6 +21,8 @@ namespace {
 constexpr const char* kMeshopt = "EXT_meshopt_compression";
 constexpr const char* kDraco = "KHR_draco_mesh_compression";
 constexpr std::size_t kGlbHeader = 12, kChunkHeader = 8;
+// The most a fallback buffer is made to hold: what any buffer file may (the loader's limit).
+constexpr std::uint64_t kMaxFallbackBytes = std::uint64_t{1} << 32;
 
 std::uint32_t read32(const unsigned char* p) {
     return std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24;
@@ -121,7 +124,12 @@ void decode_meshopt(tinygltf::Model& model, const MeshoptFallbacks& fallbacks, c
         for (const tinygltf::BufferView& view : model.bufferViews)
             if (view.buffer == index && view.extensions.count(kMeshopt) != 0)
                 needed = std::max<std::uint64_t>(needed, std::uint64_t(view.byteOffset) + view.byteLength);
-        model.buffers[std::size_t(index)].data.assign(std::size_t(std::min(needed, declared)), 0);
+        needed = std::min(needed, declared);
+        if (needed > kMaxFallbackBytes)
+            throw InputError(fmt::format("{}: buffer {} ({} fallback): its bufferViews need {} bytes, above the limit "
+                                         "of {}",
+                                         name, index, kMeshopt, needed, kMaxFallbackBytes));
+        model.buffers[std::size_t(index)].data.assign(std::size_t(needed), 0);
     }
 
     for (std::size_t v = 0; v < model.bufferViews.size(); ++v) {
@@ -241,7 +249,14 @@ void decode_draco(tinygltf::Model& model, const std::string& name) {
             draco::DecoderBuffer source;
             source.Init(reinterpret_cast<const char*>(bytes.data() + view.byteOffset), view.byteLength);
             draco::Decoder decoder;
-            auto decoded = decoder.DecodeMeshFromBuffer(&source);
+            auto decoded = [&] {
+                try {
+                    return decoder.DecodeMeshFromBuffer(&source);
+                } catch (const std::bad_alloc&) {  // counts in the data past what memory holds
+                    throw InputError(what + ": the compressed mesh does not decode (it asks for more memory than "
+                                            "this machine has)");
+                }
+            }();
             if (!decoded.ok())
                 throw InputError(fmt::format("{}: the compressed mesh does not decode ({})", what,
                                              decoded.status().error_msg_string()));
