@@ -177,6 +177,16 @@ TEST_CASE("a scene with no emissive material names the punctual lights it holds"
     CHECK(r.code == 2);
     CHECK(r.err.find("bulbs.gltf: nothing emits light: 0 emissive triangles") != std::string::npos);
     CHECK(r.err.find("2 KHR_lights_punctual lights") != std::string::npos);
+
+    // With an emissive lamp as well, the bake runs and says which lights it left out.
+    g["materials"][1]["emissiveFactor"] = {1.0, 1.0, 1.0};
+    write_json(dir / "both.gltf", g);
+    const json both = bake_ok(dir, dir / "both.gltf", dir / "both");
+    bool warned = false;
+    for (const json& w : both["warnings"])
+        warned = warned || w.get<std::string>().find("both.gltf: 2 KHR_lights_punctual lights are not baked") !=
+                               std::string::npos;
+    CHECK(warned);
 }
 
 TEST_CASE("a blended material's opacity is its alpha factor times its texture's mean alpha", "[see_through]") {

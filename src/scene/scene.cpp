@@ -1118,6 +1118,9 @@ Scene load(const std::filesystem::path& file) {
             add_primitive(L, {&inst, scene_node, node.mesh, int(p)}, primitive_counter);
         }
     }
+    if (scene.punctual_lights > 0)
+        L.warn(fmt::format("{} KHR_lights_punctual light{} not baked: hemirad bakes the light of emissive materials only",
+                           scene.punctual_lights, scene.punctual_lights == 1 ? " is" : "s are"));
     compute_bbox(scene);
     return scene;
 }
