@@ -19,6 +19,7 @@
 #include "cli_support.h"
 #include "core/error.h"
 #include "scene/scene.h"
+#include "test_scenes.h"
 
 namespace {
 
@@ -211,16 +212,6 @@ void check_same_triangles(const Scene& got, const Scene& want) {
         }
 }
 
-std::string load_error(const fs::path& file) {
-    try {
-        hemirad::scene::load(file);
-    } catch (const hemirad::InputError& e) {
-        return e.what();
-    }
-    FAIL("no InputError for " << file);
-    return {};
-}
-
 // A one-triangle-per-cell grid of `n` x `n` vertices in one primitive (plain floats, 32-bit
 // indices), as JSON and its buffer, for the tests that change one accessor.
 struct Grid {
@@ -241,6 +232,15 @@ struct Grid {
             }
     }
     std::size_t vertices() const { return positions.size() / 3; }
+    // `gltf` and its buffer written to grid.gltf and grid.bin in `dir`, then loaded: every
+    // cell's two triangles there.
+    Scene load(const TempDir& dir, const json& gltf, const std::vector<unsigned char>& bin) const {
+        write_json(dir / "grid.gltf", gltf);
+        write_bytes(dir / "grid.bin", bin);
+        Scene scene = hemirad::scene::load(dir / "grid.gltf");
+        REQUIRE(scene.triangles.size() == indices.size() / 3);
+        return scene;
+    }
     // A glTF of the grid with the positions accessor `position` (its bufferViews and buffer
     // bytes appended by the caller); indices plain in buffer 0.
     json gltf(std::vector<unsigned char>& bin, const json& position_accessor, json views) const {
@@ -311,11 +311,7 @@ TEST_CASE("EXT_meshopt_compression: EXPONENTIAL-filtered positions decode within
     gltf["buffers"].push_back(
         {{"byteLength", grid.vertices() * 12}, {"extensions", {{"EXT_meshopt_compression", {{"fallback", true}}}}}});
     gltf["extensionsRequired"] = {"EXT_meshopt_compression"};
-    write_json(dir / "grid.gltf", gltf);
-    write_bytes(dir / "grid.bin", bin);
-
-    const Scene got = hemirad::scene::load(dir / "grid.gltf");
-    REQUIRE(got.triangles.size() == grid.indices.size() / 3);
+    const Scene got = grid.load(dir, gltf, bin);
     for (std::size_t t = 0; t < got.triangles.size(); ++t)
         for (std::size_t k = 0; k < 3; ++k) {
             const std::uint32_t v = grid.indices[3 * t + k];
@@ -356,10 +352,7 @@ TEST_CASE("KHR_mesh_quantization: byte and short positions, normalized or not, u
         gltf["nodes"][0]["scale"] = {2.0, 2.0, 2.0};
         gltf["nodes"][0]["translation"] = {1.0, 0.0, -1.0};
         gltf["extensionsRequired"] = {"KHR_mesh_quantization"};
-        write_json(dir / "grid.gltf", gltf);
-        write_bytes(dir / "grid.bin", bin);
-        const Scene got = hemirad::scene::load(dir / "grid.gltf");
-        REQUIRE(got.triangles.size() == grid.indices.size() / 3);
+        const Scene got = grid.load(dir, gltf, bin);
         for (std::size_t t = 0; t < got.triangles.size(); ++t)
             for (std::size_t k = 0; k < 3; ++k) {
                 const std::uint32_t v = grid.indices[3 * t + k];
@@ -377,10 +370,7 @@ TEST_CASE("KHR_mesh_quantization: byte and short positions, normalized or not, u
             bin, {{"bufferView", 0}, {"componentType", 5121}, {"count", grid.vertices()}, {"type", "VEC3"}},
             json::array({{{"buffer", 0}, {"byteLength", bytes.size()}, {"byteStride", 4}}}));
         gltf["nodes"][0]["scale"] = {0.05, 0.05, 0.05};
-        write_json(dir / "grid.gltf", gltf);
-        write_bytes(dir / "grid.bin", bin);
-        const Scene got = hemirad::scene::load(dir / "grid.gltf");
-        REQUIRE(got.triangles.size() == grid.indices.size() / 3);
+        const Scene got = grid.load(dir, gltf, bin);
         const std::uint32_t v = grid.indices[5];  // triangle 1, vertex 2
         CHECK(glm::length(got.triangles[1].p[2] - dvec3(bytes[4 * v], bytes[4 * v + 1], bytes[4 * v + 2]) * 0.05) <
               1e-12);
@@ -396,10 +386,7 @@ TEST_CASE("a required extension the loader does not read is named in a warning",
                           json::array({{{"buffer", 0}, {"byteLength", grid.positions.size() * 4}}}));
     gltf["extensionsUsed"] = {"KHR_mesh_quantization", "EXT_made_up"};
     gltf["extensionsRequired"] = {"KHR_mesh_quantization", "EXT_made_up"};
-    write_json(dir / "grid.gltf", gltf);
-    write_bytes(dir / "grid.bin", bin);
-    const Scene got = hemirad::scene::load(dir / "grid.gltf");
-    CHECK(got.triangles.size() == grid.indices.size() / 3);
+    const Scene got = grid.load(dir, gltf, bin);
     std::vector<std::string> named;
     for (const std::string& w : got.warnings)
         if (w.find("required extension") != std::string::npos) named.push_back(w);
@@ -432,10 +419,7 @@ TEST_CASE("sparse accessors: values written over a bufferView's elements, or ove
                                {"indices", {{"bufferView", 1}, {"componentType", 5123}}},
                                {"values", {{"bufferView", 2}}}}}};
             if (!over_zeros) accessor["bufferView"] = 0;
-            write_json(dir / "grid.gltf", grid.gltf(bin, accessor, views));
-            write_bytes(dir / "grid.bin", bin);
-            const Scene got = hemirad::scene::load(dir / "grid.gltf");
-            REQUIRE(got.triangles.size() == grid.indices.size() / 3);
+            const Scene got = grid.load(dir, grid.gltf(bin, accessor, views), bin);
             for (std::size_t t = 0; t < got.triangles.size(); ++t)
                 for (std::size_t k = 0; k < 3; ++k) {
                     const std::uint32_t v = grid.indices[3 * t + k];

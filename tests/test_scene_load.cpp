@@ -23,6 +23,7 @@
 
 #include "core/error.h"
 #include "scene/scene.h"
+#include "test_scenes.h"
 
 namespace {
 
@@ -172,16 +173,7 @@ void check_triangle(const hemirad::scene::Triangle& t, const std::array<dvec3, 3
     }
 }
 
-// Loads a file that must be rejected; returns the message.
-std::string load_error(const fs::path& file) {
-    try {
-        hemirad::scene::load(file);
-    } catch (const hemirad::InputError& e) {
-        return e.what();
-    }
-    FAIL("no InputError for " << file);
-    return {};
-}
+using hemirad::test::load_error;
 
 void check_rejected(const fs::path& file, const std::string& problem) {
     const std::string message = load_error(file);

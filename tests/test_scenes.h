@@ -1,8 +1,12 @@
 // Analytic test scenes built in code: quads, parallel and perpendicular rectangles, closed boxes.
 #pragma once
 
+#include <catch2/catch.hpp>
+#include <filesystem>
 #include <glm/glm.hpp>
+#include <string>
 
+#include "core/error.h"
 #include "formfactor/engine.h"
 #include "mesh/mesh.h"
 #include "scene/builder.h"
@@ -13,6 +17,17 @@ namespace hemirad::test {
 using scene::add_material;
 using scene::add_quad;
 using scene::finish;
+
+// Loads a file that must be rejected; returns the message.
+inline std::string load_error(const std::filesystem::path& file) {
+    try {
+        scene::load(file);
+    } catch (const InputError& e) {
+        return e.what();
+    }
+    FAIL("no InputError for " << file);
+    return {};
+}
 
 // A lone triangle p0 p1 p2, counter-clockwise seen from its front: meshed as triangles.
 inline void add_triangle(scene::Scene& s, glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2, std::uint32_t material,

@@ -456,6 +456,18 @@ const unsigned char* view_bytes(const Loader& L, int index, std::size_t offset, 
     return bytes.data() + bv.byteOffset + offset;
 }
 
+// The bytes from one of an accessor's elements to the next in its bufferView (which must exist):
+// its byteStride, or the element's size where it has none.
+std::size_t element_stride(const Loader& L, const tinygltf::Accessor& a, std::size_t element, const std::string& what) {
+    const std::size_t view_stride =
+        std::size_t(a.bufferView) < L.model.bufferViews.size() ? L.model.bufferViews[std::size_t(a.bufferView)].byteStride : 0;
+    const std::size_t stride = view_stride != 0 ? view_stride : element;
+    if (stride < element) {
+        L.fail(fmt::format("{}: byteStride {} is shorter than one element ({} bytes)", what, stride, element));
+    }
+    return stride;
+}
+
 // A sparse accessor, or one without a bufferView, as glTF defines it: the elements of its
 // bufferView (zeros without one), then each of `sparse.count` values written over the element
 // its index names.
@@ -466,13 +478,7 @@ std::shared_ptr<const std::vector<unsigned char>> materialize(const Loader& L, c
         L.fail(fmt::format("{}: {} elements of {} bytes are more than an accessor may hold", what, a.count, element));
     auto out = std::make_shared<std::vector<unsigned char>>(a.count * element, 0);
     if (a.bufferView >= 0) {
-        const std::size_t stride =
-            L.model.bufferViews.size() > std::size_t(a.bufferView) &&
-                    L.model.bufferViews[std::size_t(a.bufferView)].byteStride != 0
-                ? L.model.bufferViews[std::size_t(a.bufferView)].byteStride
-                : element;
-        if (stride < element)
-            L.fail(fmt::format("{}: byteStride {} is shorter than one element ({} bytes)", what, stride, element));
+        const std::size_t stride = element_stride(L, a, element, what);
         const unsigned char* dense = view_bytes(L, a.bufferView, a.byteOffset, a.count, element, stride, what);
         for (std::size_t i = 0; i < a.count; ++i) std::memcpy(out->data() + i * element, dense + i * stride, element);
     }
@@ -518,12 +524,7 @@ AccessorView view_accessor(const Loader& L, int index, const std::string& where)
         auto owned = materialize(L, a, element, what);
         return {owned->data(), element, a.count, n, a.componentType, a.normalized, what, owned};
     }
-    const std::size_t view_stride =
-        std::size_t(a.bufferView) < m.bufferViews.size() ? m.bufferViews[std::size_t(a.bufferView)].byteStride : 0;
-    const std::size_t stride = view_stride != 0 ? view_stride : element;
-    if (stride < element) {
-        L.fail(fmt::format("{}: byteStride {} is shorter than one element ({} bytes)", what, stride, element));
-    }
+    const std::size_t stride = element_stride(L, a, element, what);
     const unsigned char* data = view_bytes(L, a.bufferView, a.byteOffset, a.count, element, stride, what);
     return {data, stride, a.count, n, a.componentType, a.normalized, what, nullptr};
 }
