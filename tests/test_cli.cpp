@@ -1075,7 +1075,7 @@ TEST_CASE("bench refuses a fast wrong OpenCL kernel: no result, no JSON", "[cli]
     CHECK(!fs::exists(file));
 }
 
-TEST_CASE("quality presets fill in the settings the options leave out; options override them", "[cli][quality]") {
+TEST_CASE("quality presets fill in the settings the options leave out, options override them", "[cli][quality]") {
     const TempDir dir;
     // closed_room spans x ∈ [−2, 2], y ∈ [0, 2.5], z ∈ [−2.5, 2.5] (scenes/README.md).
     const double diagonal = std::sqrt(4.0 * 4.0 + 2.5 * 2.5 + 5.0 * 5.0);
@@ -1703,7 +1703,7 @@ TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same b
     }
 }
 
-TEST_CASE("HEMIRAD_OCCLUSION and HEMIRAD_OCCLUDER_SHARE: the same bytes either way; other values exit 2", "[cli][opencl][hostile]") {
+TEST_CASE("HEMIRAD_OCCLUSION and HEMIRAD_OCCLUDER_SHARE: the same bytes either way, other values exit 2", "[cli][opencl][hostile]") {
     HEMIRAD_SKIP_WITHOUT_OPENCL();
     TempDir dir;
     check_environments_keep_bytes(dir, {"HEMIRAD_OCCLUSION=0 ", "HEMIRAD_OCCLUSION=1 HEMIRAD_OCCLUDER_SHARE=1 "});

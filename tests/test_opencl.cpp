@@ -554,7 +554,7 @@ TEST_CASE("opencl: out of device memory, a batch runs again in smaller parts wit
     CHECK(got[1] == want[1]);
 }
 
-TEST_CASE("opencl: a device that fails says so as a DeviceError; a wrong one is caught by comparison",
+TEST_CASE("opencl: a device that fails says so as a DeviceError, a wrong one is caught by comparison",
           "[opencl][faults]") {
     HEMIRAD_REQUIRE_DEVICE(ctx);
     const Case c = comparison_cases().back();

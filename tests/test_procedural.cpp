@@ -197,7 +197,7 @@ TEST_CASE("procedural scenes: bounding box, camera and materials", "[procedural]
     CHECK(names == std::set<std::string>{"grey", "red", "green", "light"});
 }
 
-TEST_CASE("procedural scenes are deterministic; the seed changes layout, not size", "[procedural]") {
+TEST_CASE("procedural scenes are deterministic, the seed changes layout, not size", "[procedural]") {
     const Scene a = procedural_scene(20'000, 3), b = procedural_scene(20'000, 3), c = procedural_scene(20'000, 4);
     CHECK(hemirad::test::same_triangles(a, b));
     CHECK(c.triangles.size() == a.triangles.size());

@@ -361,7 +361,7 @@ TEST_CASE("base colour texture is averaged in linear space", "[scene]") {
     CHECK(near(s.triangles[0].rho[0], want, 1e-6));
 }
 
-TEST_CASE("non-indexed and 8/16/32-bit indexed primitives load; LINES is skipped", "[scene]") {
+TEST_CASE("non-indexed and 8/16/32-bit indexed primitives load, LINES is skipped", "[scene]") {
     TempDir dir;
     ModelBuilder b;
     const int quad = b.positions({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}});

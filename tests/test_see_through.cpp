@@ -63,7 +63,7 @@ double floor_radiosity(const json& report) {
 
 }  // namespace
 
-TEST_CASE("see-through surfaces neither block nor receive by default; see_through=off makes them opaque",
+TEST_CASE("see-through surfaces neither block nor receive by default, see_through=off makes them opaque",
           "[see_through][cli]") {
     TempDir dir;
     const json glass = {{"name", "glass"},
@@ -129,7 +129,7 @@ TEST_CASE("blended materials that are mostly opaque, or that emit, stay opaque s
     CHECK(warned);
 }
 
-TEST_CASE("a faint blended emitter (a fake light shaft) is left out; the scene's lamp still lights it",
+TEST_CASE("a faint blended emitter (a fake light shaft) is left out, the scene's lamp still lights it",
           "[see_through][cli]") {
     TempDir dir;
     // A glowing slab at 10% opacity between the lamp and the floor: decoration, not a light.
