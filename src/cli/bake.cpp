@@ -34,6 +34,7 @@
 #include "formfactor/near_field.h"
 #include "formfactor/row_cache.h"
 #include "mesh/mesh.h"
+#include "mesh/texturing.h"
 #include "output/finite.h"
 #include "output/output.h"
 #include "scene/scene.h"
@@ -720,6 +721,8 @@ void run_bake(const BakeOptions& options) {
             rs.batch = std::max(o.batch, 64);
             rs.max_elements = refinement_room(shape, solver_name, memory_limit.bytes);
             rs.cancelled = [&] { return o.interrupted && *o.interrupted; };
+            const mesh::Texturing texturing(scene);
+            rs.texturing = &texturing;
             solve::RefineResult refined =
                 solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
             if (o.interrupted && *o.interrupted) throw Interrupted();

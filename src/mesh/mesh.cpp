@@ -15,6 +15,8 @@
 #include <utility>
 
 #include "core/error.h"
+#include "mesh/refine.h"
+#include "mesh/texturing.h"
 
 namespace hemirad::mesh {
 namespace {
@@ -315,39 +317,6 @@ std::vector<PatchCells> face_cells(const Grid& grid) {
     return cells;
 }
 
-// Barycentric coordinates of p (in the triangle's plane) with respect to triangle t, as ratios
-// of cross products with the triangle's normal. (The Gram determinant d00·d11 − d01² that the
-// textbook formula divides by cancels to nothing, or below zero, for a needle a billionth as
-// wide as it is long, which the mesher keeps: its weights came out NaN.)
-dvec3 barycentric(const scene::Triangle& t, const dvec3& p) {
-    const dvec3 e0 = t.p[1] - t.p[0], e1 = t.p[2] - t.p[0], e2 = p - t.p[0];
-    const dvec3 n = glm::cross(e0, e1);
-    const double denom = glm::dot(n, n);
-    const double v = glm::dot(glm::cross(e2, e1), n) / denom;
-    const double w = glm::dot(glm::cross(e0, e2), n) / denom;
-    return {1.0 - v - w, v, w};
-}
-
-// Reflectance at a point of the face, interpolated in whichever source triangle holds it
-// (the one where the point is deepest inside, so rounding on the diagonal cannot extrapolate).
-dvec3 rho_at(const Face& face, const dvec3& p) {
-    const scene::Triangle* best = face.src[0];
-    dvec3 w = barycentric(*best, p);
-    if (face.src[1]) {
-        const dvec3 w1 = barycentric(*face.src[1], p);
-        if (std::min({w1.x, w1.y, w1.z}) > std::min({w.x, w.y, w.z})) {
-            best = face.src[1];
-            w = w1;
-        }
-    }
-    w = glm::max(w, dvec3(0.0));
-    const double total = w.x + w.y + w.z;
-    // Any weights that are not a convex combination (a point triangle, an overflow) give the
-    // vertices' mean: a reflectance must stay within the vertices' range, and finite.
-    w = total > 0.0 && std::isfinite(total) ? w / total : dvec3(1.0 / 3.0);
-    return w.x * best->rho[0] + w.y * best->rho[1] + w.z * best->rho[2];
-}
-
 Polygon reversed(const Polygon& poly) {
     Polygon r = poly;
     for (int k = 1; k < poly.n; ++k) r.v[std::size_t(k)] = poly.v[std::size_t(poly.n - k)];
@@ -367,48 +336,110 @@ double plane_lift(const dvec3& point, const dvec3& plane, const dvec3& centroid,
     return glm::dot(point - centroid, plane) / glm::dot(normal, plane);
 }
 
+// One element before its side is chosen: its polygon (front winding), shape, source triangles
+// and attributes.
+struct Piece {
+    Polygon poly;
+    Shape shape;
+    std::array<std::uint32_t, 2> source{kNoSource, kNoSource};
+    dvec3 rho{0.0}, emission{0.0};
+};
+
+// The elements of a patch's parts. Untextured: each cell element, its reflectance interpolated
+// at its centroid. Textured: averaged over the element; where an emissive texture or a MASK
+// cutoff changes across an element it splits (up to kTextureLevels times), and MASK holes are
+// left out. `whole` tells whether the pieces still tile the parts' cells (no hole).
+std::vector<Piece> pieces_of(const std::vector<Part>& parts, const scene::Scene& scene, const Texturing& texturing,
+                             Mesh& mesh, bool& whole) {
+    std::vector<Piece> pieces;
+    whole = true;
+    for (const Part& part : parts) {
+        const scene::Triangle& a = *part.face->src[0];
+        const scene::Triangle* b = part.face->src[1];
+        const std::array<std::uint32_t, 2> source{
+            std::uint32_t(&a - scene.triangles.data()),
+            b ? std::uint32_t(b - scene.triangles.data()) : kNoSource};
+        const auto add = [&](const Polygon& poly, const SurfaceAverage* avg) {
+            Piece piece{poly, shape_of(poly), source};
+            const dvec3 vertex_rho = vertex_rho_at(a, b, piece.shape.centroid);
+            if (!avg) {
+                piece.rho = vertex_rho;
+                piece.emission = scene.materials[a.material].emission;
+            } else {
+                piece.rho = texturing.rho(vertex_rho, *avg);
+                piece.emission = texturing.emission(a.material, *avg);
+            }
+            pieces.push_back(piece);
+        };
+        if (!texturing.samples(a.material)) {
+            for (const Polygon& poly : part.cells->elements) add(poly, nullptr);
+            continue;
+        }
+        const bool refines = texturing.refines(a.material);
+        // Depth-first, so a split element's children stay together in order.
+        const auto visit = [&](const auto& self, const Polygon& poly, const SurfaceAverage& avg, int depth) -> void {
+            if (refines && depth < kTextureLevels) {
+                const std::array<Polygon, 4> child = split_polygon(poly);
+                std::array<SurfaceAverage, 4> child_avg;
+                for (std::size_t c = 0; c < 4; ++c) child_avg[c] = texturing.average(child[c], a, b);
+                if (texturing.should_split(poly, a, b, avg, child_avg)) {
+                    ++mesh.texture_splits;
+                    for (std::size_t c = 0; c < 4; ++c) self(self, child[c], child_avg[c], depth + 1);
+                    return;
+                }
+            }
+            if (avg.coverage < kMinCoverage) {
+                ++mesh.holes;
+                whole = false;
+                return;
+            }
+            add(poly, &avg);
+        };
+        for (const Polygon& poly : part.cells->elements) visit(visit, poly, texturing.average(poly, a, b), 0);
+    }
+    return pieces;
+}
+
 // Appends one patch of one side, followed by its contiguous elements: a cell of a face's grid
-// (one part), or a cluster of small faces (their cells' elements, poly.n = 0).
+// (one part, all of its elements), or a cluster of small faces or a cell with holes (poly.n = 0).
 // `from`, where set, is the point a cluster shoots from instead (see split_blocked_clusters).
-void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Material& mat, bool back,
-                  const std::optional<dvec3>& from) {
-    std::size_t count = 0;
-    for (const Part& part : parts) count += part.cells->elements.size();
+void append_patch(Mesh& mesh, const std::vector<Part>& parts, const std::vector<Piece>& pieces, bool whole,
+                  const scene::Material& mat, bool back, const std::optional<dvec3>& from) {
+    const std::size_t count = pieces.size();
     if (mesh.patches.size() >= std::numeric_limits<std::uint32_t>::max() ||
         mesh.elements.size() + count >= std::numeric_limits<std::uint32_t>::max())
         throw InternalError("mesh: more patches or elements than 32-bit indices can hold");
     Patch patch;
-    patch.node = parts.front().face->src[0]->node;
+    const scene::Triangle& t0 = *parts.front().face->src[0];
+    patch.node = t0.node;
     patch.first_element = static_cast<std::uint32_t>(mesh.elements.size());
     patch.element_count = static_cast<std::uint32_t>(count);
     const auto patch_index = static_cast<std::uint32_t>(mesh.patches.size());
 
     dvec3 emitted{0.0}, weighted_normal{0.0}, weighted_centroid{0.0};
     double area = 0.0;
-    for (const Part& part : parts) {
-        const scene::Triangle& t0 = *part.face->src[0];
-        for (const Polygon& poly : part.cells->elements) {
-            Element e;
-            const Shape es = shape_of(poly);
-            e.poly = back ? reversed(poly) : poly;
-            e.normal = back ? -es.normal : es.normal;
-            e.centroid = es.centroid;
-            e.area = es.area;
-            e.rho = rho_at(*part.face, es.centroid);
-            e.emission = mat.emission;
-            e.patch = patch_index;
-            e.node = t0.node;
-            e.material = t0.material;
-            e.has_twin = mat.double_sided;
-            e.back = back;
-            emitted += e.area * e.emission;
-            weighted_normal += e.area * e.normal;
-            weighted_centroid += e.area * e.centroid;
-            area += e.area;
-            mesh.elements.push_back(e);
-        }
+    for (const Piece& piece : pieces) {
+        Element e;
+        const Shape& es = piece.shape;
+        e.poly = back ? reversed(piece.poly) : piece.poly;
+        e.normal = back ? -es.normal : es.normal;
+        e.centroid = es.centroid;
+        e.area = es.area;
+        e.rho = piece.rho;
+        e.emission = piece.emission;
+        e.patch = patch_index;
+        e.node = t0.node;
+        e.material = t0.material;
+        e.has_twin = mat.double_sided;
+        e.back = back;
+        e.source = piece.source;
+        emitted += e.area * e.emission;
+        weighted_normal += e.area * e.normal;
+        weighted_centroid += e.area * e.centroid;
+        area += e.area;
+        mesh.elements.push_back(e);
     }
-    if (parts.size() == 1) {
+    if (parts.size() == 1 && whole) {
         const PatchCells& pc = *parts.front().cells;
         const Shape ps = shape_of(pc.poly);
         patch.poly = back ? reversed(pc.poly) : pc.poly;
@@ -437,15 +468,26 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const scene::Mater
 }
 
 // Appends a face's patches (or a cluster's one patch) on its front and, for a doubleSided
-// material, on its back, each side's patches the other's twins.
-void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const scene::Material& mat,
-                  const std::optional<dvec3>& from = std::nullopt) {
+// material, on its back, each side's patches the other's twins. A patch all of whose elements
+// are MASK holes is left out on both sides.
+void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const scene::Scene& scene,
+                  const Texturing& texturing, const std::optional<dvec3>& from = std::nullopt) {
+    const scene::Material& mat = scene.materials[patches.front().front().face->src[0]->material];
+    std::vector<std::vector<Piece>> pieces;
+    std::vector<char> whole;
+    std::vector<std::size_t> kept;
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+        bool w = true;
+        pieces.push_back(pieces_of(patches[i], scene, texturing, mesh, w));
+        whole.push_back(w);
+        if (!pieces.back().empty()) kept.push_back(i);
+    }
     const std::size_t front = mesh.patches.size();
-    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, false, from);
+    for (const std::size_t i : kept) append_patch(mesh, patches[i], pieces[i], whole[i], mat, false, from);
     if (!mat.double_sided) return;
     const std::size_t back = mesh.patches.size();
-    for (const std::vector<Part>& parts : patches) append_patch(mesh, parts, mat, true, from);
-    for (std::size_t i = 0; i < patches.size(); ++i) {
+    for (const std::size_t i : kept) append_patch(mesh, patches[i], pieces[i], whole[i], mat, true, from);
+    for (std::size_t i = 0; i < kept.size(); ++i) {
         mesh.patches[front + i].twin = static_cast<std::uint32_t>(back + i);
         mesh.patches[back + i].twin = static_cast<std::uint32_t>(front + i);
     }
@@ -869,13 +911,13 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         before(counts);
     }
     // Patches in face order; a cluster where its first face is, with all of its faces.
+    const Texturing texturing(scene);
     for (std::size_t f = 0; f < faces.size(); ++f) {
-        const scene::Material& mat = scene.materials[faces[f].src[0]->material];
         if (clusters.of[f] < 0) {
             const std::vector<PatchCells> cells = face_cells(grids[f]);
             std::vector<std::vector<Part>> patches;
             for (const PatchCells& pc : cells) patches.push_back({{&faces[f], &pc}});
-            append_sides(mesh, patches, mat);
+            append_sides(mesh, patches, scene, texturing);
             continue;
         }
         const std::vector<std::size_t>& members = clusters.faces[std::size_t(clusters.of[f])];
@@ -886,7 +928,7 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         std::vector<Part> parts;
         for (std::size_t i = 0; i < members.size(); ++i) parts.push_back({&faces[members[i]], &cells[i].front()});
         const std::int64_t from = clusters.from[std::size_t(clusters.of[f])];
-        append_sides(mesh, {parts}, mat,
+        append_sides(mesh, {parts}, scene, texturing,
                      from >= 0 ? std::optional<dvec3>(shape_of(faces[std::size_t(from)].poly).centroid) : std::nullopt);
     }
     return mesh;

@@ -35,9 +35,13 @@ struct Element {
     // True for the reversed copy of a doubleSided triangle (its glTF back face). Per-node
     // averages in the report use front faces only.
     bool back = false;
+    // The scene triangles whose face holds this element (scene::Scene::triangles; the second
+    // only for a quad of two, else kNoSource): textures are read through them.
+    std::array<std::uint32_t, 2> source{0xffffffffu, 0xffffffffu};
 };
 
 inline constexpr std::uint32_t kNoPatch = 0xffffffffu;
+inline constexpr std::uint32_t kNoSource = 0xffffffffu;
 
 // A shooter: one cell of a face's grid, or two of a triangle's side by side (a planar polygon), or
 // a cluster of small faces (adjacent, of one material and node, their normals within kClusterCos
@@ -82,6 +86,8 @@ struct Mesh {
     std::size_t clusters = 0;           // patches that are clusters of several faces (per side)
     std::size_t split_clusters = 0;     // halvings of curved clusters (per side): see Patch
     std::size_t moved_clusters = 0;     // flat clusters that shoot from a face's centroid: see Patch
+    std::size_t texture_splits = 0;     // elements split where an emissive texture or MASK coverage changes (per side)
+    std::size_t holes = 0;              // elements left out as MASK holes (per side)
 };
 
 // What a mesh will hold, counted before any of it is built (doubles: any size can be counted).

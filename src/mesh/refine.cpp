@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "core/error.h"
+#include "mesh/texturing.h"
 
 namespace hemirad::mesh {
 
@@ -29,7 +30,7 @@ std::array<Polygon, 4> split_polygon(const Polygon& poly) {
             polygon({m30, centre, m23, v[3]})};
 }
 
-Refined split_elements(const Mesh& mesh, const std::vector<bool>& split) {
+Refined split_elements(const Mesh& mesh, const std::vector<bool>& split, const Texturing* texturing) {
     if (split.size() != mesh.elements.size())
         throw InternalError(fmt::format("refine: {} split flags for {} elements", split.size(), mesh.elements.size()));
     Refined out;
@@ -39,6 +40,8 @@ Refined split_elements(const Mesh& mesh, const std::vector<bool>& split) {
     out.mesh.clusters = mesh.clusters;
     out.mesh.split_clusters = mesh.split_clusters;
     out.mesh.moved_clusters = mesh.moved_clusters;
+    out.mesh.texture_splits = mesh.texture_splits;
+    out.mesh.holes = mesh.holes;
     std::size_t count = mesh.elements.size();
     for (bool s : split) count += s ? 3 : 0;
     if (count >= std::numeric_limits<std::uint32_t>::max())
@@ -63,6 +66,7 @@ Refined split_elements(const Mesh& mesh, const std::vector<bool>& split) {
                 child.poly = poly;
                 child.centroid = shape.centroid;
                 child.area = shape.area;
+                if (texturing) texturing->apply(child);
                 out.mesh.elements.push_back(child);
                 out.origin.push_back(k);
                 out.is_new.push_back(true);

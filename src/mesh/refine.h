@@ -22,10 +22,14 @@ struct Refined {
     std::vector<bool> is_new;
 };
 
+class Texturing;
+
 // Splits every element with split[k] into four. Patches keep their order, polygons and areas;
 // elements stay grouped by patch (each patch's range is renumbered). Children keep the parent's
 // reflectance, emission, node, material and flags, so the reflected flux of a parent whose
-// irradiance is shared out among its children (Σ H_c A_c = H A) is unchanged.
-Refined split_elements(const Mesh& mesh, const std::vector<bool>& split);
+// irradiance is shared out among its children (Σ H_c A_c = H A) is unchanged; with `texturing`,
+// children of textured materials take their own textures' averages instead (which average to
+// the parent's).
+Refined split_elements(const Mesh& mesh, const std::vector<bool>& split, const Texturing* texturing = nullptr);
 
 }  // namespace hemirad::mesh

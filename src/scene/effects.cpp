@@ -317,6 +317,11 @@ EffectDecision analyse_colour(const Scene& scene) {
                                            "e.g. {}, so three channels are solved",
                                            coloured, scene.triangles.size(), what));
     }
+    for (std::uint32_t m = 0; m < scene.materials.size(); ++m)
+        if (used[m] && scene.materials[m].coloured_texture)
+            return automatic(true, fmt::format("material '{}' has a coloured texture (its texels' r, g, b not all "
+                                               "equal), so three channels are solved",
+                                               material_name(scene, m)));
     if (coloured_emitters > 0)
         return automatic(true, fmt::format("material '{}' emits coloured light {}, so three channels are solved",
                                            material_name(scene, emitter_example),
@@ -492,7 +497,9 @@ void apply_colour(Scene& scene, const EffectsPlan& plan) {
     for (Material& m : scene.materials) {
         m.base_color = grey(m.base_color);
         m.emission = grey(m.emission);
+        m.coloured_texture = false;
     }
+    for (std::shared_ptr<const Texture>& t : scene.textures) t = t->grey();
     for (Triangle& t : scene.triangles)
         for (glm::dvec3& rho : t.rho) rho = grey(rho);
 }

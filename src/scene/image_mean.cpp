@@ -79,7 +79,7 @@ private:
 
 }  // namespace
 
-ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size) {
+ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels* keep) {
     ImageMean out;
     const auto fail = [&out](std::string problem) {
         out.problem = std::move(problem);
@@ -127,6 +127,33 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size) {
     const std::size_t levels = bits == 8 ? 256 : bits == 16 ? 65536 : 0;
     std::vector<std::uint64_t> histogram(std::size_t(channels) * levels, 0);
     double sums[4] = {0.0, 0.0, 0.0, 0.0};  // per channel read
+
+    // Texels kept (see Texels): linear sums per texel of the reduced grid, divided at the end by
+    // the pixels each one covers (fewer along the right and bottom edges).
+    const int factor = keep ? std::max(1, (std::max(spec.width, spec.height) + kMaxTexelEdge - 1) / kMaxTexelEdge) : 1;
+    const int tw = (spec.width + factor - 1) / factor, th = (spec.height + factor - 1) / factor;
+    std::vector<double> texel_sums(keep ? std::size_t(tw) * std::size_t(th) * 4 : 0, 0.0);
+    std::vector<float> linear(levels);  // colour levels decoded from sRGB once each
+    if (keep)
+        for (std::size_t level = 0; level < levels; ++level)
+            linear[level] = float(srgb_to_linear(double(level) / double(levels - 1)));
+    const auto value_at = [&](std::size_t i, int c) -> double {  // channel c's i-th stored value, linear
+        if (bits == 8) return c < colour ? double(linear[rows[i]]) : double(rows[i]) / 255.0;
+        if (bits == 16) {
+            std::uint16_t v;
+            std::memcpy(&v, rows.data() + 2 * i, 2);
+            return c < colour ? double(linear[v]) : double(v) / 65535.0;
+        }
+        float v;
+        std::memcpy(&v, rows.data() + 4 * i, 4);
+        return double(v);
+    };
+    const auto raw_at = [&](std::size_t i) -> std::uint32_t {  // the stored bits, to compare channels
+        std::uint32_t v = 0;
+        std::memcpy(&v, rows.data() + value_bytes * i, value_bytes);
+        return v;
+    };
+
     for (int y = 0; y < spec.height; y += band) {
         const int n = std::min(band, spec.height - y);
         if (!in->read_scanlines(0, 0, spec.y + y, spec.y + y + n, 0, 0, channels, type, rows.data()))
@@ -147,6 +174,23 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size) {
                 sums[i % std::size_t(channels)] += double(v);
             }
         }
+        if (colour == 3 && !out.coloured)
+            for (std::size_t i = 0; i < values; i += std::size_t(channels))
+                if (raw_at(i) != raw_at(i + 1) || raw_at(i + 1) != raw_at(i + 2)) {
+                    out.coloured = true;
+                    break;
+                }
+        if (!keep) continue;
+        for (int r = 0; r < n; ++r) {
+            double* texel_row = texel_sums.data() + std::size_t((y + r) / factor) * std::size_t(tw) * 4;
+            for (int x = 0; x < spec.width; ++x) {
+                const std::size_t i = std::size_t(r) * row_values + std::size_t(x) * std::size_t(channels);
+                double* t = texel_row + std::size_t(x / factor) * 4;
+                for (int c = 0; c < colour; ++c) t[c] += value_at(i + std::size_t(c), c);
+                if (colour == 1) t[1] = t[2] = t[0];
+                t[3] += has_alpha ? value_at(i + std::size_t(colour), colour) : 1.0;
+            }
+        }
     }
     for (int c = 0; c < channels && levels > 0; ++c)
         for (std::size_t level = 0; level < levels; ++level)
@@ -154,6 +198,20 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size) {
                 const double value = double(level) / double(levels - 1);
                 sums[c] += double(count) * (c < colour ? srgb_to_linear(value) : value);  // alpha is linear
             }
+    if (keep) {
+        keep->width = tw;
+        keep->height = th;
+        keep->factor = factor;
+        keep->rgba.assign(std::size_t(tw) * std::size_t(th), glm::vec4(0.0f));
+        for (int ty = 0; ty < th; ++ty)
+            for (int tx = 0; tx < tw; ++tx) {
+                const double covered = double(std::min(factor, spec.width - tx * factor)) *
+                                       double(std::min(factor, spec.height - ty * factor));
+                const double* t = texel_sums.data() + (std::size_t(ty) * std::size_t(tw) + std::size_t(tx)) * 4;
+                glm::vec4& out_texel = keep->rgba[std::size_t(ty) * std::size_t(tw) + std::size_t(tx)];
+                for (int c = 0; c < 4; ++c) out_texel[c] = float(t[c] / covered);
+            }
+    }
     const glm::dvec3 sum = colour == 1 ? glm::dvec3(sums[0]) : glm::dvec3(sums[0], sums[1], sums[2]);
     out.mean = sum / double(pixels);
     if (has_alpha) out.alpha = std::clamp(sums[colour] / double(pixels), 0.0, 1.0);

@@ -26,11 +26,23 @@ struct EncodedImage {
     std::string problem;
 };
 
+// An image kept for sampling: linear RGBA (sRGB decoded; alpha 1 without an alpha channel; a grey
+// image's one channel in all three), box-filtered by a whole factor until no side exceeds
+// kMaxTexelEdge. Per-element averages need no finer detail: an element spans many texels, and
+// the box filter keeps every region's mean.
+inline constexpr int kMaxTexelEdge = 1024;
+struct Texels {
+    int width = 0, height = 0;
+    int factor = 1;                // source pixels per texel along each side
+    std::vector<glm::vec4> rgba;   // row-major, row 0 = the image's top row (glTF's v = 0)
+};
+
 struct ImageMean {
     bool ok = false;
     std::string problem;    // when !ok: "not an image OpenImageIO can decode (…)", …
     glm::dvec3 mean{1.0};   // linear RGB; a grey image's one channel in all three
     double alpha = 1.0;     // the mean alpha (linear, as glTF stores it); 1 without an alpha channel
+    bool coloured = false;  // some pixel's red, green and blue differ
     int width = 0, height = 0, channels = 0, bits = 0;
 };
 
@@ -38,6 +50,7 @@ struct ImageMean {
 // encoded values would darken the result); float images are linear already. Alpha (a channel
 // after the colour ones: grey + alpha, RGBA) is averaged as it is stored, linear.
 // The format is the bytes' own (PNG, JPEG or WebP), whatever the uri or mime type says.
-ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size);
+// With `keep`, the decoded texels are also kept there (see Texels).
+ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels* keep = nullptr);
 
 }  // namespace hemirad::scene

@@ -41,6 +41,13 @@ using glm::dvec3;
 // converges; 0.8 is a typical bright diffuse surface.
 constexpr double kDefaultBaseColor = 0.8;
 
+// Which TEXCOORD_n set a texture reads, and the KHR_texture_transform applied to it.
+struct UvSource {
+    int set = 0;
+    glm::dmat3 transform{1.0};
+    bool used = false;  // the material has this texture
+};
+
 // Everything the load steps share: the parsed file, its name for messages, the scene being
 // built, and which once-per-kind warnings have already been given.
 struct Loader {
@@ -53,6 +60,9 @@ struct Loader {
     std::map<int, EncodedImage> encoded;  // what tinygltf handed the image loader, by index
     std::map<int, ImageMean> images;     // decoded when a material's texture first needs one
     std::uint64_t decoded_pixels = 0;    // of every image decoded so far
+    std::map<int, int> texture_of_image;  // glTF image -> Scene::textures index, once decoded
+    // Per material: where its base colour and emissive textures' coordinates come from.
+    std::vector<std::array<UvSource, 2>> uv_sources;
 
     [[noreturn]] void fail(const std::string& problem) const { throw InputError(file + ": " + problem); }
     void warn(const std::string& problem) { scene.warnings.push_back(file + ": " + problem); }
@@ -558,6 +568,21 @@ std::vector<std::uint32_t> read_indices(const Loader& L, int index, const std::s
     return out;
 }
 
+// TEXCOORD_n: FLOAT, or normalized unsigned bytes or shorts (glTF), or (KHR_mesh_quantization)
+// bytes or shorts of either sign, normalized or not.
+std::vector<glm::dvec2> read_texcoords(const Loader& L, int index, const std::string& where) {
+    const AccessorView v = view_accessor(L, index, where);
+    if (v.components != 2 || v.component_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+        L.fail(v.what + ": a TEXCOORD must be VEC2 of FLOAT, or of bytes or shorts");
+    std::vector<glm::dvec2> out(v.count);
+    for (std::size_t i = 0; i < v.count; ++i) {
+        out[i] = glm::dvec2(v.value(i, 0), v.value(i, 1));
+        if (!std::isfinite(out[i].x) || !std::isfinite(out[i].y))
+            L.fail(fmt::format("{}: texture coordinate {} is not finite (NaN or Inf)", v.what, i));
+    }
+    return out;
+}
+
 // COLOR_0 as linear RGB (glTF vertex colours are linear; alpha does not matter to radiosity).
 std::vector<dvec3> read_colors(const Loader& L, int index, const std::string& where) {
     const AccessorView v = view_accessor(L, index, where);
@@ -641,11 +666,16 @@ const ImageMean& texture_image(Loader& L, const tinygltf::TextureInfo& info, con
             if (!kept->second.problem.empty()) {
                 mean.problem = kept->second.problem;
             } else {
-                mean = decode_image_mean(kept->second.bytes.data(), kept->second.bytes.size());
+                Texels texels;
+                mean = decode_image_mean(kept->second.bytes.data(), kept->second.bytes.size(), &texels);
                 L.decoded_pixels += std::uint64_t(mean.width) * std::uint64_t(mean.height);
                 if (L.decoded_pixels > kMaxScenePixels)
                     L.fail(fmt::format("{}: {}: the textures the scene's materials use hold more than {} pixels in all",
                                        what, image, kMaxScenePixels));
+                if (mean.ok) {
+                    L.texture_of_image[tex.source] = int(L.scene.textures.size());
+                    L.scene.textures.push_back(std::make_shared<const Texture>(texels, mean.mean));
+                }
             }
             L.encoded.erase(kept);  // decoded once; the bytes are no longer needed
             decoded = L.images.emplace(tex.source, mean).first;
@@ -664,6 +694,75 @@ const ImageMean& texture_image(Loader& L, const tinygltf::TextureInfo& info, con
 
 dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
     return texture_image(L, info, what).mean;
+}
+
+Wrap wrap_mode(const Loader& L, int mode, const std::string& what) {
+    switch (mode) {
+        case TINYGLTF_TEXTURE_WRAP_REPEAT:
+            return Wrap::repeat;
+        case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE:
+            return Wrap::clamp;
+        case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT:
+            return Wrap::mirror;
+        default:
+            L.fail(fmt::format("{}: wrap mode {} is not a glTF wrap mode", what, mode));
+    }
+}
+
+// The decoded texture a material's texture reads, with its sampler's wrap modes (none when the
+// material has no such texture). Decodes the image if no texture has yet.
+TextureSlot texture_slot(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
+    TextureSlot slot;
+    if (info.index < 0) return slot;
+    const ImageMean& image = texture_image(L, info, what);  // fails for a bad texture or image
+    const tinygltf::Texture& tex = L.model.textures[std::size_t(info.index)];
+    slot.texture = L.texture_of_image.at(tex.source);
+    if (tex.sampler >= 0) {
+        if (std::size_t(tex.sampler) >= L.model.samplers.size())
+            L.fail(fmt::format("{}: texture {} names sampler {}, out of range", what, info.index, tex.sampler));
+        const tinygltf::Sampler& sampler = L.model.samplers[std::size_t(tex.sampler)];
+        slot.wrap_s = wrap_mode(L, sampler.wrapS, fmt::format("{}: sampler {} wrapS", what, tex.sampler));
+        slot.wrap_t = wrap_mode(L, sampler.wrapT, fmt::format("{}: sampler {} wrapT", what, tex.sampler));
+    }
+    (void)image;
+    return slot;
+}
+
+// A number of a KHR_texture_transform object, or `fallback` where absent.
+double transform_number(const Loader& L, const tinygltf::Value& ext, const char* key, int i, double fallback,
+                        const std::string& what) {
+    if (!ext.Has(key)) return fallback;
+    const tinygltf::Value& v = ext.Get(key);
+    const tinygltf::Value& n = i < 0 ? v : (v.IsArray() && v.ArrayLen() == 2 ? v.Get(i) : tinygltf::Value());
+    if (!n.IsNumber() || !std::isfinite(n.GetNumberAsDouble()))
+        L.fail(fmt::format("{}: KHR_texture_transform {} must be {}", what, key,
+                           i < 0 ? "a finite number" : "two finite numbers"));
+    return n.GetNumberAsDouble();
+}
+
+// The texture coordinate set and transform a texture is read through: texCoord, unless
+// KHR_texture_transform names another, and the extension's offset . rotation . scale (its
+// rotation turns the coordinates counter-clockwise, as the extension's GLSL reads).
+UvSource uv_source(const Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
+    UvSource src;
+    src.used = info.index >= 0;
+    src.set = info.texCoord;
+    const auto it = info.extensions.find("KHR_texture_transform");
+    if (it != info.extensions.end() && it->second.IsObject()) {
+        const tinygltf::Value& ext = it->second;
+        const double ox = transform_number(L, ext, "offset", 0, 0.0, what);
+        const double oy = transform_number(L, ext, "offset", 1, 0.0, what);
+        const double r = transform_number(L, ext, "rotation", -1, 0.0, what);
+        const double sx = transform_number(L, ext, "scale", 0, 1.0, what);
+        const double sy = transform_number(L, ext, "scale", 1, 1.0, what);
+        if (ext.Has("texCoord")) src.set = int(transform_number(L, ext, "texCoord", -1, 0.0, what));
+        const glm::dmat3 translation(1, 0, 0, 0, 1, 0, ox, oy, 1);  // column-major, as GLSL's mat3
+        const glm::dmat3 rotation(std::cos(r), std::sin(r), 0, -std::sin(r), std::cos(r), 0, 0, 0, 1);
+        const glm::dmat3 scale(sx, 0, 0, 0, sy, 0, 0, 0, 1);
+        src.transform = translation * rotation * scale;
+    }
+    if (src.set < 0) L.fail(fmt::format("{}: texCoord {} is negative", what, src.set));
+    return src;
 }
 
 std::string material_label(const tinygltf::Material& mat, int index) {
@@ -739,8 +838,20 @@ Material convert_material(Loader& L, int index) {
     const std::vector<double>& base = mat.pbrMetallicRoughness.baseColorFactor;
     if (base.size() != 4) L.fail(label + ": baseColorFactor must have 4 components");
     check_factor(L, base, label + ": baseColorFactor");
-    out.base_color = dvec3(base[0], base[1], base[2]) *
-                     texture_average(L, mat.pbrMetallicRoughness.baseColorTexture, label + " baseColorTexture");
+    const tinygltf::TextureInfo& base_info = mat.pbrMetallicRoughness.baseColorTexture;
+    out.base_color = dvec3(base[0], base[1], base[2]) * texture_average(L, base_info, label + " baseColorTexture");
+    out.base_texture = texture_slot(L, base_info, label + " baseColorTexture");
+    out.alpha_factor = base[3];
+    if (mat.alphaMode == "MASK") {
+        out.alpha_cutoff = mat.alphaCutoff;
+        if (!(out.alpha_cutoff >= 0.0) || !std::isfinite(out.alpha_cutoff))
+            L.fail(fmt::format("{}: alphaCutoff {} must be finite and >= 0", label, mat.alphaCutoff));
+    }
+    std::array<UvSource, 2> uv{};
+    if (out.base_texture) {
+        uv[0] = uv_source(L, base_info, label + " baseColorTexture");
+        out.coloured_texture = texture_image(L, base_info, label + " baseColorTexture").coloured;
+    }
 
     const std::vector<double>& emissive = mat.emissiveFactor;
     if (!emissive.empty() && emissive.size() != 3) L.fail(label + ": emissiveFactor must have 3 components");
@@ -749,7 +860,15 @@ Material convert_material(Loader& L, int index) {
     if (!emissive.empty() && (emissive[0] > 0.0 || emissive[1] > 0.0 || emissive[2] > 0.0) && strength > 0.0) {
         out.emission = dvec3(emissive[0], emissive[1], emissive[2]) * strength *
                        texture_average(L, mat.emissiveTexture, label + " emissiveTexture");
+        out.emissive_texture = texture_slot(L, mat.emissiveTexture, label + " emissiveTexture");
+        if (out.emissive_texture) {
+            uv[1] = uv_source(L, mat.emissiveTexture, label + " emissiveTexture");
+            out.coloured_texture =
+                out.coloured_texture || texture_image(L, mat.emissiveTexture, label + " emissiveTexture").coloured;
+        }
     }
+    if (L.uv_sources.size() <= std::size_t(index)) L.uv_sources.resize(std::size_t(index) + 1);
+    L.uv_sources[std::size_t(index)] = uv;
     see_through(L, mat, label, out);
     for (int c = 0; c < 3; ++c) {
         if (!(out.emission[c] <= kMaxEmission)) {
@@ -970,6 +1089,26 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
     }
     const Material& mat = L.scene.materials[material];
 
+    // The texture coordinates of the material's base colour and emissive textures, transformed.
+    std::array<std::vector<glm::dvec2>, 2> uvs;
+    for (std::size_t slot = 0; slot < 2 && material < L.uv_sources.size(); ++slot) {
+        const UvSource& src = L.uv_sources[material][slot];
+        if (!src.used) continue;
+        const std::string name = fmt::format("TEXCOORD_{}", src.set);
+        const auto a = prim.attributes.find(name);
+        if (a == prim.attributes.end()) {  // invalid glTF, but the texture's mean still stands for it
+            L.warn_once(fmt::format("notexcoord {} {}", material, slot),
+                        fmt::format("{}: material '{}' reads its {} texture through {}, which the primitive lacks; "
+                                    "the texture's mean colour is used",
+                                    where, mat.name, slot == 0 ? "base colour" : "emissive", name));
+            continue;
+        }
+        uvs[slot] = read_texcoords(L, a->second, where + " " + name);
+        if (uvs[slot].size() != positions.size())
+            L.fail(fmt::format("{} {}: {} coordinates for {} positions", where, name, uvs[slot].size(), positions.size()));
+        for (glm::dvec2& uv : uvs[slot]) uv = glm::dvec2(src.transform * glm::dvec3(uv, 1.0));
+    }
+
     const dmat4& world = ref.instance->world;
     // A mirroring transform turns counter-clockwise into clockwise; swapping two vertices
     // keeps the side the file called front as the front.
@@ -989,11 +1128,16 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
                 }
             }
             t.rho[std::size_t(v)] = rho;
+            if (!uvs[0].empty()) t.uv_base[std::size_t(v)] = glm::vec2(uvs[0][i]);
+            if (!uvs[1].empty()) t.uv_emissive[std::size_t(v)] = glm::vec2(uvs[1][i]);
         }
         if (mirrored) {
             std::swap(t.p[1], t.p[2]);
             std::swap(t.rho[1], t.rho[2]);
+            std::swap(t.uv_base[1], t.uv_base[2]);
+            std::swap(t.uv_emissive[1], t.uv_emissive[2]);
         }
+        t.uv_slots = std::uint8_t((uvs[0].empty() ? 0 : 1) | (uvs[1].empty() ? 0 : 2));
         t.material = material;
         t.node = ref.scene_node;
         t.primitive = primitive;
@@ -1082,7 +1226,7 @@ Scene load(const std::filesystem::path& file) {
     const std::string name = file.string();
     std::map<int, EncodedImage> images;
     const tinygltf::Model model = parse(file, name, scene.warnings, images);
-    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0};
+    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}};
 
     // Converted in file order so a primitive's material index is also its Scene index.
     for (std::size_t i = 0; i < model.materials.size(); ++i) scene.materials.push_back(convert_material(L, int(i)));

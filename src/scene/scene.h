@@ -10,6 +10,8 @@
 
 #include <glm/glm.hpp>
 
+#include "scene/texture.h"
+
 namespace hemirad::scene {
 
 struct Material {
@@ -20,6 +22,15 @@ struct Material {
     // Why light passes through this surface ("alphaMode BLEND", "KHR_materials_transmission
     // 0.9"); empty for an opaque one. The see_through effect leaves such surfaces out.
     std::string see_through;
+    // Textures, sampled per element by the mesher. base_color and emission above hold the
+    // textures' means; an element's own values scale them by its area average over the mean.
+    TextureSlot base_texture, emissive_texture;
+    bool coloured_texture = false;  // a texture's texels are not all grey
+    // alphaMode MASK: the cutoff below which (baseColorFactor alpha x texture alpha) is a hole;
+    // -1 for OPAQUE and BLEND.
+    double alpha_cutoff = -1.0;
+    double alpha_factor = 1.0;  // baseColorFactor alpha
+    bool textured() const { return base_texture || emissive_texture || alpha_cutoff >= 0.0; }
 };
 
 // One world-space triangle. Its front is the counter-clockwise side (after the node's
@@ -33,6 +44,10 @@ struct Triangle {
     std::uint32_t node = 0;       // index into Scene::nodes
     std::uint32_t primitive = 0;  // index of the source primitive instance (mesh builder pairs
                                   // quads within one primitive only)
+    // Texture coordinates of each vertex for the material's base colour (and alpha) and
+    // emissive textures, KHR_texture_transform applied; zero when it has none.
+    std::array<glm::vec2, 3> uv_base{}, uv_emissive{};
+    std::uint8_t uv_slots = 0;  // bit 0: uv_base holds coordinates; bit 1: uv_emissive does
 };
 
 // A glTF node that holds a mesh: one entry per such node, in glTF node order.
@@ -69,6 +84,7 @@ struct Scene {
     std::vector<Triangle> triangles;
     std::vector<MeshNode> nodes;
     std::vector<Camera> cameras;
+    std::vector<std::shared_ptr<const Texture>> textures;  // the images materials' textures read
     std::vector<std::string> warnings;  // each already names the file
     std::size_t skipped_primitives = 0; // non-triangle modes
     std::size_t punctual_lights = 0;    // KHR_lights_punctual lights the scene's nodes place (not baked yet)

@@ -124,7 +124,7 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
             result.stopped_for_memory = {depth + 1, count};
             break;
         }
-        mesh::Refined refined = mesh::split_elements(mesh, marked);
+        mesh::Refined refined = mesh::split_elements(mesh, marked, settings.texturing);
         const mesh::Mesh& m = refined.mesh;
 
         // The re-gather: light arriving at the new children from every patch that shot.

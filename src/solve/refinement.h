@@ -17,6 +17,7 @@
 
 #include "formfactor/engine.h"
 #include "mesh/mesh.h"
+#include "mesh/texturing.h"
 
 namespace hemirad::solve {
 
@@ -42,6 +43,9 @@ struct RefineSettings {
     double max_elements = std::numeric_limits<double>::infinity();
     // Checked between engine calls; when set the refinement stops at the level it is in.
     std::function<bool()> cancelled;
+    // The scene's textures, so that split elements take their own averages (none: children keep
+    // their parent's reflectance and emission). Must outlive the refinement.
+    const mesh::Texturing* texturing = nullptr;
 };
 
 struct RefineLevel {
