@@ -1098,6 +1098,12 @@ int tile_face(const HrShot* shot, int tile) {
 // Cells of a raster tile; the delta form-factor table holds the tiles' cells tile by tile.
 #define TILE_CELLS (HEMIRAD_TILE * HEMIRAD_TILE)
 
+// Where a shot's cell weights start in the weight tables (form factors, then solid angles: see
+// HrShot::table), each holding every tile's cells.
+size_t shot_table(const HrShot* shot) {
+    return (size_t)shot->table * (size_t)shot->tile_base[HR_FACES] * TILE_CELLS;
+}
+
 // The first cell of a face in the id buffers (DeltaFormFactors::offset).
 size_t face_cell_offset(int face, int n) {
     return face == 0 ? 0 : (size_t)n * n + (size_t)(face - 1) * n * (n / 2);
@@ -1166,7 +1172,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_TILE * HEMIRAD_TILE, 1, 1))
     const size_t face_offset = face_cell_offset(face, n);
     const size_t cell = face_offset + (size_t)j * n + i;
     ids[cell] = best < 0 ? HR_EMPTY : (best_back ? HR_BLOCKER : best);
-    if (best >= 0) atom_add(&sums[best_back ? shot->elements : best], delta_fixed[(size_t)tile * TILE_CELLS + lid]);
+    if (best >= 0)
+        atom_add(&sums[best_back ? shot->elements : best], delta_fixed[shot_table(shot) + (size_t)tile * TILE_CELLS + lid]);
 }
 
 // For CPU devices: one work-item per tile walks the records of its list in turn, each over
@@ -1313,7 +1320,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_RASTER_WG, 1, 1))) void ras
     double row_t[HEMIRAD_TILE];  // t = y / per_unit - t0 of its rows
     for (int c = 0; c < HEMIRAD_TILE; ++c) row_t[c] = (cj0 + c + 0.5) / per_unit - t0;
     const size_t face_offset = face_cell_offset(face, n);
-    __global const long* delta_tile = delta_fixed + (size_t)tile * TILE_CELLS;  // the tile's cells, row by row
+    __global const long* delta_tile = delta_fixed + shot_table(shot) + (size_t)tile * TILE_CELLS;  // the tile's cells, row by row
 
     const uint end = offsets[(tile + 1) * HEMIRAD_COUNT_COPIES];
     for (uint at = offsets[tile * HEMIRAD_COUNT_COPIES]; at < end; ++at) {

@@ -85,7 +85,7 @@ typedef struct {
     // the record buffers hold per shot.
     hr_uint group_capacity;
     hr_uint group_rows;
-    hr_uint pad;
+    hr_uint table;  // the cell weights: 0 form factors (a patch), 1 solid angles (a light)
 } HrShot;
 
 // One edge of a record's inside test, exact in 64-bit integers: at cell (i, j) its value is

@@ -35,6 +35,7 @@
 #include "formfactor/row_cache.h"
 #include "mesh/mesh.h"
 #include "mesh/texturing.h"
+#include "solve/lights.h"
 #include "output/finite.h"
 #include "output/output.h"
 #include "scene/scene.h"
@@ -218,25 +219,35 @@ bool emits(const scene::Scene& scene, const scene::Triangle& t) {
     return e.x > 0.0 || e.y > 0.0 || e.z > 0.0;
 }
 
+// The point and spot lights of a scene that shine: hemirad bakes those (directional ones not yet).
+std::size_t shining_lights(const scene::Scene& scene) {
+    return static_cast<std::size_t>(std::count_if(scene.lights.begin(), scene.lights.end(), [](const scene::PunctualLight& l) {
+        return l.type != scene::PunctualLight::Type::directional && l.intensity != glm::dvec3(0.0);
+    }));
+}
+
 void check_scene(const scene::Scene& scene) {
     if (scene.triangles.empty())
         throw InputError(fmt::format("{}: no triangles to bake (no mesh with TRIANGLES primitives)", scene.path.string()));
-    if (std::none_of(scene.triangles.begin(), scene.triangles.end(),
-                     [&](const scene::Triangle& t) { return emits(scene, t); }))
-        throw InputError(fmt::format(
-            "{}: nothing emits light: 0 emissive triangles (no triangle's material has emission > 0){}; hemirad bakes the "
-            "light of emissive materials",
-            scene.path.string(),
-            scene.punctual_lights == 0
-                ? std::string()
-                : fmt::format(", and {} KHR_lights_punctual light{}, which it does not bake yet", scene.punctual_lights,
-                              scene.punctual_lights == 1 ? "" : "s")));
+    if (shining_lights(scene) > 0 ||
+        std::any_of(scene.triangles.begin(), scene.triangles.end(), [&](const scene::Triangle& t) { return emits(scene, t); }))
+        return;
+    const auto directional = std::count_if(scene.lights.begin(), scene.lights.end(), [](const scene::PunctualLight& l) {
+        return l.type == scene::PunctualLight::Type::directional;
+    });
+    throw InputError(fmt::format(
+        "{}: nothing emits light: 0 emissive triangles (no triangle's material has emission > 0) and {} KHR_lights_punctual "
+        "point or spot light{} of intensity > 0{}; hemirad bakes emissive materials and point and spot lights",
+        scene.path.string(), shining_lights(scene), shining_lights(scene) == 1 ? "" : "s",
+        directional == 0 ? std::string()
+                         : fmt::format(" ({} directional light{}, which it does not bake yet)", directional,
+                                       directional == 1 ? "" : "s")));
 }
 
 // After the see_through decision: a scene whose only emitters were see-through (faint blended
 // glows) has nothing left to light it, which the user can change.
 void check_emitters_left(const scene::Scene& scene, const scene::EffectsPlan& plan) {
-    if (!plan.see_through.on) return;
+    if (!plan.see_through.on || shining_lights(scene) > 0) return;
     if (std::none_of(scene.triangles.begin(), scene.triangles.end(),
                      [&](const scene::Triangle& t) { return emits(scene, t); }))
         throw InputError(fmt::format("{}: nothing emits light once see-through surfaces are left out: every emissive "
@@ -392,11 +403,12 @@ struct SolveContext {
     const std::string& resume_state;       // what --resume read, or empty
     ProgressLine& progress;
     std::function<void(const solve::Progressive&)> preview;  // writes a preview frame of the passes so far
+    const std::vector<glm::dvec3>* direct;  // the punctual lights' irradiance per element, or null
 };
 
 Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c) {
     const BakeOptions& o = c.o;
-    solve::Matrix solver(mesh, engine, c.matrix);
+    solve::Matrix solver(mesh, engine, c.matrix, c.direct);
     Solution solution;
     if (!o.resume.empty()) {
         restore(solver, c.resume_state, o.resume);
@@ -433,7 +445,7 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
     settings.threshold = c.threshold;
     settings.max_passes = max_passes_for(o, mesh.patches.size());
     settings.batch = o.batch;
-    solve::Progressive solver(mesh, engine, settings);
+    solve::Progressive solver(mesh, engine, settings, c.direct);
     Solution solution;
     if (!o.resume.empty()) {
         restore(solver, c.resume_state, o.resume);
@@ -688,11 +700,15 @@ void run_bake(const BakeOptions& options) {
         t0 = Clock::now();
         levels.clear();
         ProgressLine progress(o.progress);
+        // The punctual lights shoot first: the solvers start from their direct light.
+        std::vector<glm::dvec3> direct;
+        if (!mesh.lights.empty()) direct = solve::direct_light(mesh, scene.lights, engine, 0);
         const SolveContext context{o, threshold, matrix_settings, fingerprint, resume_state, progress,
                                    [&](const solve::Progressive& solver) {
                                        write_png_preview(scene, mesh, solver, view, width, height,
                                                          out.preview_path(solver.passes()));
-                                   }};
+                                   },
+                                   direct.empty() ? nullptr : &direct};
         solution = solver_name == "matrix" ? solve_with_matrix(mesh, engine, context)
                                            : solve_progressively(mesh, engine, context);
         progress.finish();
@@ -723,6 +739,7 @@ void run_bake(const BakeOptions& options) {
             rs.cancelled = [&] { return o.interrupted && *o.interrupted; };
             const mesh::Texturing texturing(scene);
             rs.texturing = &texturing;
+            rs.lights = &scene.lights;
             solve::RefineResult refined =
                 solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
             if (o.interrupted && *o.interrupted) throw Interrupted();

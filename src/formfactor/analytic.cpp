@@ -30,4 +30,21 @@ double point_to_polygon(const glm::dvec3& point, const glm::dvec3& normal, const
     return n >= 3 ? point_to_polygon(normal, clipped, n) : 0.0;
 }
 
+double solid_angle(const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+    const double la = glm::length(a), lb = glm::length(b), lc = glm::length(c);
+    const double numerator = std::abs(glm::dot(a, glm::cross(b, c)));
+    const double denominator = la * lb * lc + glm::dot(a, b) * lc + glm::dot(a, c) * lb + glm::dot(b, c) * la;
+    return 2.0 * std::atan2(numerator, denominator);
+}
+
+double solid_angle(const glm::dvec3& point, const glm::dvec3& axis, const mesh::Polygon& polygon, double eps) {
+    glm::dvec3 relative[4], clipped[5];
+    for (int i = 0; i < polygon.n; ++i) relative[i] = polygon.v[i] - point;
+    const int n =
+        clip_convex(relative, polygon.n, [&](const glm::dvec3& r) { return glm::dot(axis, r) - eps; }, clipped);
+    double omega = 0.0;
+    for (int i = 1; i + 1 < n; ++i) omega += solid_angle(clipped[0], clipped[i], clipped[i + 1]);
+    return omega;
+}
+
 }  // namespace hemirad::formfactor

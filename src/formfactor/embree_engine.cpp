@@ -134,6 +134,7 @@ struct EmbreeEngine::Impl {
     struct ShotFrame {
         glm::dvec3 origin{0.0};
         FloatFrame rays;
+        const std::vector<double>* table = nullptr;  // the cell weights (Weights) of the shot
     };
     // What one tile of one shot found: sums in the order first hit, and its blocked part.
     struct TileSums {
@@ -145,6 +146,7 @@ struct EmbreeEngine::Impl {
     const mesh::Mesh& mesh;
     Settings settings;
     DeltaFormFactors delta;
+    std::unique_ptr<DeltaFormFactors> light_delta;  // solid angles, made when a light first shoots
     unsigned threads;
     RTCDevice device = nullptr;
     RTCScene scene = nullptr;
@@ -316,7 +318,7 @@ inline bool EmbreeEngine::Impl::seen_from_behind(const RTCRayHit16& rh, int r, c
 }
 
 void EmbreeEngine::Impl::cast_tile(const ShotFrame& f, std::size_t tile, TileSums& sums, std::int32_t* ids_out) const {
-    const auto& table = delta.table();
+    const auto& table = *f.table;
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
     context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
@@ -408,10 +410,13 @@ void EmbreeEngine::Impl::run(const ShotRequest* shots, std::size_t count, ShotRe
     const std::size_t per_shot = tiles();
     frames.resize(std::max(frames.size(), count));
     for (std::size_t b = 0; b < count; ++b) {
-        const Frame frame = make_frame(mesh.patches.at(shots[b].shooter.patch), settings.seed, shots[b].shot);
+        const Frame frame = make_frame(mesh, shots[b].shooter, settings.seed, shots[b].shot);
         ShotFrame& f = frames[b];
         f.origin = frame.origin;
         f.rays = float_frame(frame);
+        const bool light = weights_of(shots[b].shooter) == Weights::solid_angle;
+        if (light && !light_delta) light_delta = std::make_unique<DeltaFormFactors>(delta.n(), Weights::solid_angle);
+        f.table = light ? &light_delta->table() : &delta.table();
     }
     while (tile_sums.size() < count * per_shot) {
         tile_sums.emplace_back();

@@ -75,16 +75,20 @@ void for_each_in_union(const ShotResult& a, const ShotResult& b, Fn fn) {
     }
 }
 
-// What shoots, as data: every engine takes a Shooter, so that new kinds of shooter (point, spot,
-// directional and sky lights) come as new kinds here, not as new engine interfaces. Today one
-// kind: a patch of the mesh, shooting its hemicube from its centre along its normal (a planar
-// cell skips its own elements and its twin's; a cluster draws its own, see shot_skips).
+// What shoots, as data: every engine takes a Shooter, so that new kinds of shooter come as new
+// kinds here, not as new engine interfaces. Two kinds:
+// - a patch of the mesh, shooting its hemicube from its centre along its normal (a planar cell
+//   skips its own elements and its twin's; a cluster draws its own, see shot_skips); the row
+//   holds form factors;
+// - one hemicube of a punctual light (mesh::Mesh::lights), from the light along its axis,
+//   skipping nothing; the row holds each element's visible solid angle over 4π (Weights).
 struct Shooter {
-    enum class Kind : std::uint8_t { patch };
+    enum class Kind : std::uint8_t { patch, light };
     Kind kind = Kind::patch;
-    std::uint32_t patch = 0;  // Kind::patch: the patch
+    std::uint32_t patch = 0;  // Kind::patch: the patch; Kind::light: the index in mesh::Mesh::lights
 
     static Shooter of_patch(std::uint32_t patch) { return {Kind::patch, patch}; }
+    static Shooter of_light(std::uint32_t light) { return {Kind::light, light}; }
     bool operator==(const Shooter& o) const { return kind == o.kind && patch == o.patch; }
 };
 
@@ -95,6 +99,7 @@ struct ShotRequest {
     std::uint64_t shot = 0;
 
     static ShotRequest of_patch(std::uint32_t patch, std::uint64_t shot) { return {Shooter::of_patch(patch), shot}; }
+    static ShotRequest of_light(std::uint32_t light, std::uint64_t shot) { return {Shooter::of_light(light), shot}; }
 };
 
 // The patches whose elements a shot leaves out (mesh::kNoPatch: none): a planar cell's own
@@ -105,6 +110,7 @@ struct ShotSkips {
     bool skips(std::uint32_t patch) const { return patch == own || patch == twin; }
 };
 inline ShotSkips shot_skips(const mesh::Mesh& mesh, const Shooter& shooter) {
+    if (shooter.kind == Shooter::Kind::light) return {};
     const mesh::Patch& p = mesh.patches.at(shooter.patch);
     if (p.cluster()) return {};
     return {shooter.patch, p.twin};

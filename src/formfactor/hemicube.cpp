@@ -6,6 +6,7 @@
 
 #include "core/rng.h"
 #include "formfactor/analytic.h"
+#include "formfactor/engine.h"
 
 namespace hemirad::formfactor {
 
@@ -29,7 +30,7 @@ glm::dvec3 from_face(int face, const glm::dvec3& q) {
     }
 }
 
-DeltaFormFactors::DeltaFormFactors(int n) : n_(n), table_(3u * static_cast<std::size_t>(n) * n) {
+DeltaFormFactors::DeltaFormFactors(int n, Weights weights) : n_(n), table_(3u * static_cast<std::size_t>(n) * n) {
     const double cell = 2.0 / n;  // cell size on the unit-distance face plane
     const glm::dvec3 up{0.0, 0.0, 1.0};
     for (int face = 0; face < kFaces; ++face) {
@@ -41,7 +42,11 @@ DeltaFormFactors::DeltaFormFactors(int n) : n_(n), table_(3u * static_cast<std::
                 const glm::dvec3 corners[4] = {
                     from_face(face, {s_lo, t_lo, 1.0}), from_face(face, {s_hi, t_lo, 1.0}),
                     from_face(face, {s_hi, t_hi, 1.0}), from_face(face, {s_lo, t_hi, 1.0})};
-                table_[offset(face) + static_cast<std::size_t>(j) * n + i] = point_to_polygon(up, corners, 4);
+                table_[offset(face) + static_cast<std::size_t>(j) * n + i] =
+                    weights == Weights::form_factor
+                        ? point_to_polygon(up, corners, 4)
+                        : (solid_angle(corners[0], corners[1], corners[2]) +
+                           solid_angle(corners[0], corners[2], corners[3])) / (4.0 * M_PI);
             }
         }
     }
@@ -68,9 +73,25 @@ double base_plane_epsilon(const mesh::Mesh& mesh) {
 }
 
 Frame make_frame(const mesh::Patch& shooter, std::uint64_t seed, std::uint64_t shot) {
+    return make_frame(shooter.centroid, shooter.normal, seed, shot);
+}
+
+Frame make_frame(const mesh::Mesh& mesh, const Shooter& shooter, std::uint64_t seed, std::uint64_t shot) {
+    if (shooter.kind == Shooter::Kind::light) {
+        const mesh::LightShooter& light = mesh.lights.at(shooter.patch);
+        return make_frame(light.position, light.axis, seed, shot);
+    }
+    return make_frame(mesh.patches.at(shooter.patch), seed, shot);
+}
+
+Weights weights_of(const Shooter& shooter) {
+    return shooter.kind == Shooter::Kind::light ? Weights::solid_angle : Weights::form_factor;
+}
+
+Frame make_frame(const glm::dvec3& origin, const glm::dvec3& normal, std::uint64_t seed, std::uint64_t shot) {
     // Orthonormal basis from the normal (Duff et al. 2017, branchless), then a seeded rotation
     // about the normal: the same (seed, shot) gives the same frame in every engine.
-    const glm::dvec3 n = shooter.normal;
+    const glm::dvec3 n = normal;
     const double sign = std::copysign(1.0, n.z);
     const double a = -1.0 / (sign + n.z);
     const double b = n.x * n.y * a;
@@ -80,7 +101,7 @@ Frame make_frame(const mesh::Patch& shooter, std::uint64_t seed, std::uint64_t s
     const double angle = 2.0 * M_PI * uniform01(seed, kRotationStream, shot);
     const double c = std::cos(angle), s = std::sin(angle);
     Frame f;
-    f.origin = shooter.centroid;
+    f.origin = origin;
     f.u = c * t1 + s * t2;
     f.v = -s * t1 + c * t2;
     f.w = n;

@@ -11,6 +11,8 @@
 
 namespace hemirad::formfactor {
 
+struct Shooter;
+
 // Face order: 0 top (+z), 1 +x, 2 −x, 3 +y, 4 −y in the hemicube frame.
 inline constexpr int kFaces = 5;
 
@@ -22,9 +24,14 @@ glm::dvec3 from_face(int face, const glm::dvec3& face_point);
 
 // Exact delta form factors: each cell's value is the differential-area-to-polygon form factor
 // of the cell's square (Lambert's formula), in double precision. They sum to 1 to rounding.
+// A light's shots weigh each cell by its solid angle instead (Weights::solid_angle): the share
+// of a point light's power that leaves through it, ΔΩ / 4π, so that a hemicube's cells sum to
+// one half and a light's two hemicubes (the whole cube) to one.
+enum class Weights { form_factor, solid_angle };
+
 class DeltaFormFactors {
 public:
-    explicit DeltaFormFactors(int n);  // n even, >= 2
+    explicit DeltaFormFactors(int n, Weights weights = Weights::form_factor);  // n even, >= 2
     int n() const { return n_; }
     // Cell (i, j) of a face: i along u (0..n−1), j along v (0..n−1 on top, 0..n/2−1 on sides).
     int rows(int face) const { return face == 0 ? n_ : n_ / 2; }
@@ -61,6 +68,11 @@ struct Frame {
         return {glm::dot(d, u), glm::dot(d, v), glm::dot(d, w)};
     }
 };
+Frame make_frame(const glm::dvec3& origin, const glm::dvec3& normal, std::uint64_t seed, std::uint64_t shot);
 Frame make_frame(const mesh::Patch& shooter, std::uint64_t seed, std::uint64_t shot);
+// The frame of any shooter: a patch's, or a light's hemicube from the light along its axis.
+Frame make_frame(const mesh::Mesh& mesh, const Shooter& shooter, std::uint64_t seed, std::uint64_t shot);
+// Which cell weights a shooter's shot sums: form factors for a patch, solid angles for a light.
+Weights weights_of(const Shooter& shooter);
 
 }  // namespace hemirad::formfactor

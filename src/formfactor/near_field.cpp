@@ -11,14 +11,16 @@ namespace hemirad::formfactor {
 NearFieldEngine::NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine> inner, double reach)
     : mesh_(mesh), inner_(std::move(inner)), reach_(reach) {}
 
+// Lights' rows are left as they are: a point has no extent for receivers to be near.
 void NearFieldEngine::shoot(const ShotRequest& request, ShotResult& out) {
     inner_->shoot(request, out);
-    correct(request.shooter.patch, out);
+    if (request.shooter.kind == Shooter::Kind::patch) correct(request.shooter.patch, out);
 }
 
 void NearFieldEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     inner_->shoot_batch(shots, out);
-    for (std::size_t i = 0; i < shots.size(); ++i) correct(shots[i].shooter.patch, out[i]);
+    for (std::size_t i = 0; i < shots.size(); ++i)
+        if (shots[i].shooter.kind == Shooter::Kind::patch) correct(shots[i].shooter.patch, out[i]);
 }
 
 void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {

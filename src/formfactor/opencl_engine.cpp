@@ -401,20 +401,25 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh* packed, ocl
     // block (row-major, a tile's rows at N = 1024 lay 8 KB apart and 41% of raster_records'
     // samples waited on them). Zero-padded: raster_records reads whole lane groups, up to 7
     // entries past the last cell.
+    // Two tables, one after the other (HrShot::table picks): the form factors of patches' shots,
+    // then the solid angles of lights' (Weights).
     const std::size_t tile = static_cast<std::size_t>(tuning.tile);
-    std::vector<hr_long> delta_fixed(static_cast<std::size_t>(tile_base_[kFaces]) * tile * tile + 8, 0);
-    {  // the table in doubles only while it is converted (25 MB at N = 1024)
-    const DeltaFormFactors delta(n);
-    for (int face = 0; face < kFaces; ++face)
-        for (int j = 0; j < delta.rows(face); ++j)
-            for (int i = 0; i < n; ++i) {
-                const std::size_t t = static_cast<std::size_t>(tile_base_[static_cast<std::size_t>(face)] +
-                                                               (j / tuning.tile) * tiles_x_ + i / tuning.tile);
-                const double f = delta.table()[delta.offset(face) + static_cast<std::size_t>(j) * n + i];
-                delta_fixed[t * tile * tile + static_cast<std::size_t>(j % tuning.tile) * tile +
-                            static_cast<std::size_t>(i % tuning.tile)] =
-                    static_cast<hr_long>(std::llround(std::ldexp(f, HR_FIXED_SHIFT)));
-            }
+    const std::size_t table_cells = static_cast<std::size_t>(tile_base_[kFaces]) * tile * tile;
+    std::vector<hr_long> delta_fixed(2 * table_cells + 8, 0);
+    for (const Weights weights : {Weights::form_factor, Weights::solid_angle}) {
+        // the table in doubles only while it is converted (25 MB at N = 1024)
+        const DeltaFormFactors delta(n, weights);
+        const std::size_t base = weights == Weights::form_factor ? 0 : table_cells;
+        for (int face = 0; face < kFaces; ++face)
+            for (int j = 0; j < delta.rows(face); ++j)
+                for (int i = 0; i < n; ++i) {
+                    const std::size_t t = static_cast<std::size_t>(tile_base_[static_cast<std::size_t>(face)] +
+                                                                   (j / tuning.tile) * tiles_x_ + i / tuning.tile);
+                    const double f = delta.table()[delta.offset(face) + static_cast<std::size_t>(j) * n + i];
+                    delta_fixed[base + t * tile * tile + static_cast<std::size_t>(j % tuning.tile) * tile +
+                                static_cast<std::size_t>(i % tuning.tile)] =
+                        static_cast<hr_long>(std::llround(std::ldexp(f, HR_FIXED_SHIFT)));
+                }
     }
 
     cl::Context& cl_context = context.context();
@@ -577,7 +582,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
     const auto launch_start = Clock::now();
     std::vector<HrShot> shots(batch);
     for (std::size_t i = 0; i < batch; ++i) {
-        const Frame frame = make_frame(mesh_.patches.at(requests[i].shooter.patch), settings_.seed, requests[i].shot);
+        const Frame frame = make_frame(mesh_, requests[i].shooter, settings_.seed, requests[i].shot);
         HrShot& shot = shots[i];
         shot = {};
         copy3(frame.origin, shot.origin);
@@ -597,6 +602,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
         shot.list_capacity = list_capacity_;
         shot.group_capacity = group_capacity_;
         shot.group_rows = static_cast<hr_uint>(record_rows_);
+        shot.table = weights_of(requests[i].shooter) == Weights::solid_angle ? 1 : 0;
     }
     // Every kernel's arguments, bound here only: the first shot by value, the rest of the batch
     // through shots_ (batch_shot in the kernels).

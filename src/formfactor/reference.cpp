@@ -84,13 +84,21 @@ ReferenceEngine::ReferenceEngine(const mesh::Mesh& mesh, const Settings& setting
     depth_.assign(delta_.cells(), 0.0);
     owner_.assign(delta_.cells(), -1);
     back_.assign(delta_.cells(), 0);
-    fixed_.resize(delta_.cells());
-    for (std::size_t c = 0; c < fixed_.size(); ++c)
-        fixed_[c] = static_cast<std::int64_t>(std::llround(std::ldexp(delta_.table()[c], HR_FIXED_SHIFT)));
+    fixed_ = fixed_point(delta_.table());
+}
+
+std::vector<std::int64_t> fixed_point(const std::vector<double>& table) {
+    std::vector<std::int64_t> out(table.size());
+    for (std::size_t c = 0; c < out.size(); ++c)
+        out[c] = static_cast<std::int64_t>(std::llround(std::ldexp(table[c], HR_FIXED_SHIFT)));
+    return out;
 }
 
 void ReferenceEngine::shoot(const ShotRequest& request, ShotResult& out) {
-    const Frame frame = make_frame(mesh_.patches.at(request.shooter.patch), settings_.seed, request.shot);
+    const Frame frame = make_frame(mesh_, request.shooter, settings_.seed, request.shot);
+    const bool light = weights_of(request.shooter) == Weights::solid_angle;
+    if (light && light_fixed_.empty()) light_fixed_ = fixed_point(DeltaFormFactors(delta_.n(), Weights::solid_angle).table());
+    const std::vector<std::int64_t>& weight = light ? light_fixed_ : fixed_;
     last_batch_ = 1;
     // A cell's own elements, and its twin's, lie in its base plane: skipped. A cluster's are drawn
     // like any other, since the rim of a concave one rises in front of the shooter and must block
@@ -202,10 +210,10 @@ void ReferenceEngine::shoot(const ShotRequest& request, ShotResult& out) {
             ids_[cell] = kEmpty;
         } else if (back_[cell]) {
             ids_[cell] = kBlocker;
-            sums_[elements] += fixed_[cell];
+            sums_[elements] += weight[cell];
         } else {
             ids_[cell] = owner_[cell];
-            sums_[static_cast<std::size_t>(owner_[cell])] += fixed_[cell];
+            sums_[static_cast<std::size_t>(owner_[cell])] += weight[cell];
         }
     }
     const double unit = std::ldexp(1.0, -HR_FIXED_SHIFT);

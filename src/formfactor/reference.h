@@ -13,6 +13,9 @@ namespace hemirad::formfactor {
 // it, and together they leave none of them out.
 bool covers_cell(const std::int64_t* px, const std::int64_t* py, int n, int i, int j);
 
+// A table of cell weights in fixed point, 2^HR_FIXED_SHIFT per unit, as every engine sums them.
+std::vector<std::int64_t> fixed_point(const std::vector<double>& table);
+
 class ReferenceEngine final : public Engine {
 public:
     ReferenceEngine(const mesh::Mesh& mesh, const Settings& settings);
@@ -45,6 +48,7 @@ private:
     std::vector<std::int32_t> owner_;    // winning element per cell, −1 for none
     std::vector<char> back_;             // the winner is the back of a one-sided surface
     std::vector<std::int64_t> fixed_;    // per cell, its delta form factor in 2^-HR_FIXED_SHIFT units
+    std::vector<std::int64_t> light_fixed_;  // per cell, its solid angle over 4π likewise (made when a light first shoots)
     std::vector<std::int64_t> sums_;     // per element, then blocked: a shot's sums in those units
     std::size_t last_batch_ = 1;         // shots in the last batch: ids_ is its last
 

@@ -48,11 +48,12 @@ void RowCacheEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vec
     for (std::size_t i = 0; i < shots.size(); ++i) {
         if (inner_index_[i] < 0) continue;
         const ShotResult& row = shot_[std::size_t(inner_index_[i])];
+        out[i] = row;
+        if (shots[i].shooter.kind != Shooter::Kind::patch) continue;  // a light shoots once a level
         const std::uint32_t patch = shots[i].shooter.patch;
         if (patch >= seen_.size()) seen_.resize(std::size_t(patch) + 1, false);
         if (seen_[patch]) keep(key_of(shots[i]), row);
         seen_[patch] = true;
-        out[i] = row;
     }
 }
 

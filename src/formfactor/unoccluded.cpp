@@ -100,6 +100,19 @@ double cell_mean(const glm::dvec3* v, int n, const glm::dvec3& centroid, int q, 
 }  // namespace
 
 void UnoccludedEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    if (request.shooter.kind == Shooter::Kind::light) {
+        // A light's hemicube: the exact solid angle of each element facing the light, over its
+        // part in the hemicube's half-space, over 4π (Weights::solid_angle).
+        const mesh::LightShooter& light = mesh_.lights.at(request.shooter.patch);
+        out.clear();
+        for (std::size_t k = 0; k < receivers_.size(); ++k) {
+            const mesh::Element& e = mesh_.elements[k];
+            if (!(glm::dot(e.normal, light.position - e.centroid) > 0.0)) continue;  // its back faces the light
+            const double omega = solid_angle(light.position, light.axis, e.poly, eps_);
+            if (omega > 0.0) out.push(static_cast<std::uint32_t>(k), omega / (4.0 * M_PI));
+        }
+        return;
+    }
     const std::uint32_t patch = request.shooter.patch;
     out.clear();
     const mesh::Patch& shooter = mesh_.patches[patch];

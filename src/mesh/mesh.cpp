@@ -885,6 +885,26 @@ double longest_edge(const Polygon& poly) {
     return longest;
 }
 
+std::vector<mesh::LightShooter> light_shooters(const std::vector<scene::PunctualLight>& lights) {
+    std::vector<mesh::LightShooter> out;
+    for (std::size_t i = 0; i < lights.size(); ++i) {
+        const scene::PunctualLight& l = lights[i];
+        const auto index = static_cast<std::uint32_t>(i);
+        switch (l.type) {
+            case scene::PunctualLight::Type::point:
+                out.push_back({l.position, glm::dvec3(0.0, 1.0, 0.0), index});
+                out.push_back({l.position, glm::dvec3(0.0, -1.0, 0.0), index});
+                break;
+            case scene::PunctualLight::Type::spot:
+                out.push_back({l.position, l.direction, index});  // its cone is at most the half-space
+                break;
+            case scene::PunctualLight::Type::directional:
+                break;
+        }
+    }
+    return out;
+}
+
 Mesh build(const scene::Scene& scene, const Settings& settings, const std::function<void(const Counts&)>& before) {
     check_settings(settings);
     Mesh mesh;
@@ -912,6 +932,7 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
     }
     // Patches in face order; a cluster where its first face is, with all of its faces.
     const Texturing texturing(scene);
+    mesh.lights = light_shooters(scene.lights);
     for (std::size_t f = 0; f < faces.size(); ++f) {
         if (clusters.of[f] < 0) {
             const std::vector<PatchCells> cells = face_cells(grids[f]);

@@ -65,6 +65,15 @@ struct Patch {
     bool cluster() const { return poly.n == 0; }
 };
 
+// One hemicube of a punctual light: from `position`, the half-space along unit `axis`. A point
+// light is two, back to back; a spot light one, along its direction (its cone is at most a
+// half-space wide).
+struct LightShooter {
+    glm::dvec3 position{0.0};
+    glm::dvec3 axis{0.0, 1.0, 0.0};
+    std::uint32_t light = 0;  // index of the light in scene::Scene::lights
+};
+
 struct Settings {
     double patch_size = 0.0;    // maximum patch edge length, scene units (> 0)
     double element_size = 0.0;  // maximum element edge length, scene units (> 0, <= patch_size)
@@ -80,6 +89,7 @@ inline constexpr double kClusterCos = 0.9063077870366499;
 
 struct Mesh {
     std::vector<Patch> patches;
+    std::vector<LightShooter> lights;  // the scene's punctual lights' hemicubes
     std::vector<Element> elements;  // elements of patch p are [first_element, first_element + element_count)
     std::size_t dropped_triangles = 0;  // zero or near-zero area
     std::size_t quads = 0;              // triangle pairs meshed as quads
@@ -101,6 +111,10 @@ struct Counts {
 // the bake fit in memory.
 Mesh build(const scene::Scene& scene, const Settings& settings,
            const std::function<void(const Counts&)>& before = {});
+
+// The hemicubes of a scene's point and spot lights, for Mesh::lights (directional lights have
+// none): two back to back for a point light, one along a spot light's direction.
+std::vector<LightShooter> light_shooters(const std::vector<scene::PunctualLight>& lights);
 
 // Normal (unit, front side), area centroid and area of a planar convex polygon.
 struct Shape {

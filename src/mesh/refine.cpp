@@ -35,6 +35,7 @@ Refined split_elements(const Mesh& mesh, const std::vector<bool>& split, const T
         throw InternalError(fmt::format("refine: {} split flags for {} elements", split.size(), mesh.elements.size()));
     Refined out;
     out.mesh.patches = mesh.patches;
+    out.mesh.lights = mesh.lights;
     out.mesh.dropped_triangles = mesh.dropped_triangles;
     out.mesh.quads = mesh.quads;
     out.mesh.clusters = mesh.clusters;

@@ -258,6 +258,19 @@ EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
                                            vec(v.p), node_name(scene, v.triangle), v.triangle, depth, plane.triangle,
                                            node_name(scene, plane.triangle)));
     }
+    // A punctual light must lie in that region too: one behind a plane has that triangle's back
+    // towards it, which casts a shadow.
+    for (const PunctualLight& light : scene.lights) {
+        if (light.type == PunctualLight::Type::directional) continue;
+        for (const Plane& plane : planes) {
+            if (glm::dot(plane.n, light.position) >= plane.d - tolerance) continue;
+            return automatic(true, fmt::format("light '{}' at {} lies {:.4g} behind the plane of triangle {} of node "
+                                               "'{}', so that triangle can cast its shadow",
+                                               light.name, vec(light.position),
+                                               plane.d - glm::dot(plane.n, light.position), plane.triangle,
+                                               node_name(scene, plane.triangle)));
+        }
+    }
     double pair_budget = kMaxOverlapPairs;
     for (std::size_t g = 0; g < coplanar.size(); ++g) {
         bool gave_up = false;
@@ -273,10 +286,10 @@ EffectDecision analyse_occlusion(const Scene& scene, Force two_sided) {
                                            overlap->first, node_name(scene, overlap->first), overlap->second,
                                            node_name(scene, overlap->second)));
     }
-    return automatic(false, fmt::format("all {} vertices lie on or in front of all {} distinct triangle planes ({} "
+    return automatic(false, fmt::format("all {} vertices{} lie on or in front of all {} distinct triangle planes ({} "
                                         "triangles): the surfaces bound a convex region seen from inside, so no surface "
                                         "can hide one front face from another",
-                                        nv, planes.size(), count));
+                                        nv, scene.lights.empty() ? "" : " and lights", planes.size(), count));
 }
 
 // ---- colour, interreflection, two-sidedness ----------------------------------------------------
@@ -322,6 +335,10 @@ EffectDecision analyse_colour(const Scene& scene) {
             return automatic(true, fmt::format("material '{}' has a coloured texture (its texels' r, g, b not all "
                                                "equal), so three channels are solved",
                                                material_name(scene, m)));
+    for (const PunctualLight& l : scene.lights)
+        if (!grey(l.intensity))
+            return automatic(true, fmt::format("light '{}' shines coloured light {}, so three channels are solved",
+                                               l.name, vec(l.intensity)));
     if (coloured_emitters > 0)
         return automatic(true, fmt::format("material '{}' emits coloured light {}, so three channels are solved",
                                            material_name(scene, emitter_example),
@@ -502,6 +519,7 @@ void apply_colour(Scene& scene, const EffectsPlan& plan) {
     for (std::shared_ptr<const Texture>& t : scene.textures) t = t->grey();
     for (Triangle& t : scene.triangles)
         for (glm::dvec3& rho : t.rho) rho = grey(rho);
+    for (PunctualLight& l : scene.lights) l.intensity = grey(l.intensity);
 }
 
 }  // namespace hemirad::scene

@@ -63,6 +63,7 @@ struct Loader {
     std::map<int, int> texture_of_image;  // glTF image -> Scene::textures index, once decoded
     // Per material: where its base colour and emissive textures' coordinates come from.
     std::vector<std::array<UvSource, 2>> uv_sources;
+    std::map<int, std::size_t> light_of_node;  // glTF node -> its light in Scene::lights
 
     [[noreturn]] void fail(const std::string& problem) const { throw InputError(file + ": " + problem); }
     void warn(const std::string& problem) { scene.warnings.push_back(file + ": " + problem); }
@@ -1150,6 +1151,103 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
     }
 }
 
+// A node's KHR_lights_punctual light: its type, colour and intensity from the file's list,
+// placed at the node's origin and shining along its -Z axis.
+void add_light(Loader& L, const Instance& inst, const tinygltf::Value& ext) {
+    const std::string where = fmt::format("node {} KHR_lights_punctual", inst.node);
+    if (!ext.IsObject() || !ext.Has("light") || !ext.Get("light").IsInt())
+        L.fail(where + ": 'light' must be the index of a light");
+    const int index = ext.Get("light").GetNumberAsInt();
+    if (index < 0 || std::size_t(index) >= L.model.lights.size())
+        L.fail(fmt::format("{}: light {} out of range ({} lights)", where, index, L.model.lights.size()));
+    const tinygltf::Light& in = L.model.lights[std::size_t(index)];
+    const std::string label =
+        in.name.empty() ? fmt::format("light {}", index) : fmt::format("light {} '{}'", index, in.name);
+    PunctualLight out;
+    out.name = !in.name.empty() ? in.name : fmt::format("light{}", index);
+    if (in.type == "point") {
+        out.type = PunctualLight::Type::point;
+    } else if (in.type == "spot") {
+        out.type = PunctualLight::Type::spot;
+    } else if (in.type == "directional") {
+        out.type = PunctualLight::Type::directional;
+    } else {
+        L.fail(fmt::format("{}: type '{}' is not point, spot or directional", label, in.type));
+    }
+    dvec3 colour(1.0);
+    if (!in.color.empty()) {
+        if (in.color.size() != 3) L.fail(label + ": color must have 3 components");
+        check_factor(L, in.color, label + ": color");
+        colour = dvec3(in.color[0], in.color[1], in.color[2]);
+    }
+    if (!(in.intensity >= 0.0) || !std::isfinite(in.intensity))
+        L.fail(fmt::format("{}: intensity {} must be finite and >= 0", label, in.intensity));
+    out.intensity = colour * in.intensity;
+    for (int c = 0; c < 3; ++c)
+        if (!(out.intensity[c] <= kMaxEmission))
+            L.fail(fmt::format("{}: intensity {:g} is above {:g}; rescale the scene's units", label, out.intensity[c],
+                               kMaxEmission));
+    if (!(in.range >= 0.0) || !std::isfinite(in.range))
+        L.fail(fmt::format("{}: range {} must be finite and > 0", label, in.range));
+    out.range = in.range;
+    if (out.type == PunctualLight::Type::spot) {
+        const double inner = in.spot.innerConeAngle, outer = in.spot.outerConeAngle;
+        if (!(inner >= 0.0 && inner < outer && outer <= 0.5 * glm::pi<double>()))
+            L.fail(fmt::format("{}: cone angles inner {} and outer {} must satisfy 0 <= inner < outer <= pi/2", label,
+                               inner, outer));
+        out.inner_cone = inner;
+        out.outer_cone = outer;
+    }
+    out.position = dvec3(inst.world[3]);
+    const dvec3 axis = -dvec3(inst.world[2]);
+    const double length = glm::length(axis);
+    if (!(length > 0.0) || !std::isfinite(length) || !std::isfinite(glm::length(out.position)))
+        L.fail(fmt::format("{}: node {} places it with a degenerate transform", label, inst.node));
+    out.direction = axis / length;
+    L.light_of_node[inst.node] = L.scene.lights.size();
+    L.scene.lights.push_back(out);
+}
+
+// Meshes placed under a point or spot light's node (or on it) that enclose the light are its
+// bulb, a visible stand-in for the light (an exporter's sphere of the light's radius): they
+// would hide the light they stand for, so they are left out, with a warning naming them.
+void leave_out_bulbs(Loader& L) {
+    if (L.light_of_node.empty()) return;
+    const tinygltf::Model& m = L.model;
+    std::vector<int> parent(m.nodes.size(), -1);
+    for (std::size_t i = 0; i < m.nodes.size(); ++i)
+        for (const int child : m.nodes[i].children)
+            if (child >= 0 && std::size_t(child) < m.nodes.size()) parent[std::size_t(child)] = int(i);
+    Scene& scene = L.scene;
+    std::vector<char> bulb(scene.nodes.size(), 0);
+    for (std::size_t n = 0; n < scene.nodes.size(); ++n) {
+        int at = scene.nodes[n].gltf_node;
+        for (int steps = 0; at >= 0 && steps <= int(m.nodes.size()); ++steps, at = parent[std::size_t(at)]) {
+            const auto light = L.light_of_node.find(at);
+            if (light == L.light_of_node.end()) continue;
+            const PunctualLight& l = scene.lights[light->second];
+            if (l.type == PunctualLight::Type::directional) break;
+            dvec3 lo(HUGE_VAL), hi(-HUGE_VAL);
+            for (const Triangle& t : scene.triangles)
+                if (t.node == n)
+                    for (const dvec3& p : t.p) {
+                        lo = glm::min(lo, p);
+                        hi = glm::max(hi, p);
+                    }
+            if (glm::all(glm::greaterThanEqual(l.position, lo)) && glm::all(glm::lessThanEqual(l.position, hi))) {
+                bulb[n] = 1;
+                L.warn(fmt::format("node '{}' lies under light '{}' and encloses it: taken as the light's bulb and "
+                                   "left out, since it would hide the light it stands for",
+                                   scene.nodes[n].name, l.name));
+            }
+            break;
+        }
+    }
+    scene.triangles.erase(std::remove_if(scene.triangles.begin(), scene.triangles.end(),
+                                         [&](const Triangle& t) { return t.node < bulb.size() && bulb[t.node]; }),
+                          scene.triangles.end());
+}
+
 // Cameras carry no scale: keep the position and viewing direction, rebuild orthonormal axes.
 dmat4 rigid_frame(const Loader& L, const dmat4& m, int node) {
     const dvec3 z_axis(m[2]), x_axis(m[0]);
@@ -1220,13 +1318,30 @@ void compute_bbox(Scene& scene) {
 
 }  // namespace
 
+double PunctualLight::attenuation(const glm::dvec3& to_point) const {
+    const double distance = glm::length(to_point);
+    double a = 1.0;
+    if (range > 0.0) {
+        const double r = distance / range;
+        const double window = std::clamp(1.0 - r * r * r * r, 0.0, 1.0);
+        a *= window * window;
+    }
+    if (type == Type::spot) {
+        const double cd = distance > 0.0 ? glm::dot(direction, to_point) / distance : 1.0;
+        const double scale = 1.0 / std::max(1e-3, std::cos(inner_cone) - std::cos(outer_cone));
+        const double t = std::clamp((cd - std::cos(outer_cone)) * scale, 0.0, 1.0);
+        a *= t * t;
+    }
+    return a;
+}
+
 Scene load(const std::filesystem::path& file) {
     Scene scene;
     scene.path = file;
     const std::string name = file.string();
     std::map<int, EncodedImage> images;
     const tinygltf::Model model = parse(file, name, scene.warnings, images);
-    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}};
+    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}, {}};
 
     // Converted in file order so a primitive's material index is also its Scene index.
     for (std::size_t i = 0; i < model.materials.size(); ++i) scene.materials.push_back(convert_material(L, int(i)));
@@ -1246,7 +1361,8 @@ Scene load(const std::filesystem::path& file) {
             }
             add_camera(L, inst);
         }
-        if (node.extensions.count("KHR_lights_punctual") != 0) ++scene.punctual_lights;
+        if (const auto light = node.extensions.find("KHR_lights_punctual"); light != node.extensions.end())
+            add_light(L, inst, light->second);
         if (node.mesh < 0) continue;
         if (std::size_t(node.mesh) >= model.meshes.size()) {
             L.fail(fmt::format("node {}: mesh {} out of range ({} meshes)", inst.node, node.mesh, model.meshes.size()));
@@ -1263,9 +1379,14 @@ Scene load(const std::filesystem::path& file) {
             add_primitive(L, {&inst, scene_node, node.mesh, int(p)}, primitive_counter);
         }
     }
-    if (scene.punctual_lights > 0)
-        L.warn(fmt::format("{} KHR_lights_punctual light{} not baked: hemirad bakes the light of emissive materials only",
-                           scene.punctual_lights, scene.punctual_lights == 1 ? " is" : "s are"));
+    leave_out_bulbs(L);
+    const auto directional = std::count_if(scene.lights.begin(), scene.lights.end(), [](const PunctualLight& l) {
+        return l.type == PunctualLight::Type::directional;
+    });
+    if (directional > 0)
+        L.warn(fmt::format("{} directional KHR_lights_punctual light{} not baked: hemirad bakes point and spot lights "
+                           "and emissive materials",
+                           directional, directional == 1 ? " is" : "s are"));
     compute_bbox(scene);
     return scene;
 }

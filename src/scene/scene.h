@@ -64,6 +64,25 @@ struct Camera {
     double znear = 0.01;
 };
 
+// A KHR_lights_punctual light, placed by its node. Intensity is the light's colour times its
+// intensity, in the extension's units: candela (lm/sr) for point and spot lights, lux (lm/m²)
+// for directional ones. hemirad's emission is exitance in the same lumens: a light of I cd
+// gives an irradiance of I cos θ / r² on a surface at distance r, in the units of emissiveFactor.
+struct PunctualLight {
+    enum class Type { point, spot, directional };
+    Type type = Type::point;
+    std::string name;
+    glm::dvec3 position{0.0};             // world space
+    glm::dvec3 direction{0.0, 0.0, -1.0};  // unit, world space: where a spot or directional light shines
+    glm::dvec3 intensity{1.0};
+    double inner_cone = 0.0, outer_cone = 0.7853981633974483;  // spot: radians from the direction
+    double range = 0.0;                                          // 0: unlimited
+
+    // The spot's falloff at angle θ from its direction (the extension's recommended smooth
+    // step in cos θ, squared), 1 for a point light; times the range window where a range is set.
+    double attenuation(const glm::dvec3& to_point) const;
+};
+
 // Reflectance 1 cannot conserve energy; the loader clamps to this and warns.
 inline constexpr double kMaxReflectance = 0.9999;
 
@@ -87,7 +106,7 @@ struct Scene {
     std::vector<std::shared_ptr<const Texture>> textures;  // the images materials' textures read
     std::vector<std::string> warnings;  // each already names the file
     std::size_t skipped_primitives = 0; // non-triangle modes
-    std::size_t punctual_lights = 0;    // KHR_lights_punctual lights the scene's nodes place (not baked yet)
+    std::vector<PunctualLight> lights;  // KHR_lights_punctual lights the scene's nodes place
     glm::dvec3 bbox_min{0.0}, bbox_max{0.0};
 
     double diagonal() const { return glm::length(bbox_max - bbox_min); }

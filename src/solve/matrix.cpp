@@ -41,8 +41,22 @@ std::vector<std::uint32_t> active_patches(const mesh::Mesh& mesh, const MatrixSe
 
 }  // namespace
 
-Matrix::Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixSettings& settings)
+Matrix::Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixSettings& settings,
+               const std::vector<glm::dvec3>* direct)
     : mesh_(mesh), engine_(engine), settings_(settings), channels_(settings.grey ? 1 : 3) {
+    source_.reserve(mesh.patches.size());
+    for (const auto& p : mesh.patches) source_.push_back(p.emission);
+    if (direct) {
+        if (direct->size() != mesh.elements.size()) throw std::invalid_argument("matrix: direct light for another mesh");
+        direct_ = *direct;
+        // The lights' reflected light is a source of its patch, as emission is; without
+        // interreflection it goes no further.
+        if (settings.interreflection)
+            for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
+                const mesh::Element& e = mesh.elements[k];
+                source_[e.patch] += e.rho * direct_[k] * (e.area / mesh.patches[e.patch].area);
+            }
+    }
     if (settings_.grey) {
         for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
             const mesh::Element& e = mesh.elements[k];
@@ -218,7 +232,7 @@ void Matrix::gauss_seidel() {
 
     std::vector<std::vector<double>> E(static_cast<std::size_t>(C), std::vector<double>(n));
     for (std::size_t a = 0; a < n; ++a)
-        for (int c = 0; c < C; ++c) E[static_cast<std::size_t>(c)][a] = mesh_.patches[active_[a]].emission[c];
+        for (int c = 0; c < C; ++c) E[static_cast<std::size_t>(c)][a] = source_[active_[a]][c];
     std::vector<std::vector<double>> B = E;  // start from the emission: the first sweep is direct light
 
     const auto dot = [n](const double* k, const std::vector<double>& b) {
@@ -283,7 +297,10 @@ void Matrix::gauss_seidel() {
 
 void Matrix::gather() {
     // H_j = Σ_i F_ij A_i B_i / A_j over the rows shot; accumulate flux, then divide.
-    std::fill(H_.begin(), H_.end(), glm::dvec3(0.0));
+    if (direct_.empty())
+        std::fill(H_.begin(), H_.end(), glm::dvec3(0.0));
+    else
+        for (std::size_t j = 0; j < H_.size(); ++j) H_[j] = direct_[j] * mesh_.elements[j].area;
     for (std::size_t i = 0; i < rows_.size(); ++i) {
         const Row& row = rows_[i];
         if (!row.shot) continue;
@@ -302,6 +319,7 @@ Energy Matrix::energy() const {
     for (std::size_t j = 0; j < mesh_.elements.size(); ++j) {
         const mesh::Element& e = mesh_.elements[j];
         emitted += e.emission * e.area;
+        if (!direct_.empty()) emitted += direct_[j] * e.area;  // the lights' flux that landed
         absorbed += (glm::dvec3(1.0) - e.rho) * H_[j] * e.area;
     }
     for (std::size_t i = 0; i < rows_.size(); ++i) {

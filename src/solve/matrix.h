@@ -43,7 +43,10 @@ MatrixSettings matrix_settings(double threshold, int batch);
 class Matrix final : public Resumable {
 public:
     // Throws std::invalid_argument when settings.grey is set and some element's ρ or E is not grey.
-    Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixSettings& settings);
+    // `direct`, if set, is the irradiance per element the punctual lights have already shot
+    // (solve/lights.h): its reflection is a source like emission, B = E + ρ·H_direct + K·B.
+    Matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const MatrixSettings& settings,
+           const std::vector<glm::dvec3>* direct = nullptr);
 
     // An estimate of the memory solve() needs, P being the patches that get rows: the dense K
     // exactly (none for direct light), the sparse rows at a quarter of their worst case (every
@@ -115,6 +118,8 @@ private:
     std::vector<glm::dvec3> Bp_;  // per patch
     std::vector<glm::dvec3> B_;   // per element
     std::vector<glm::dvec3> H_;   // per element
+    std::vector<glm::dvec3> direct_;  // per element, the lights' irradiance (empty: none)
+    std::vector<glm::dvec3> source_;  // per patch, E: its emission, and with interreflection ρ·H_direct
 
     bool cancelled() const;
     bool shoot_rows(const std::function<void(long, long)>& progress);  // false when cancelled

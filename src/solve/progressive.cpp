@@ -16,7 +16,8 @@ double sum(const glm::dvec3& v) { return v.x + v.y + v.z; }
 
 }  // namespace
 
-Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings)
+Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings,
+                         const std::vector<glm::dvec3>* direct)
     : mesh_(mesh),
       engine_(engine),
       settings_(settings),
@@ -31,6 +32,20 @@ Progressive::Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, con
     for (const auto& p : mesh.patches) {
         unshot_.push_back(p.emission);
         emitted_ += p.emission * p.area;
+    }
+    if (direct) {
+        if (direct->size() != mesh.elements.size())
+            throw std::invalid_argument("progressive: direct light for another mesh");
+        // As if the lights had shot: what lands is emitted and received, its reflection unshot.
+        for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
+            const mesh::Element& e = mesh.elements[k];
+            const glm::dvec3 received = (*direct)[k] * e.area;
+            H_[k] = (*direct)[k];
+            emitted_ += received;
+            const glm::dvec3 back = e.rho * received;
+            unshot_[e.patch] += back / mesh.patches[e.patch].area;
+            absorbed_ += received - back;
+        }
     }
     glm::dvec3 rho_area{0.0};
     for (const auto& e : mesh.elements) {

@@ -51,7 +51,11 @@ struct Energy {
 
 class Progressive final : public Resumable {
 public:
-    Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings);
+    // `direct`, if set, is the irradiance per element the punctual lights have already shot
+    // (solve/lights.h): the solve starts from it, its reflection unshot, the flux counted as
+    // emitted.
+    Progressive(const mesh::Mesh& mesh, formfactor::Engine& engine, const Settings& settings,
+                const std::vector<glm::dvec3>* direct = nullptr);
 
     // Shoots one batch of patches (one pass each). Returns false (and does nothing) once
     // converged or out of passes.

@@ -8,6 +8,7 @@
 
 #include "core/colour.h"
 #include "mesh/refine.h"
+#include "solve/lights.h"
 
 namespace hemirad::solve {
 namespace {
@@ -152,6 +153,14 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
                     if (refined.is_new[k] && row.F[i] != 0.0) gathered[k] += flux * row.F[i] / m.elements[k].area;
                 }
             }
+        }
+
+        // The lights' direct light, shot again onto the refined mesh: their shadows are the sharpest.
+        if (settings.lights && !m.lights.empty()) {
+            const std::vector<glm::dvec3> direct = direct_light(m, *settings.lights, *engine, depth + 1);
+            for (std::size_t k = 0; k < m.elements.size(); ++k)
+                if (refined.is_new[k]) gathered[k] += direct[k];
+            shots += static_cast<long>(m.lights.size());
         }
 
         if (settings.cancelled && settings.cancelled()) break;  // a level half gathered is not used

@@ -46,6 +46,9 @@ struct RefineSettings {
     // The scene's textures, so that split elements take their own averages (none: children keep
     // their parent's reflectance and emission). Must outlive the refinement.
     const mesh::Texturing* texturing = nullptr;
+    // The scene's punctual lights (the mesh's light hemicubes name them): each level shoots them
+    // again onto the new children, as it does the emitters. None: no lights.
+    const std::vector<scene::PunctualLight>* lights = nullptr;
 };
 
 struct RefineLevel {

@@ -1,0 +1,38 @@
+// Direct light of punctual lights (see lights.h).
+#include "solve/lights.h"
+
+#include <cmath>
+
+#include "core/error.h"
+
+namespace hemirad::solve {
+
+std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
+                                     formfactor::Engine& engine, int level, glm::dvec3* landed) {
+    std::vector<glm::dvec3> H(mesh.elements.size(), glm::dvec3(0.0));
+    if (landed) *landed = glm::dvec3(0.0);
+    if (mesh.lights.empty()) return H;
+    std::vector<formfactor::ShotRequest> requests;
+    const std::uint64_t first = kLightShots + static_cast<std::uint64_t>(level) * mesh.lights.size();
+    for (std::size_t i = 0; i < mesh.lights.size(); ++i)
+        requests.push_back(formfactor::ShotRequest::of_light(static_cast<std::uint32_t>(i), first + i));
+    std::vector<formfactor::ShotResult> rows;
+    engine.shoot_batch(requests, rows);
+    for (std::size_t r = 0; r < requests.size(); ++r) {
+        const mesh::LightShooter& shooter = mesh.lights[r];
+        if (shooter.light >= lights.size()) throw InternalError("direct light: a light hemicube names no light");
+        const scene::PunctualLight& light = lights[shooter.light];
+        const formfactor::ShotResult& row = rows[r];
+        for (std::size_t i = 0; i < row.size(); ++i) {
+            const mesh::Element& e = mesh.elements[row.element[i]];
+            // The row holds Ω / 4π: the flux through the element's solid angle is I · Ω.
+            const glm::dvec3 flux =
+                light.intensity * (light.attenuation(e.centroid - shooter.position) * 4.0 * M_PI * row.F[i]);
+            H[row.element[i]] += flux / e.area;
+            if (landed) *landed += flux;
+        }
+    }
+    return H;
+}
+
+}  // namespace hemirad::solve

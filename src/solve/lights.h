@@ -1,0 +1,27 @@
+// Punctual lights' direct light: each point light shoots the two hemicubes of a full cube, each
+// spot light the one along its direction, through the same engines as patches (rows of solid
+// angles, formfactor::Weights); an element receives I × attenuation × Ω / A of each. The solvers
+// start from this light, as if the lights had shot first.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "formfactor/engine.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+
+namespace hemirad::solve {
+
+// Shot counters of lights' hemicubes start here (patches' passes count from 0, refinement's
+// re-gathers from 2^40): hemicube i of a mesh at refinement level L takes kLightShots + L·n + i.
+inline constexpr std::uint64_t kLightShots = std::uint64_t{1} << 42;
+
+// Per element, the irradiance of every light hemicube of the mesh, shot in one batch. `landed`,
+// if set, receives the flux that reached elements (per channel).
+std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
+                                     formfactor::Engine& engine, int level, glm::dvec3* landed = nullptr);
+
+}  // namespace hemirad::solve
