@@ -14,6 +14,8 @@ writes, next to this script:
     lamp_facing_sky.gltf  a two-sided lamp whose brighter side faces the open sky, 1 m above a floor
     curved_objects.gltf   a double-sided vertex-coloured torus and a sphere under mirroring node
                        chains, in the closed room
+    lit_room.gltf      the closed room lit by a point and a spot light (KHR_lights_punctual),
+                       with a repeated floor texture, an alpha-masked card and an emissive sign
 
 Python 3 standard library only; the output is byte-for-byte deterministic.
 
@@ -34,6 +36,7 @@ import json
 import math
 import os
 import struct
+import zlib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -159,6 +162,8 @@ class GltfBuilder:
         }
         self.material_index = {}
         self.uses_emissive_strength = False
+        self.extensions = set()  # besides KHR_materials_emissive_strength
+        self.lights = []  # KHR_lights_punctual
 
     def _align(self):
         while len(self.bin) % 4:
@@ -198,8 +203,34 @@ class GltfBuilder:
         self.material_index[name] = len(self.gltf["materials"]) - 1
         return self.material_index[name]
 
-    def mesh_node(self, name, quads, material):
-        """One node + one mesh + one primitive holding the given (already oriented) quads."""
+    def texture(self, png, wrap=10497):
+        """A texture of a PNG image (bytes, embedded as a data URI) through a sampler with
+        wrap mode `wrap` both ways (10497 REPEAT, 33071 CLAMP_TO_EDGE); returns its index."""
+        g = self.gltf
+        g.setdefault("images", []).append({"uri": "data:image/png;base64," + base64.b64encode(png).decode("ascii")})
+        g.setdefault("samplers", []).append({"wrapS": wrap, "wrapT": wrap})
+        g.setdefault("textures", []).append({"source": len(g["images"]) - 1, "sampler": len(g["samplers"]) - 1})
+        return len(g["textures"]) - 1
+
+    def textures_of(self, name, base=None, emissive=None, mask_cutoff=None, scale=None):
+        """Gives material `name` a base colour texture (with a KHR_texture_transform scale, if
+        given), an emissive texture, and alphaMode MASK with that cutoff."""
+        m = self.gltf["materials"][self.material_index[name]]
+        if base is not None:
+            info = {"index": base}
+            if scale is not None:
+                info["extensions"] = {"KHR_texture_transform": {"scale": [float(scale[0]), float(scale[1])]}}
+                self.extensions.add("KHR_texture_transform")
+            m["pbrMetallicRoughness"]["baseColorTexture"] = info
+        if emissive is not None:
+            m["emissiveTexture"] = {"index": emissive}
+        if mask_cutoff is not None:
+            m["alphaMode"] = "MASK"
+            m["alphaCutoff"] = float(mask_cutoff)
+
+    def mesh_node(self, name, quads, material, uv=None):
+        """One node + one mesh + one primitive holding the given (already oriented) quads; with
+        `uv` (a function of a corner's position) the quads get TEXCOORD_0."""
         positions = []
         triangles = []
         for q in quads:
@@ -207,10 +238,11 @@ class GltfBuilder:
             positions.extend(q)
             for t in QUAD_TRIS:
                 triangles.append(tuple(base + i for i in t))
-        mesh = self.triangle_mesh(name, positions, triangles, material)
+        mesh = self.triangle_mesh(name, positions, triangles, material,
+                                  uvs=None if uv is None else [uv(p) for p in positions])
         self.add_node({"name": name, "mesh": mesh})
 
-    def triangle_mesh(self, name, positions, triangles, material, colors=None):
+    def triangle_mesh(self, name, positions, triangles, material, colors=None, uvs=None):
         """One mesh with one primitive of indexed triangles (already oriented, in the mesh's own
         frame) and, if given, per-vertex COLOR_0 (float RGB in [0, 1]); returns its index. A node
         places it (add_node, or a child of one)."""
@@ -252,6 +284,11 @@ class GltfBuilder:
             col_view = self._view(b"".join(struct.pack("<3f", *c) for c in colors), 34962)
             acc.append({"bufferView": col_view, "componentType": 5126, "count": len(colors), "type": "VEC3"})
             attributes["COLOR_0"] = len(acc) - 1
+        if uvs is not None:
+            assert len(uvs) == len(positions)
+            uv_view = self._view(b"".join(struct.pack("<2f", *t) for t in uvs), 34962)
+            acc.append({"bufferView": uv_view, "componentType": 5126, "count": len(uvs), "type": "VEC2"})
+            attributes["TEXCOORD_0"] = len(acc) - 1
 
         self.gltf["meshes"].append(
             {
@@ -282,6 +319,15 @@ class GltfBuilder:
             node["rotation"] = [float(c) for c in rotation]
         self.add_node(node)
 
+    def light_node(self, node_name, light, translation, rotation=None):
+        """A node placing a KHR_lights_punctual light (a dict as the extension writes it)."""
+        self.lights.append(light)
+        node = {"name": node_name, "translation": [float(c) for c in translation],
+                "extensions": {"KHR_lights_punctual": {"light": len(self.lights) - 1}}}
+        if rotation is not None:
+            node["rotation"] = [float(c) for c in rotation]
+        self.add_node(node)
+
     def add_node(self, node, root=True):
         """Appends a node (a dict as glTF writes it); a root of the scene unless root is False
         (then some node names it among its children). Returns its index."""
@@ -293,8 +339,12 @@ class GltfBuilder:
 
     def write(self, path):
         self._align()
-        if self.uses_emissive_strength:
-            self.gltf["extensionsUsed"] = [EMISSIVE_EXT]
+        used = sorted(self.extensions | ({EMISSIVE_EXT} if self.uses_emissive_strength else set()))
+        if self.lights:
+            used = sorted(set(used) | {"KHR_lights_punctual"})
+            self.gltf["extensions"] = {"KHR_lights_punctual": {"lights": self.lights}}
+        if used:
+            self.gltf["extensionsUsed"] = used
         self.gltf["buffers"] = [
             {
                 "byteLength": len(self.bin),
@@ -302,8 +352,8 @@ class GltfBuilder:
             }
         ]
         # Put the keys in a conventional order; everything else keeps insertion order.
-        order = ["asset", "extensionsUsed", "scene", "scenes", "nodes", "cameras", "meshes",
-                 "materials", "accessors", "bufferViews", "buffers"]
+        order = ["asset", "extensionsUsed", "extensions", "scene", "scenes", "nodes", "cameras", "meshes",
+                 "materials", "textures", "samplers", "images", "accessors", "bufferViews", "buffers"]
         out = {k: self.gltf[k] for k in order if k in self.gltf}
         text = json.dumps(out, indent=2) + "\n"
         with open(path, "w", encoding="utf-8", newline="\n") as f:
@@ -1079,6 +1129,81 @@ def make_curved_objects(path):
                    closed_groups=[shell, ("ball",)], double_sided=("ceramic",))
 
 
+def png_rgba(width, height, texel):
+    """A PNG of 8-bit RGBA texels, texel(x, y) -> (r, g, b, a), row 0 at the top."""
+    raw = b"".join(b"\x00" + b"".join(bytes(texel(x, y)) for x in range(width)) for y in range(height))
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b"")
+
+
+def make_lit_room(path):
+    """The closed room lit by punctual lights, with textures: see scenes/README.md."""
+    hx, hz = ROOM_X / 2.0, ROOM_Z / 2.0
+    inside = (0.0, ROOM_Y / 2.0, 0.0)
+    rules = {}
+    b = GltfBuilder(
+        {
+            "title": "Lit room",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres; light intensities in candela",
+            "layout": "the closed room's shell; a checkered floor (texture repeated 4 x 5 times by "
+                      "KHR_texture_transform), a warm point light, a cool spot light through an alpha-masked "
+                      "card of round holes onto the north wall, an emissive sign on the west wall",
+        }
+    )
+    b.material("wall_grey", (0.7, 0.7, 0.7))
+    b.material("floor", (0.8, 0.8, 0.8))
+    b.material("card", (0.3, 0.5, 0.2), double_sided=True)
+    b.material("sign", (0.2, 0.2, 0.2), emission=(1.0, 0.45, 0.15), strength=6.0)
+    # 2 x 2 checks of light and dark wood-ish tones per texture repeat.
+    checks = png_rgba(16, 16, lambda x, y: (200, 180, 150, 255) if (x // 8 + y // 8) % 2 == 0 else (90, 70, 55, 255))
+    b.textures_of("floor", base=b.texture(checks), scale=(ROOM_X, ROOM_Z))
+    # A card of round holes: alpha 0 inside circles of radius 0.3 (in cells of a 4 x 4 grid).
+    holes = png_rgba(64, 64, lambda x, y: (80, 130, 50, 0 if ((x % 16) - 7.5) ** 2 + ((y % 16) - 7.5) ** 2 < 30 else 255))
+    b.textures_of("card", base=b.texture(holes, wrap=33071), mask_cutoff=0.5)
+    # The sign's atlas: three lit letters' worth of blocks on black, 5% of the texels.
+    def sign_texel(x, y):
+        lit = 8 <= y < 24 and any(x0 <= x < x0 + 6 for x0 in (10, 28, 46)) and (x + y) % 5 != 0
+        return (255, 255, 255, 255) if lit else (0, 0, 0, 255)
+    b.textures_of("sign", emissive=b.texture(png_rgba(64, 32, sign_texel), wrap=33071))
+
+    shell = box_faces(-hx, hx, 0.0, ROOM_Y, -hz, hz)
+    for name in ("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west"):
+        rules[name] = faces_towards(inside)
+        quad = orient_quad(shell[name], rules[name])
+        if name == "floor":
+            b.mesh_node(name, [quad], "floor", uv=lambda p: ((p[0] + hx) / ROOM_X, (p[2] + hz) / ROOM_Z))
+        else:
+            b.mesh_node(name, [quad], "wall_grey")
+    # The card: 0.8 m x 0.8 m, upright in the plane z = 0.4 in the spot's beam, its lower edge 0.9 m
+    # up: its holes cast a pattern three times their size onto the north wall.
+    card = [(0.5, 0.9, 0.4), (1.3, 0.9, 0.4), (1.3, 1.7, 0.4), (0.5, 1.7, 0.4)]
+    rules["card"] = faces_direction((0.0, 0.0, 1.0))
+    b.mesh_node("card", [orient_quad(card, rules["card"])], "card", uv=lambda p: ((p[0] - 0.5) / 0.8, (1.7 - p[1]) / 0.8))
+    # The sign: 1.6 m x 0.8 m, 1 cm in front of the west wall, facing east.
+    x = -hx + 0.01
+    sign = [(x, 1.0, -1.6), (x, 1.0, -0.0), (x, 1.8, -0.0), (x, 1.8, -1.6)]
+    rules["sign"] = faces_direction((1.0, 0.0, 0.0))
+    b.mesh_node("sign", [orient_quad(sign, rules["sign"])], "sign", uv=lambda p: ((p[2] + 1.6) / 1.6, (1.8 - p[1]) / 0.8))
+
+    b.light_node("bulb", {"name": "bulb", "type": "point", "color": [1.0, 0.85, 0.7], "intensity": 12.0},
+                 (-1.0, 2.1, 0.8))
+    spot_at, spot_to = (0.9, 1.3, 1.8), (0.9, 1.3, -2.5)
+    b.light_node("spot", {"name": "spot", "type": "spot", "color": [0.75, 0.85, 1.0], "intensity": 60.0,
+                          "spot": {"innerConeAngle": 0.25, "outerConeAngle": 0.35}},
+                 spot_at, look_at_quat(spot_at, spot_to))
+    cam_pos = (0.0, 1.4, hz - 0.2)
+    b.camera_node("camera", "room", 1.0, 4.0 / 3.0, 0.01, cam_pos)
+    b.write(path)
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, (0, 0, -1), (0, 1, 0)),
+                   closed_groups=[("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west")],
+                   double_sided=("card",))
+
+
 def main():
     for name, make in (
         ("cornell_box.gltf", make_cornell),
@@ -1087,6 +1212,7 @@ def main():
         ("double_sided_cylinder.gltf", make_double_sided_cylinder),
         ("lamp_facing_sky.gltf", make_lamp_facing_sky),
         ("curved_objects.gltf", make_curved_objects),
+        ("lit_room.gltf", make_lit_room),
     ):
         path = os.path.join(HERE, name)
         make(path)  # writes the file, reads it back and checks it (raises AssertionError on failure)

@@ -49,6 +49,11 @@ case "$target" in
   loader)
     cp "$src"/tests/corpus/*.gltf "$src"/tests/corpus/*.glb "$src"/scenes/*.gltf "$run/corpus/"
     args+=(-timeout=10 -rss_limit_mb=2048 -max_len=65536)
+    # Leaks are checked after each input, against lsan.supp (a corrupt PNG leaks a string inside
+    # OpenImageIO's reader): a suppression matches only a whole stack, which libstdc++'s frames,
+    # built without frame pointers, cut short under the fast unwinder.
+    export LSAN_OPTIONS="suppressions=$src/tests/fuzz/lsan.supp:print_suppressions=0:${LSAN_OPTIONS:-}"
+    export ASAN_OPTIONS="fast_unwind_on_malloc=0:${ASAN_OPTIONS:-}"
     ;;
   bake)
     # Seed inputs: 16 byte strings from a fixed pseudo-random sequence (the bytes the generator
