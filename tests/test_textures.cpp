@@ -15,6 +15,7 @@
 #include "mesh/refine.h"
 #include "mesh/texturing.h"
 #include "scene/scene.h"
+#include "rect_scenes.h"
 #include "test_scenes.h"
 
 namespace {
@@ -120,16 +121,6 @@ void add_textures(json& g, const std::vector<std::string>& images) {
         g["images"].push_back({{"uri", images[i]}});
         g["textures"].push_back({{"source", i}, {"sampler", 0}});
     }
-}
-
-const json& mesh_named(const json& report, const std::string& name) {
-    for (const json& m : report["meshes"])
-        if (m["name"] == name) return m;
-    FAIL("no mesh '" << name << "' in the report");
-    return report;
-}
-double radiosity(const json& report, const std::string& name) {
-    return mesh_named(report, name)["radiosity"][0].get<double>();
 }
 
 // Form factors from a floor half to the panel above it (1 m up): the half straight below, and the
