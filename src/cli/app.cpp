@@ -147,6 +147,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "force effects on or off, e.g. occlusion=off,colour=on (occlusion, colour, interreflection, "
                     "two_sided, refinement, convergence; on|off|auto); by default each is planned from the scene "
                     "and report.json says why");
+    bake.add_option("--sky", o.sky,
+                    "light the scene with a sky dome of this radiance (emission / pi): RADIANCE, or "
+                    "HORIZON,ZENITH radiances (between them by the sine of the elevation)");
     bake.add_option("--refine-levels", o.refine_levels,
                     "adaptive refinement: split an element at most this often where the irradiance contrasts (0: off)")
         ->transform(integer_in(0, 6))

@@ -35,6 +35,7 @@
 #include "formfactor/row_cache.h"
 #include "mesh/mesh.h"
 #include "mesh/texturing.h"
+#include "scene/sky.h"
 #include "solve/lights.h"
 #include "output/finite.h"
 #include "output/output.h"
@@ -237,7 +238,8 @@ void check_scene(const scene::Scene& scene) {
     });
     throw InputError(fmt::format(
         "{}: nothing emits light: 0 emissive triangles (no triangle's material has emission > 0) and {} KHR_lights_punctual "
-        "point or spot light{} of intensity > 0{}; hemirad bakes emissive materials and point and spot lights",
+        "point or spot light{} of intensity > 0{}; hemirad bakes emissive materials and point and spot lights, and "
+        "--sky RADIANCE[,ZENITH_RADIANCE] adds a sky",
         scene.path.string(), shining_lights(scene), shining_lights(scene) == 1 ? "" : "s",
         directional == 0 ? std::string()
                          : fmt::format(" ({} directional light{}, which it does not bake yet)", directional,
@@ -505,6 +507,8 @@ void run_bake(const BakeOptions& options) {
     } catch (const std::invalid_argument& e) {
         throw InputError(fmt::format("--effects {}: {}", o.effects, e.what()));
     }
+    const std::optional<scene::Sky> sky =
+        o.sky.empty() ? std::nullopt : std::optional<scene::Sky>(scene::parse_sky(o.sky, "--sky"));
 
     // Files named by options, before any work: a wrong --resume fails at once, and a --checkpoint
     // naming the scene (or any file not a checkpoint) must not be overwritten.
@@ -515,6 +519,7 @@ void run_bake(const BakeOptions& options) {
 
     auto t0 = Clock::now();
     scene::Scene scene = scene::load(o.scene);
+    if (sky && !scene.triangles.empty()) scene::add_sky(scene, *sky);
     check_scene(scene);
     const double t_load = seconds_since(t0);
     if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while loading a large scene
@@ -902,8 +907,12 @@ void run_bake(const BakeOptions& options) {
     };
     report["timings_s"] = ordered_json::object();  // keeps the contract's key order; filled last
     ordered_json meshes = ordered_json::array();
-    for (const auto& s : output::summarize(scene, mesh, radiosity, irradiance))
+    const auto summaries = output::summarize(scene, mesh, radiosity, irradiance);
+    for (std::size_t n = 0; n < summaries.size(); ++n) {
+        if (scene.nodes[n].synthetic) continue;  // the sky dome: not one of the file's meshes
+        const auto& s = summaries[n];
         meshes.push_back({{"name", s.name}, {"area", s.area}, {"radiosity", vec3(s.radiosity)}, {"irradiance", vec3(s.irradiance)}});
+    }
     report["meshes"] = meshes;
     if (verified) {
         const formfactor::VerifySummary& v = *verified;

@@ -432,6 +432,7 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const std::vector<
         e.material = t0.material;
         e.has_twin = mat.double_sided;
         e.back = back;
+        e.coarse = mat.coarse;
         e.source = piece.source;
         emitted += e.area * e.emission;
         weighted_normal += e.area * e.normal;
@@ -508,11 +509,12 @@ struct Clusters {
     std::size_t split = 0, moved = 0;
 };
 
-Clusters cluster_faces(const std::vector<Face>& faces, const std::vector<Grid>& grids, const Settings& settings) {
+Clusters cluster_faces(const std::vector<Face>& faces, const std::vector<Grid>& grids, const Settings& settings,
+                       const std::vector<char>& coarse) {
     Clusters c;
     c.of.assign(faces.size(), -1);
     std::vector<bool> small(faces.size());
-    for (std::size_t f = 0; f < faces.size(); ++f) small[f] = grids[f].patches() == 1.0;
+    for (std::size_t f = 0; f < faces.size(); ++f) small[f] = !coarse[f] && grids[f].patches() == 1.0;
 
     struct Edge {
         std::uint32_t material, node;
@@ -914,8 +916,15 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
             throw InternalError(fmt::format("mesh: triangle material {} out of range", face.src[0]->material));
     std::vector<Grid> grids;
     grids.reserve(faces.size());
-    for (const Face& face : faces) grids.push_back(grid_of(face.poly, settings));
-    Clusters clusters = cluster_faces(faces, grids, settings);
+    // A coarse material's faces (the sky dome's) are one patch and one element each.
+    Settings whole = settings;
+    whole.patch_size = whole.element_size = std::numeric_limits<double>::infinity();
+    std::vector<char> coarse(faces.size(), 0);
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+        coarse[f] = scene.materials[faces[f].src[0]->material].coarse;
+        grids.push_back(grid_of(faces[f].poly, coarse[f] ? whole : settings));
+    }
+    Clusters clusters = cluster_faces(faces, grids, settings, coarse);
     split_blocked_clusters(faces, scene, settings, clusters);
     mesh.split_clusters = clusters.split;
     mesh.moved_clusters = clusters.moved;

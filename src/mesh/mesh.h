@@ -35,6 +35,8 @@ struct Element {
     // True for the reversed copy of a doubleSided triangle (its glTF back face). Per-node
     // averages in the report use front faces only.
     bool back = false;
+    // Of a coarse material (the sky dome): refinement never splits it.
+    bool coarse = false;
     // The scene triangles whose face holds this element (scene::Scene::triangles; the second
     // only for a quad of two, else kNoSource): textures are read through them.
     std::array<std::uint32_t, 2> source{0xffffffffu, 0xffffffffu};

@@ -112,6 +112,7 @@ tinygltf::Model build_model(const scene::Scene& scene, const WeldedMesh& welded)
     model.defaultScene = 0;
     const int material = add_unlit_material(model);
     for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (scene.nodes[n].synthetic) continue;  // the sky dome: not the user's
         add_node(model, scene.nodes[n].name, welded.nodes[n], material);
     }
     if (model.buffers[0].data.empty()) model.buffers.clear();  // glTF forbids empty buffers

@@ -30,6 +30,9 @@ struct Material {
     // -1 for OPAQUE and BLEND.
     double alpha_cutoff = -1.0;
     double alpha_factor = 1.0;  // baseColorFactor alpha
+    // Meshed as one patch and one element per face and never clustered, whatever the patch size:
+    // the sky dome's faces (scene/sky.h), far larger than the scene's.
+    bool coarse = false;
     bool textured() const { return base_texture || emissive_texture || alpha_cutoff >= 0.0; }
 };
 
@@ -54,6 +57,9 @@ struct Triangle {
 struct MeshNode {
     std::string name;  // node name, else mesh name, else "node<index>"
     int gltf_node = -1;
+    // Added by hemirad, not the file (the sky dome): left out of baked.gltf and report.json's
+    // meshes. It comes after the file's nodes.
+    bool synthetic = false;
 };
 
 struct Camera {

@@ -75,7 +75,7 @@ std::vector<bool> mark_contrast(const mesh::Mesh& mesh, const std::vector<glm::d
     std::vector<double> edge(n);
     for (std::size_t k = 0; k < n; ++k) edge[k] = mesh::longest_edge(mesh.elements[k].poly);
     const auto splittable = [&](std::size_t k) {
-        return level[k] < settings.max_levels && edge[k] > settings.min_size;
+        return level[k] < settings.max_levels && edge[k] > settings.min_size && !mesh.elements[k].coarse;
     };
 
     // Elements meeting at a vertex are neighbours; a vertex hanging on a coarser element's edge

@@ -1,0 +1,74 @@
+// The sky dome (see sky.h).
+#include "scene/sky.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace hemirad::scene {
+
+Sky parse_sky(const std::string& text, const std::string& option) {
+    std::vector<double> values;
+    std::stringstream in(text);
+    std::string part;
+    while (std::getline(in, part, ',')) {
+        char* end = nullptr;
+        const double v = std::strtod(part.c_str(), &end);
+        if (part.empty() || end != part.c_str() + part.size() || !std::isfinite(v) || v < 0.0)
+            throw InputError(fmt::format("{} '{}': each radiance must be a finite number >= 0", option, text));
+        values.push_back(v);
+    }
+    if (values.empty() || values.size() > 2 || text.back() == ',')
+        throw InputError(fmt::format("{} '{}': expected RADIANCE or HORIZON_RADIANCE,ZENITH_RADIANCE", option, text));
+    Sky sky{values[0], values.size() == 2 ? values[1] : values[0]};
+    if (sky.horizon == 0.0 && sky.zenith == 0.0)
+        throw InputError(fmt::format("{} '{}': a sky of radiance 0 lights nothing", option, text));
+    if (M_PI * std::max(sky.horizon, sky.zenith) > kMaxEmission)
+        throw InputError(fmt::format("{} '{}': above the largest emission, {:g}", option, text, kMaxEmission));
+    return sky;
+}
+
+void add_sky(Scene& scene, const Sky& sky) {
+    const double diagonal = std::max(scene.diagonal(), 1e-6);
+    const double radius = kSkyRadius * diagonal;
+    const glm::dvec3 centre(0.5 * (scene.bbox_min.x + scene.bbox_max.x), scene.bbox_min.y,
+                            0.5 * (scene.bbox_min.z + scene.bbox_max.z));
+    const auto at = [&](int ring, int segment) {
+        const double elevation = 0.5 * M_PI * ring / kSkyRings;
+        const double azimuth = 2.0 * M_PI * segment / kSkySegments;
+        if (ring == kSkyRings) return centre + glm::dvec3(0.0, radius, 0.0);  // the zenith, exactly
+        return centre + radius * glm::dvec3(std::cos(elevation) * std::cos(azimuth), std::sin(elevation),
+                                            std::cos(elevation) * std::sin(azimuth));
+    };
+    const auto node = static_cast<std::uint32_t>(scene.nodes.size());
+    MeshNode dome;
+    dome.name = "sky";
+    dome.synthetic = true;
+    scene.nodes.push_back(dome);
+    std::uint32_t primitive = 0;
+    for (const Triangle& t : scene.triangles) primitive = std::max(primitive, t.primitive + 1);
+    const glm::dvec3 zero(0.0);
+    for (int ring = 0; ring < kSkyRings; ++ring) {
+        Material m;
+        m.name = fmt::format("sky ring {}", ring);
+        m.base_color = zero;
+        const double elevation = 0.5 * M_PI * (ring + 0.5) / kSkyRings;
+        m.emission = glm::dvec3(M_PI * (sky.horizon + (sky.zenith - sky.horizon) * std::sin(elevation)));
+        m.coarse = true;
+        const auto material = static_cast<std::uint32_t>(scene.materials.size());
+        scene.materials.push_back(m);
+        for (int s = 0; s < kSkySegments; ++s) {
+            // Counter-clockwise seen from inside the dome: its front faces the scene. The top
+            // ring's quads close at the zenith (c = d): a triangle each.
+            const glm::dvec3 a = at(ring, s), b = at(ring, s + 1), c = at(ring + 1, s + 1), d = at(ring + 1, s);
+            scene.triangles.push_back({{a, b, c}, {zero, zero, zero}, material, node, primitive});
+            if (ring + 1 < kSkyRings) scene.triangles.push_back({{a, c, d}, {zero, zero, zero}, material, node, primitive});
+        }
+    }
+}
+
+}  // namespace hemirad::scene
