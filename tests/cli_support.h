@@ -6,6 +6,8 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <OpenImageIO/imageio.h>
+
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cstdlib>
@@ -117,6 +119,27 @@ inline std::vector<std::string> concat(std::vector<std::string> a, const std::ve
 inline std::vector<std::string> bake_args(const fs::path& scene, const fs::path& out,
                                    const std::vector<std::string>& extra = kFast) {
     return concat({"bake", scene.string(), "-o", out.string()}, extra);
+}
+
+// An image file read back as floats (PNG values in [0, 1]; EXR linear).
+struct ImageData {
+    int width = 0, height = 0, channels = 0;
+    std::vector<float> pixels;
+};
+
+inline ImageData read_image(const fs::path& file) {
+    ImageData image;
+    auto in = OIIO::ImageInput::open(file.string());
+    INFO("OpenImageIO: " << OIIO::geterror());
+    REQUIRE(in);
+    const OIIO::ImageSpec& spec = in->spec();
+    image.width = spec.width;
+    image.height = spec.height;
+    image.channels = spec.nchannels;
+    image.pixels.resize(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(spec.nchannels));
+    REQUIRE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data()));
+    in->close();
+    return image;
 }
 
 // Runs a bake that must succeed.

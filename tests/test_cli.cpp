@@ -132,26 +132,6 @@ json scaled_scene(const json& original, double s) {
     return g;
 }
 
-struct ImageData {
-    int width = 0, height = 0, channels = 0;
-    std::vector<float> pixels;
-};
-
-ImageData read_image(const fs::path& file) {
-    ImageData image;
-    auto in = OIIO::ImageInput::open(file.string());
-    INFO("OpenImageIO: " << OIIO::geterror());
-    REQUIRE(in);
-    const OIIO::ImageSpec& spec = in->spec();
-    image.width = spec.width;
-    image.height = spec.height;
-    image.channels = spec.nchannels;
-    image.pixels.resize(std::size_t(spec.width) * std::size_t(spec.height) * std::size_t(spec.nchannels));
-    REQUIRE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data()));
-    in->close();
-    return image;
-}
-
 // The camera's aspect ratio from the .gltf JSON (closed_room has one perspective camera).
 double camera_aspect(const json& gltf) {
     return gltf.at("cameras").at(0).at("perspective").at("aspectRatio").get<double>();

@@ -165,7 +165,7 @@ TEST_CASE("a scene with no emissive material and only a directional light names 
     json g = room(dir, dark);
     g["extensionsUsed"] = {"KHR_lights_punctual"};
     g["extensions"]["KHR_lights_punctual"]["lights"] = {{{"type", "directional"}, {"intensity", 10.0}},
-                                                         {{"type", "spot"}, {"intensity", 0.0}}};
+                                                         {{"type", "spot"}, {"intensity", 0.0}, {"spot", {{"outerConeAngle", 0.7}}}}};
     g["nodes"].push_back({{"name", "sun"}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
     g["nodes"].push_back({{"name", "spot"}, {"translation", {0, 0.8, 0}},
                           {"extensions", {{"KHR_lights_punctual", {{"light", 1}}}}}});

@@ -60,7 +60,7 @@ TEST_CASE("a roof hides its share of the sky from the floor under it", "[sky][cl
     CHECK(irradiance(report, "floor") == Approx(M_PI * (1 - F)).epsilon(0.05));
 }
 
-TEST_CASE("--sky values that are not radiances are refused with one line", "[sky][cli]") {
+TEST_CASE("sky radiances that are not numbers >= 0 are refused with one line", "[sky][cli]") {
     for (const std::string bad : {"", "-1", "1,2,3", "x", "1,", "0", "inf", "1,nan"}) {
         INFO("--sky '" << bad << "'");
         CHECK_THROWS_AS(hemirad::scene::parse_sky(bad, "--sky"), hemirad::InputError);

@@ -174,6 +174,14 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->transform(integer_from(1L))
         ->capture_default_str();
     bake.add_option("--camera", o.camera, "render from the camera with this name");
+    bake.add_option("--look-from", o.look_from, "render from this point X,Y,Z (with --look-at): a view the file lacks");
+    bake.add_option("--look-at", o.look_at, "... looking at this point X,Y,Z, +Y up");
+    bake.add_option("--fov", o.fov, "vertical field of view of the render, degrees (default: the camera's, else 45.8)")
+        ->transform(real_in(0.0, 179.0, true));
+    bake.add_option("--exposure", o.exposure,
+                    "render.png's exposure in stops: linear radiance x 2^EV (default: automatic, the 90th percentile "
+                    "of lit pixels at 0.6)")
+        ->transform(real_in(-64.0, 64.0));
     bake.add_option("--preview-every", o.preview_every, "write DIR/preview/pass_NNNNNN.png every K passes")
         ->transform(integer_from(0L));
     bake.add_option("--image-width", o.image_width, "width of render.exr/png; height follows the camera's aspect")
@@ -184,6 +192,8 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "estimated to need more is refused before it starts, --solver auto takes the solver that fits, "
                     "and refinement stops where it would pass it");
     bake.add_flag("--quiet", o.quiet, "no progress line");
+    bake.add_flag("--progress", o.progress,
+                  "report progress when stderr is not a terminal too (a log): a line every few seconds");
 }
 
 void add_bench_options(CLI::App& cmd, BenchCommand& c) {
@@ -314,14 +324,16 @@ int run(int argc, char** argv) {
             std::signal(signal, on_interrupt);
         }
         bake_options.interrupted = &g_interrupted;
-        bake_options.progress = !bake_options.quiet && isatty(fileno(stderr));
+        bake_options.progress_tty = isatty(fileno(stderr));
+        bake_options.progress = !bake_options.quiet && (bake_options.progress || bake_options.progress_tty);
         run_bake(bake_options);
         return 0;
     } catch (const InputError& e) {
         std::cerr << "hemirad: " << printable(e.what()) << "\n";
         return 2;
     } catch (const Interrupted&) {
-        std::cerr << (bake_options.progress ? "\n" : "") << "hemirad: interrupted; no output written\n";
+        std::cerr << (bake_options.progress && bake_options.progress_tty ? "\n" : "")
+                  << "hemirad: interrupted; no output written\n";
         return 130;
     } catch (const formfactor::VerifyError& e) {
         std::cerr << "hemirad: verification failed: " << printable(e.what()) << "\n";

@@ -220,6 +220,23 @@ bool emits(const scene::Scene& scene, const scene::Triangle& t) {
     return e.x > 0.0 || e.y > 0.0 || e.z > 0.0;
 }
 
+// "X,Y,Z": three finite numbers, or exit 2 naming the option.
+glm::dvec3 parse_point(const std::string& text, const std::string& option) {
+    glm::dvec3 p(0.0);
+    std::size_t at = 0;
+    for (int i = 0; i < 3; ++i) {
+        const std::size_t end = i < 2 ? text.find(',', at) : text.size();
+        const std::string part = end == std::string::npos ? std::string() : text.substr(at, end - at);
+        char* stop = nullptr;
+        p[i] = std::strtod(part.c_str(), &stop);
+        if (part.empty() || stop != part.c_str() + part.size() || !std::isfinite(p[i]) ||
+            (i == 2 && text.find(',', at) != std::string::npos))
+            throw InputError(fmt::format("{} '{}': expected X,Y,Z, three finite numbers", option, text));
+        at = end + 1;
+    }
+    return p;
+}
+
 // The point and spot lights of a scene that shine: hemirad bakes those (directional ones not yet).
 std::size_t shining_lights(const scene::Scene& scene) {
     return static_cast<std::size_t>(std::count_if(scene.lights.begin(), scene.lights.end(), [](const scene::PunctualLight& l) {
@@ -310,12 +327,13 @@ constexpr int kMaxSweeps = 20000;
 
 class ProgressLine {
 public:
-    explicit ProgressLine(bool on) : on_(on), start_(Clock::now()) {}
+    // On a terminal (tty), one line redrawn in place five times a second; in a log, a line every
+    // kLogSeconds.
+    static constexpr double kLogSeconds = 5.0;
+    ProgressLine(bool on, bool tty) : on_(on), tty_(tty), start_(Clock::now()) {}
     void update(const solve::Progressive& solver, double threshold) {
-        if (!on_) return;
+        if (!due(solver.done())) return;
         const double elapsed = seconds_since(start_);
-        if (elapsed - last_ < 0.2 && !solver.done()) return;
-        last_ = elapsed;
         const double err = solver.error();
         if (first_error_ <= 0.0 && std::isfinite(err) && err > 0.0) {
             first_error_ = err;
@@ -329,26 +347,40 @@ public:
         } else if (solver.done()) {
             eta = "0 s";
         }
-        std::fprintf(stderr, "\r\033[Kpass %ld  unshot %.2e  error %.2e  %.1f s  left %s", solver.passes(),
-                     solver.unshot_fraction(), err, elapsed, eta.c_str());
-        std::fflush(stderr);
+        print(fmt::format("pass {}  unshot {:.2e}  error {:.2e}  {:.1f} s  left {}", solver.passes(),
+                          solver.unshot_fraction(), err, elapsed, eta));
     }
     void rows(long done, long total) {
-        if (!on_) return;
-        const double elapsed = seconds_since(start_);
-        if (elapsed - last_ < 0.2 && done < total) return;
-        last_ = elapsed;
-        std::fprintf(stderr, "\r\033[Kform-factor rows %ld / %ld  %.1f s", done, total, elapsed);
-        std::fflush(stderr);
+        if (!due(done >= total)) return;
+        print(fmt::format("form-factor rows {} / {}  {:.1f} s", done, total, seconds_since(start_)));
+    }
+    void refining(int level, long shots, long total) {
+        if (!due(shots >= total)) return;
+        print(fmt::format("refinement level {}: re-gather {} / {} shots  {:.1f} s", level, shots, total,
+                          seconds_since(start_)));
     }
     void finish() {
-        if (on_) std::fprintf(stderr, "\n");
+        if (on_ && tty_ && printed_) std::fprintf(stderr, "\n");
+        printed_ = false;
     }
 
 private:
-    bool on_;
+    bool due(bool last) {
+        if (!on_) return false;
+        const double elapsed = seconds_since(start_);
+        if (elapsed - last_ < (tty_ ? 0.2 : kLogSeconds) && !last) return false;
+        last_ = elapsed;
+        return true;
+    }
+    void print(const std::string& line) {
+        std::fprintf(stderr, tty_ ? "\r\033[K%s" : "hemirad: %s\n", line.c_str());
+        std::fflush(stderr);
+        printed_ = true;
+    }
+    bool on_, tty_;
     Clock::time_point start_;
-    double last_ = -1.0, first_error_ = 0.0, first_time_ = 0.0;
+    double last_ = -1e9, first_error_ = 0.0, first_time_ = 0.0;
+    bool printed_ = false;
 };
 
 }  // namespace
@@ -507,6 +539,13 @@ void run_bake(const BakeOptions& options) {
     } catch (const std::invalid_argument& e) {
         throw InputError(fmt::format("--effects {}: {}", o.effects, e.what()));
     }
+    if (o.look_from.empty() != o.look_at.empty())
+        throw InputError(o.look_from.empty() ? "--look-at needs --look-from" : "--look-from needs --look-at");
+    if (!o.look_from.empty() && !o.camera.empty())
+        throw InputError("--camera and --look-from name two views; give one");
+    const std::optional<std::pair<glm::dvec3, glm::dvec3>> look =
+        o.look_from.empty() ? std::nullopt
+                            : std::optional(std::pair(parse_point(o.look_from, "--look-from"), parse_point(o.look_at, "--look-at")));
     const std::optional<scene::Sky> sky =
         o.sky.empty() ? std::nullopt : std::optional<scene::Sky>(scene::parse_sky(o.sky, "--sky"));
 
@@ -548,7 +587,9 @@ void run_bake(const BakeOptions& options) {
     mesh_settings.cluster = plan.occlusion.on;
     if (mesh_settings.element_size > mesh_settings.patch_size)
         throw InputError(fmt::format("--element-size {} is larger than the patch size {}", mesh_settings.element_size, mesh_settings.patch_size));
-    const output::View view = output::choose_view(scene, o.camera);  // fails early on a bad --camera
+    output::View view = look ? output::look_view(look->first, look->second, 0.8)
+                             : output::choose_view(scene, o.camera);  // fails early on a bad --camera
+    if (o.fov > 0.0) view.yfov = o.fov * M_PI / 180.0;
     const int width = o.image_width;
     const double rows = std::max(1.0, std::round(width / view.aspect));  // the loader keeps aspects within [1/16, 16]
     if (!(rows <= kMaxImageSide))
@@ -704,7 +745,7 @@ void run_bake(const BakeOptions& options) {
 
         t0 = Clock::now();
         levels.clear();
-        ProgressLine progress(o.progress);
+        ProgressLine progress(o.progress, o.progress_tty);
         // The punctual lights shoot first: the solvers start from their direct light.
         std::vector<glm::dvec3> direct;
         if (!mesh.lights.empty()) direct = solve::direct_light(mesh, scene.lights, engine, 0);
@@ -745,15 +786,18 @@ void run_bake(const BakeOptions& options) {
             const mesh::Texturing texturing(scene);
             rs.texturing = &texturing;
             rs.lights = &scene.lights;
+            ProgressLine refining(o.progress, o.progress_tty);
+            rs.progress = [&](int level, long shots, long total) { refining.refining(level, shots, total); };
             solve::RefineResult refined =
                 solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
+            refining.finish();
             if (o.interrupted && *o.interrupted) throw Interrupted();
             if (refined.stopped_for_memory.level > 0) {
                 const std::string warning = fmt::format(
                     "refinement stopped before level {}: splitting {} more elements would pass the {} {}",
                     refined.stopped_for_memory.level, refined.stopped_for_memory.split,
                     format_bytes(memory_limit.bytes), memory_limit.source);
-                if (!o.quiet) std::cerr << (o.progress ? "\n" : "") << "hemirad: warning: " << warning << "\n";
+                if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
                 warnings.push_back(warning);
             }
             mesh = std::move(refined.mesh);
@@ -776,7 +820,7 @@ void run_bake(const BakeOptions& options) {
             fallback = {{"from", choice.id}, {"name", choice.name}, {"why", why}};
             const std::string warning =
                 fmt::format("{} failed part-way: {}; starting again on the reference engine", choice.id, why);
-            std::cerr << (o.progress ? "\n" : "") << "hemirad: warning: " << warning << "\n";
+            std::cerr << (o.progress && o.progress_tty ? "\n" : "") << "hemirad: warning: " << warning << "\n";
             warnings.push_back(warning);
             verified.reset();
             mesh = built;
@@ -800,7 +844,8 @@ void run_bake(const BakeOptions& options) {
     const output::Image image = output::render(scene, mesh, radiosity, view, width, height);
     if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
     output::write_exr(image, out.staged("render.exr"));
-    output::write_png(image, out.staged("render.png"), output::auto_exposure(image));
+    const double exposure = std::isnan(o.exposure) ? output::auto_exposure(image) : std::exp2(o.exposure);
+    output::write_png(image, out.staged("render.png"), exposure);
     const double t_output_files = seconds_since(t0);
 
     const solve::Energy& energy = solution.energy;
@@ -826,6 +871,7 @@ void run_bake(const BakeOptions& options) {
         {"refine_levels", o.refine_levels},
         {"contrast", o.contrast},
         {"camera", view.name},
+        {"exposure", exposure},
         {"image", {width, height}},
         {"preview_every", o.preview_every},
         {"checkpoint", o.checkpoint},

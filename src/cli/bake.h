@@ -7,6 +7,7 @@
 #include <functional>
 #include <ostream>
 #include <stdexcept>
+#include <limits>
 #include <string>
 
 #include "core/quality.h"
@@ -43,11 +44,19 @@ struct BakeOptions {
     bool verify = false;
     long verify_every = 1;        // with --verify: check shots 0, K, 2K, …
     std::string camera;
+    // --look-from X,Y,Z --look-at X,Y,Z: a view the file lacks (both, or neither); --fov its
+    // vertical field of view in degrees (0: the camera's, else 45.8°).
+    std::string look_from, look_at;
+    double fov = 0.0;
+    // --exposure EV: render.png's linear radiance is scaled by 2^EV; NaN: automatic (the 90th
+    // percentile of lit pixels at 0.6 linear).
+    double exposure = std::numeric_limits<double>::quiet_NaN();
     long preview_every = 0;
     int image_width = 640;
     std::string max_memory;       // --max-memory SIZE; empty: the memory available (core/memory.h)
     bool quiet = false;
-    bool progress = false;                       // draw a progress line (a TTY and not --quiet)
+    bool progress = false;                       // report progress (a TTY or --progress, and not --quiet)
+    bool progress_tty = false;                   // ... as one line redrawn in place (a TTY), else a line every few seconds
     const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT, SIGTERM or SIGHUP
     // Called with every shot the solve and refinement's re-gather take, as the solver sees it
     // (near-field corrected), so tests and the fuzzer can check what the engines return.

@@ -48,6 +48,11 @@ struct View {
 // Throws InputError naming the scene file when `camera_name` is given but not found.
 View choose_view(const scene::Scene& scene, const std::string& camera_name);
 
+// A view from `from` looking at `at` (+Y up; +Z up when looking straight up or down), with a
+// vertical field of view of yfov radians and a 4:3 image. Throws InputError when the two points
+// are the same.
+View look_view(const glm::dvec3& from, const glm::dvec3& at, double yfov);
+
 // Rasterizes the element mesh (welded, smooth per-vertex radiosity as in the baked glTF) from
 // `view`: z-buffered, perspective-correct, supersampled. Back faces of one-sided surfaces are
 // black; nothing hit is black.

@@ -41,6 +41,15 @@ View framing_view(const scene::Scene& scene) {
 
 }  // namespace
 
+View look_view(const glm::dvec3& from, const glm::dvec3& at, double yfov) {
+    const glm::dvec3 d = at - from;
+    const double length = glm::length(d);
+    if (!(length > 0.0) || !std::isfinite(length))
+        throw InputError("--look-from and --look-at must be two different points");
+    const glm::dvec3 up = std::abs(d.y) > 0.999 * length ? glm::dvec3(0.0, 0.0, 1.0) : glm::dvec3(0.0, 1.0, 0.0);
+    return View{glm::inverse(glm::lookAt(from, at, up)), yfov, 4.0 / 3.0, "look-from"};
+}
+
 View choose_view(const scene::Scene& scene, const std::string& camera_name) {
     if (!camera_name.empty()) {
         const auto it = std::find_if(scene.cameras.begin(), scene.cameras.end(),

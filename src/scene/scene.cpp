@@ -64,6 +64,7 @@ struct Loader {
     // Per material: where its base colour and emissive textures' coordinates come from.
     std::vector<std::array<UvSource, 2>> uv_sources;
     std::map<int, std::size_t> light_of_node;  // glTF node -> its light in Scene::lights
+    std::set<std::uint32_t> clamped;  // materials whose reflectance (× COLOR_0) reached 1 somewhere
 
     [[noreturn]] void fail(const std::string& problem) const { throw InputError(file + ": " + problem); }
     void warn(const std::string& problem) { scene.warnings.push_back(file + ": " + problem); }
@@ -1144,11 +1145,7 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
         t.primitive = primitive;
         L.scene.triangles.push_back(t);
     }
-    if (clamped) {
-        L.warn_once(fmt::format("clamp {}", material),
-                    fmt::format("material '{}': reflectance 1 cannot conserve energy; clamped to {}", mat.name,
-                                kMaxReflectance));
-    }
+    if (clamped) L.clamped.insert(material);
 }
 
 // A node's KHR_lights_punctual light: its type, colour and intensity from the file's list,
@@ -1341,7 +1338,7 @@ Scene load(const std::filesystem::path& file) {
     const std::string name = file.string();
     std::map<int, EncodedImage> images;
     const tinygltf::Model model = parse(file, name, scene.warnings, images);
-    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}, {}};
+    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}, {}, {}};
 
     // Converted in file order so a primitive's material index is also its Scene index.
     for (std::size_t i = 0; i < model.materials.size(); ++i) scene.materials.push_back(convert_material(L, int(i)));
@@ -1380,6 +1377,18 @@ Scene load(const std::filesystem::path& file) {
         }
     }
     leave_out_bulbs(L);
+    if (!L.clamped.empty()) {  // one line for them all
+        constexpr std::size_t kNamed = 5;
+        std::string names;
+        std::size_t named = 0;
+        for (const std::uint32_t m : L.clamped) {
+            if (named++ == kNamed) break;
+            names += fmt::format("{}'{}'", names.empty() ? "" : ", ", scene.materials[m].name);
+        }
+        if (L.clamped.size() > kNamed) names += fmt::format(" and {} more", L.clamped.size() - kNamed);
+        L.warn(fmt::format("{} material{} reflect{} 1, which cannot conserve energy; clamped to {}: {}", L.clamped.size(),
+                           L.clamped.size() == 1 ? "" : "s", L.clamped.size() == 1 ? "s" : "", kMaxReflectance, names));
+    }
     const auto directional = std::count_if(scene.lights.begin(), scene.lights.end(), [](const PunctualLight& l) {
         return l.type == PunctualLight::Type::directional;
     });

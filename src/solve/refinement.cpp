@@ -144,6 +144,7 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
                     settings.first_shot + static_cast<std::uint64_t>(depth) * mesh.patches.size() + shooters[i]));
             engine->shoot_batch(requests, results);
             shots += static_cast<long>(requests.size());
+            if (settings.progress) settings.progress(depth + 1, shots, static_cast<long>(shooters.size()));
             for (std::size_t r = 0; r < requests.size(); ++r) {
                 const std::uint32_t p = requests[r].shooter.patch;
                 const glm::dvec3 flux = shot[p] * m.patches[p].area;

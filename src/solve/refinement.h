@@ -49,6 +49,9 @@ struct RefineSettings {
     // The scene's punctual lights (the mesh's light hemicubes name them): each level shoots them
     // again onto the new children, as it does the emitters. None: no lights.
     const std::vector<scene::PunctualLight>* lights = nullptr;
+    // Told, after each engine call of a level's re-gather, the level (1 for the first), the shots
+    // taken so far and the level's total.
+    std::function<void(int, long, long)> progress;
 };
 
 struct RefineLevel {

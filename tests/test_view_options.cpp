@@ -1,0 +1,90 @@
+// Seeing the result: --look-from/--look-at/--fov for a view the file lacks, --exposure, and a
+// progress report in logs (--progress when stderr is not a terminal).
+#include <catch2/catch.hpp>
+#include <cmath>
+#include <string>
+
+#include "cli_support.h"
+
+namespace {
+
+using namespace hemirad::test;
+
+// The pixel at the centre of an image, channel c.
+float centre(const ImageData& image, int c) {
+    const std::size_t x = std::size_t(image.width / 2), y = std::size_t(image.height / 2);
+    return image.pixels[(y * std::size_t(image.width) + x) * std::size_t(image.channels) + std::size_t(c)];
+}
+
+}  // namespace
+
+TEST_CASE("look-from and look-at render a view the file lacks, --fov narrows it", "[cli][view]") {
+    TempDir dir;
+    // From the Cornell box's floor straight up at its light, a narrow field of view: the light
+    // fills the middle of the image, whose linear value is its radiosity, its emission 17 (red)
+    // and what it reflects (reflectance 0.78) of the little light it receives.
+    const json report = bake_ok(dir, kCornellBox, dir / "up",
+                                concat(kFast, {"--look-from", "0.278,0.05,0.28", "--look-at", "0.278,0.5,0.28",
+                                               "--fov", "10"}));
+    CHECK(report["settings"]["camera"] == "look-from");
+    const ImageData exr = read_image(dir / "up" / "render.exr");
+    CHECK(exr.width * 3 == exr.height * 4);  // 4:3
+    CHECK(centre(exr, 0) >= 17.0f);
+    CHECK(centre(exr, 0) < 17.0f * 1.2f);
+    CHECK(centre(exr, 2) >= 4.0f);
+    // The file's camera sees the back wall in the middle instead: far dimmer than the light.
+    bake_ok(dir, kCornellBox, dir / "own");
+    const ImageData own = read_image(dir / "own" / "render.exr");
+    CHECK(centre(own, 0) < 2.0f);
+}
+
+TEST_CASE("the exposure option sets render.png's exposure in stops, and the report says which it used", "[cli][view]") {
+    TempDir dir;
+    const json automatic = bake_ok(dir, kCornellBox, dir / "auto");
+    const double chosen = automatic["settings"]["exposure"].get<double>();
+    CHECK(chosen > 0.0);
+    const json darker = bake_ok(dir, kCornellBox, dir / "dark", concat(kFast, {"--exposure", "-3"}));
+    CHECK(darker["settings"]["exposure"].get<double>() == 0.125);
+    const json brighter = bake_ok(dir, kCornellBox, dir / "bright", concat(kFast, {"--exposure", "2"}));
+    CHECK(brighter["settings"]["exposure"].get<double>() == 4.0);
+    // The same radiance, brighter pixels: the centre of the back wall.
+    const float dark = centre(read_image(dir / "dark" / "render.png"), 0);
+    const float bright = centre(read_image(dir / "bright" / "render.png"), 0);
+    CHECK(bright > dark);
+    CHECK(read_image(dir / "dark" / "render.exr").pixels == read_image(dir / "bright" / "render.exr").pixels);
+}
+
+TEST_CASE("the progress option reports progress in a log, a line at a time, through refinement too", "[cli][view]") {
+    TempDir dir;
+    const std::vector<std::string> quick = {"--hemicube", "32", "--image-width", "64"};
+    const RunResult r = run_hemirad(dir, concat(bake_args(kCornellBox, dir / "out", quick), {"--progress"}));
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    CHECK(r.err.find("\r") == std::string::npos);  // not a terminal: no line redrawn in place
+    CHECK(r.err.find("hemirad: form-factor rows") != std::string::npos);
+    CHECK(r.err.find("hemirad: refinement level 1: re-gather") != std::string::npos);
+    // Without --progress a log gets none.
+    const RunResult quiet = run_hemirad(dir, bake_args(kCornellBox, dir / "quiet", quick));
+    CHECK(quiet.err.find("hemirad: form-factor rows ") == std::string::npos);
+    CHECK(quiet.err.find("re-gather") == std::string::npos);
+}
+
+TEST_CASE("view options that cannot be used are refused with one line", "[cli][view]") {
+    TempDir dir;
+    const auto refused = [&](const std::vector<std::string>& args, const std::string& problem) {
+        const RunResult r = run_hemirad(dir, concat(bake_args(kCornellBox, dir / "out"), args));
+        INFO(r.err);
+        CHECK(r.code == 2);
+        CHECK(r.err.find(problem) != std::string::npos);
+        CHECK(!fs::exists(dir / "out"));
+    };
+    refused({"--look-from", "0,0,1"}, "--look-from needs --look-at");
+    refused({"--look-at", "0,0,1"}, "--look-at needs --look-from");
+    refused({"--look-from", "0,0", "--look-at", "0,0,1"}, "--look-from '0,0': expected X,Y,Z");
+    refused({"--look-from", "0,0,1,2", "--look-at", "0,0,1"}, "expected X,Y,Z");
+    refused({"--look-from", "0,nan,1", "--look-at", "0,0,1"}, "expected X,Y,Z");
+    refused({"--look-from", "0,0,1", "--look-at", "0,0,1"}, "two different points");
+    refused({"--look-from", "0,0,1", "--look-at", "0,0,0", "--camera", "cornell"}, "give one");
+    refused({"--exposure", "100"}, "--exposure");
+    refused({"--fov", "0"}, "--fov");
+}
