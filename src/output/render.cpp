@@ -240,10 +240,13 @@ void resolve(const Strip& strip, Image& image) {
     }
 }
 
-double mesh_diagonal(const WeldedMesh& welded) {
+// Over the nodes drawn: the file's, not the sky dome (synthetic), which would dwarf the scene
+// and push the near plane into it, and set the automatic exposure by the sky's brightness.
+double mesh_diagonal(const scene::Scene& scene, const WeldedMesh& welded) {
     glm::dvec3 lo(HUGE_VAL), hi(-HUGE_VAL);
-    for (const WeldedNode& node : welded.nodes) {
-        for (const glm::dvec3& p : node.positions) {
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (scene.nodes[n].synthetic) continue;
+        for (const glm::dvec3& p : welded.nodes[n].positions) {
             lo = glm::min(lo, p);
             hi = glm::max(hi, p);
         }
@@ -262,14 +265,16 @@ Image render(const scene::Scene& scene, const mesh::Mesh& mesh, const std::vecto
     std::vector<ScreenTriangle> triangles;
     {  // the welded mesh only while its triangles are set up: it is freed before they are drawn
         const WeldedMesh welded = weld(scene.nodes.size(), mesh, radiosity);
-        const double diagonal = mesh_diagonal(welded);
+        const double diagonal = mesh_diagonal(scene, welded);
         if (diagonal <= 0.0) return image;  // nothing (or nothing with extent) to draw
         const TriangleSetup setup(view, width, height, kNearFraction * diagonal);
         std::size_t count = 0;  // (reserved: a vector doubling as it grows holds both copies at once)
-        for (const WeldedNode& node : welded.nodes) count += node.triangle_count();
+        for (std::size_t n = 0; n < welded.nodes.size(); ++n)
+            if (!scene.nodes[n].synthetic) count += welded.nodes[n].triangle_count();
         triangles.reserve(count);
-        for (const WeldedNode& node : welded.nodes) {
-            for (std::size_t t = 0; t < node.triangle_count(); ++t) setup.add(node, t, triangles);
+        for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+            if (scene.nodes[n].synthetic) continue;
+            for (std::size_t t = 0; t < welded.nodes[n].triangle_count(); ++t) setup.add(welded.nodes[n], t, triangles);
         }
     }
 
