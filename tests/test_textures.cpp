@@ -44,66 +44,22 @@ void write_halves(const fs::path& file, std::array<unsigned char, 4> left, std::
     write_png(file, 64, 4, [&](int x, int) { return x < 32 ? left : right; });
 }
 
-// One quad of a test scene: its corners (counter-clockwise seen from the front), texture
-// coordinates, node name and material index.
-struct Quad {
-    std::array<dvec3, 4> p;
-    std::array<glm::dvec2, 4> uv;
-    std::string name;
-    int material;
-};
-
 // A 2 x 1 m panel at y = 1 facing down (u = x / 2, v = z), and under it the floor's two 1 x 1 m
 // halves at y = 0 facing up ("floor left", x in [0, 1], and "floor right", their u the panel's),
 // then any extra quads: a glTF with its buffer in `dir`.
 json panel_over_floor(const TempDir& dir, const json& panel, const json& floor, const std::vector<Quad>& extra = {},
                       const std::vector<json>& extra_materials = {}) {
     std::vector<Quad> quads = {
-        {{dvec3(0, 1, 0), dvec3(2, 1, 0), dvec3(2, 1, 1), dvec3(0, 1, 1)}, {{{0, 0}, {1, 0}, {1, 1}, {0, 1}}}, "panel", 0},
-        {{dvec3(0, 0, 0), dvec3(0, 0, 1), dvec3(1, 0, 1), dvec3(1, 0, 0)},
-         {{{0, 0}, {0, 1}, {0.5, 1}, {0.5, 0}}}, "floor left", 1},
-        {{dvec3(1, 0, 0), dvec3(1, 0, 1), dvec3(2, 0, 1), dvec3(2, 0, 0)},
-         {{{0.5, 0}, {0.5, 1}, {1, 1}, {1, 0}}}, "floor right", 1},
+        {{dvec3(0, 1, 0), dvec3(2, 1, 0), dvec3(2, 1, 1), dvec3(0, 1, 1)}, {{0, 0}, {1, 0}, {1, 1}, {0, 1}}, "panel", 0},
+        {{dvec3(0, 0, 0), dvec3(0, 0, 1), dvec3(1, 0, 1), dvec3(1, 0, 0)}, {{0, 0}, {0, 1}, {0.5, 1}, {0.5, 0}},
+         "floor left", 1},
+        {{dvec3(1, 0, 0), dvec3(1, 0, 1), dvec3(2, 0, 1), dvec3(2, 0, 0)}, {{0.5, 0}, {0.5, 1}, {1, 1}, {1, 0}},
+         "floor right", 1},
     };
     quads.insert(quads.end(), extra.begin(), extra.end());
-    std::vector<float> data;
-    for (const Quad& q : quads)
-        for (const dvec3& p : q.p) data.insert(data.end(), {float(p.x), float(p.y), float(p.z)});
-    const std::size_t uv_offset = data.size() * 4;
-    for (const Quad& q : quads)
-        for (const glm::dvec2& uv : q.uv) data.insert(data.end(), {float(uv.x), float(uv.y)});
-    const std::vector<std::uint16_t> indices = {0, 1, 2, 0, 2, 3};
-    std::string bytes(reinterpret_cast<const char*>(data.data()), data.size() * 4);
-    const std::size_t index_offset = bytes.size();
-    bytes.append(reinterpret_cast<const char*>(indices.data()), indices.size() * 2);
-    write_text(dir / "scene.bin", bytes);
-
-    json g = {{"asset", {{"version", "2.0"}}},
-              {"scene", 0},
-              {"scenes", {{{"nodes", json::array()}}}},
-              {"nodes", json::array()},
-              {"meshes", json::array()},
-              {"materials", {panel, floor}},
-              {"accessors", {{{"bufferView", 1}, {"componentType", 5123}, {"count", 6}, {"type", "SCALAR"}}}},
-              {"bufferViews", {{{"buffer", 0}, {"byteLength", uv_offset}},
-                               {{"buffer", 0}, {"byteOffset", index_offset}, {"byteLength", 12}},
-                               {{"buffer", 0}, {"byteOffset", uv_offset}, {"byteLength", index_offset - uv_offset}}}},
-              {"buffers", {{{"byteLength", bytes.size()}, {"uri", "scene.bin"}}}}};
-    for (const json& m : extra_materials) g["materials"].push_back(m);
-    for (std::size_t q = 0; q < quads.size(); ++q) {
-        const int position = int(g["accessors"].size());
-        g["accessors"].push_back({{"bufferView", 0}, {"byteOffset", 48 * q}, {"componentType", 5126}, {"count", 4},
-                                  {"type", "VEC3"}, {"min", {0, 0, 0}}, {"max", {2, 1, 1}}});
-        g["accessors"].push_back({{"bufferView", 2}, {"byteOffset", 32 * q}, {"componentType", 5126}, {"count", 4},
-                                  {"type", "VEC2"}});
-        const json primitive = {{"attributes", {{"POSITION", position}, {"TEXCOORD_0", position + 1}}},
-                                {"indices", 0},
-                                {"material", quads[q].material}};
-        g["meshes"].push_back({{"primitives", json::array({primitive})}});
-        g["nodes"].push_back({{"name", quads[q].name}, {"mesh", q}});
-        g["scenes"][0]["nodes"].push_back(q);
-    }
-    return g;
+    json materials = {panel, floor};
+    for (const json& m : extra_materials) materials.push_back(m);
+    return quad_scene(dir, quads, materials);
 }
 
 const json kBlack = {{"name", "black"}, {"pbrMetallicRoughness", {{"baseColorFactor", {0.0, 0.0, 0.0, 1.0}}}}};
@@ -181,7 +137,7 @@ TEST_CASE("a MASK card with half its area cut away passes the light of that half
                                                  {"baseColorTexture", {{"index", 0}}}}}};
     // Just under the panel, facing down: it hides the right half of the panel from the floor.
     const Quad under{{dvec3(0, 0.99, 0), dvec3(2, 0.99, 0), dvec3(2, 0.99, 1), dvec3(0, 0.99, 1)},
-                     {{{0, 0}, {1, 0}, {1, 1}, {0, 1}}}, "card", 2};
+                     {{0, 0}, {1, 0}, {1, 1}, {0, 1}}, "card", 2};
     json g = panel_over_floor(dir, kGlow, kGrey, {under}, {card});
     add_textures(g, {"leaf.png"});
     write_json(dir / "mask.gltf", g);
