@@ -154,6 +154,7 @@ TEST_CASE("a MASK card with half its area cut away passes the light of that half
     CHECK(mesh.holes > 0);
 
     const json report = bake_ok(dir, dir / "mask.gltf", dir / "out", {});
+    CHECK(report["counts"]["mask_holes"].get<long>() > 0);
     CHECK(radiosity(report, "floor left") == Approx(0.5 * kBelow).epsilon(0.04));
     CHECK(radiosity(report, "floor right") == Approx(0.5 * kBeside).epsilon(0.05));
     // Without its texture the card is all covered: the floor sees only the strip at the gap.

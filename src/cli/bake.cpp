@@ -696,8 +696,16 @@ void run_bake(const BakeOptions& options) {
     // A checkpoint resumes only the bake it was made by: the same mesh and the settings that
     // decide its numbers (not the device: every engine gives the reference's bits). The matrix
     // solver's holds its rows, which depend on neither the batch nor the threshold.
-    const std::string form_factors =
-        fmt::format("{} form factors, N {}, seed {}", plan.occlusion.on ? "hemicube" : "exact", o.hemicube, o.seed);
+    // The lights are not in the mesh: their placement and intensity go into the fingerprint too.
+    std::string lights;
+    for (const scene::PunctualLight& l : scene.lights)
+        lights += fmt::format("; light {} at {:.17g},{:.17g},{:.17g} along {:.17g},{:.17g},{:.17g} of {:.17g},{:.17g},{:.17g} "
+                              "cones {:.17g},{:.17g} range {:.17g}",
+                              static_cast<int>(l.type), l.position.x, l.position.y, l.position.z, l.direction.x,
+                              l.direction.y, l.direction.z, l.intensity.x, l.intensity.y, l.intensity.z, l.inner_cone,
+                              l.outer_cone, l.range);
+    const std::string form_factors = fmt::format("{} form factors, N {}, seed {}{}", plan.occlusion.on ? "hemicube" : "exact",
+                                                 o.hemicube, o.seed, lights);
     const std::string fingerprint =
         !checkpoints ? std::string()
         : solver_name == "matrix"
@@ -886,6 +894,8 @@ void run_bake(const BakeOptions& options) {
                         {"clusters", mesh.clusters},
                         {"split_clusters", mesh.split_clusters},
                         {"moved_clusters", mesh.moved_clusters},
+                        {"texture_splits", mesh.texture_splits},
+                        {"mask_holes", mesh.holes},
                         {"dropped_triangles", mesh.dropped_triangles},
                         {"skipped_primitives", scene.skipped_primitives}};
     report["plan"] = {{"solver", {{"name", solver_name}, {"why", solver_why}}},

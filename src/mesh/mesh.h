@@ -98,8 +98,8 @@ struct Mesh {
     std::size_t clusters = 0;           // patches that are clusters of several faces (per side)
     std::size_t split_clusters = 0;     // halvings of curved clusters (per side): see Patch
     std::size_t moved_clusters = 0;     // flat clusters that shoot from a face's centroid: see Patch
-    std::size_t texture_splits = 0;     // elements split where an emissive texture or MASK coverage changes (per side)
-    std::size_t holes = 0;              // elements left out as MASK holes (per side)
+    std::size_t texture_splits = 0;     // elements split where an emissive texture or MASK coverage changes (once for both sides)
+    std::size_t holes = 0;              // elements left out as MASK holes (once for both sides)
 };
 
 // What a mesh will hold, counted before any of it is built (doubles: any size can be counted).
