@@ -402,11 +402,13 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh* packed, ocl
     // samples waited on them). Zero-padded: raster_records reads whole lane groups, up to 7
     // entries past the last cell.
     // Two tables, one after the other (HrShot::table picks): the form factors of patches' shots,
-    // then the solid angles of lights' (Weights).
+    // then, for a mesh with lights, the solid angles of lights' shots (Weights).
     const std::size_t tile = static_cast<std::size_t>(tuning.tile);
     const std::size_t table_cells = static_cast<std::size_t>(tile_base_[kFaces]) * tile * tile;
-    std::vector<hr_long> delta_fixed(2 * table_cells + 8, 0);
+    const bool lights = !mesh.lights.empty();
+    std::vector<hr_long> delta_fixed((lights ? 2 : 1) * table_cells + 8, 0);
     for (const Weights weights : {Weights::form_factor, Weights::solid_angle}) {
+        if (weights == Weights::solid_angle && !lights) break;
         // the table in doubles only while it is converted (25 MB at N = 1024)
         const DeltaFormFactors delta(n, weights);
         const std::size_t base = weights == Weights::form_factor ? 0 : table_cells;
