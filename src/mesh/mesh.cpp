@@ -375,14 +375,13 @@ std::vector<Piece> pieces_of(const std::vector<Part>& parts, const scene::Scene&
             for (const Polygon& poly : part.cells->elements) add(poly, nullptr);
             continue;
         }
-        const bool refines = texturing.refines(a.material);
         // Depth-first, so a split element's children stay together in order.
         const auto visit = [&](const auto& self, const Polygon& poly, const SurfaceAverage& avg, int depth) -> void {
-            if (refines && depth < kTextureLevels) {
+            if (depth < kTextureLevels && texturing.may_split(a.material, avg)) {
                 const std::array<Polygon, 4> child = split_polygon(poly);
                 std::array<SurfaceAverage, 4> child_avg;
                 for (std::size_t c = 0; c < 4; ++c) child_avg[c] = texturing.average(child[c], a, b);
-                if (texturing.should_split(poly, a, b, avg, child_avg)) {
+                if (texturing.should_split(a.material, avg, child_avg)) {
                     ++mesh.texture_splits;
                     for (std::size_t c = 0; c < 4; ++c) self(self, child[c], child_avg[c], depth + 1);
                     return;

@@ -60,12 +60,6 @@ bool Texturing::samples(std::uint32_t material) const {
     return material < scene_.materials.size() && scene_.materials[material].textured();
 }
 
-bool Texturing::refines(std::uint32_t material) const {
-    if (material >= scene_.materials.size()) return false;
-    const scene::Material& m = scene_.materials[material];
-    return m.alpha_cutoff >= 0.0 || (m.emissive_texture && m.emission != dvec3(0.0));
-}
-
 std::array<double, 2> Texturing::footprint(const Polygon& poly, const scene::Triangle& a,
                                            const scene::Triangle* b) const {
     const scene::Material& m = scene_.materials[a.material];
@@ -107,6 +101,7 @@ SurfaceAverage Texturing::average(const Polygon& poly, const scene::Triangle& a,
         level[s] = int(std::floor(std::log2(std::max(1.0, texels[s] / k))));
     }
     const bool mask = m.alpha_cutoff >= 0.0;
+    out.texels = std::max(texels[0], texels[1]);
 
     dvec3 sum_base(0.0), sum_emit(0.0);
     double covered = 0.0, total = 0.0;
@@ -148,13 +143,27 @@ SurfaceAverage Texturing::average(const Polygon& poly, const scene::Triangle& a,
     return out;
 }
 
-bool Texturing::should_split(const Polygon& poly, const scene::Triangle& a, const scene::Triangle* b,
-                             const SurfaceAverage& whole, const std::array<SurfaceAverage, 4>& children) const {
-    const std::array<double, 2> texels = footprint(poly, a, b);
-    if (std::max(texels[0], texels[1]) <= 2.0) return false;
-    const scene::Material& m = scene_.materials[a.material];
-    if (m.alpha_cutoff >= 0.0 && whole.coverage > 0.0 && whole.coverage < 1.0) return true;
-    if (!m.emissive_texture || m.emission == dvec3(0.0)) return false;
+namespace {
+
+bool cut_by_mask(const scene::Material& m, const SurfaceAverage& whole) {
+    return m.alpha_cutoff >= 0.0 && whole.coverage > 0.0 && whole.coverage < 1.0;
+}
+
+bool emits_texture(const scene::Material& m) { return m.emissive_texture && m.emission != dvec3(0.0); }
+
+}  // namespace
+
+bool Texturing::may_split(std::uint32_t material, const SurfaceAverage& whole) const {
+    if (material >= scene_.materials.size() || whole.texels <= 2.0) return false;
+    const scene::Material& m = scene_.materials[material];
+    return cut_by_mask(m, whole) || emits_texture(m);
+}
+
+bool Texturing::should_split(std::uint32_t material, const SurfaceAverage& whole,
+                             const std::array<SurfaceAverage, 4>& children) const {
+    const scene::Material& m = scene_.materials[material];
+    if (cut_by_mask(m, whole)) return true;
+    if (!emits_texture(m)) return false;
     double lo = HUGE_VAL, hi = 0.0;
     for (const SurfaceAverage& c : children) {
         const double y = luminance(m.emission * c.emission_scale);

@@ -27,6 +27,7 @@ struct SurfaceAverage {
     glm::dvec3 rho_scale{1.0};       // base colour texture's area average / the texture's mean, per channel
     glm::dvec3 emission_scale{1.0};  // the same for the emissive texture
     double coverage = 1.0;           // MASK: share of the area whose alpha reaches the cutoff
+    double texels = 0.0;             // the finer texture's texels along the polygon's longest edge
 };
 
 // The source triangle holding p (of a and, for a quad face, b: the one where p lies deepest
@@ -44,17 +45,18 @@ public:
 
     // Whether a material's elements need textures sampled (a texture or MASK).
     bool samples(std::uint32_t material) const;
-    // Whether they also split where the textures change (an emissive texture or MASK).
-    bool refines(std::uint32_t material) const;
 
     // Area averages over a polygon lying in the face of source triangles a (and b).
     SurfaceAverage average(const Polygon& poly, const scene::Triangle& a, const scene::Triangle* b) const;
 
-    // Whether an element should split in four for its textures: its children's averages
-    // (`children`, of split_polygon's four) differ in emission or coverage, and it spans more
-    // than two texels.
-    bool should_split(const Polygon& poly, const scene::Triangle& a, const scene::Triangle* b,
-                      const SurfaceAverage& whole, const std::array<SurfaceAverage, 4>& children) const;
+    // Whether an element of this material, of averages `whole`, may split in four for its
+    // textures: it spans more than two texels, and a MASK cutoff crosses it or its material has
+    // an emissive texture. Only then are its children's averages worth taking.
+    bool may_split(std::uint32_t material, const SurfaceAverage& whole) const;
+    // Whether it should: a MASK cutoff crosses it, or its children's averages (`children`, of
+    // split_polygon's four) differ in emission by more than kEmissionContrast.
+    bool should_split(std::uint32_t material, const SurfaceAverage& whole,
+                      const std::array<SurfaceAverage, 4>& children) const;
 
     // An element's reflectance (vertex reflectance at its centroid x the base colour texture's
     // scale, held to [0, kMaxReflectance]) and emission (material emission x the emissive scale).
