@@ -307,7 +307,7 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
         throw InputError(name + ": " + (why.empty() ? "cannot parse glTF" : why));
     }
     images = std::move(decoder.images);
-    // tinygltf only warns for an external image it cannot read; texture_average fails for one a
+    // tinygltf only warns for an external image it cannot read; texture_image fails for one a
     // material uses, and one no material uses does not matter.
     const auto about_an_image = [](const std::string& line) {
         for (const char* start : {"File not found : ", "File read error : ", "File is empty : ",
@@ -694,10 +694,6 @@ const ImageMean& texture_image(Loader& L, const tinygltf::TextureInfo& info, con
     return decoded->second;
 }
 
-dvec3 texture_average(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
-    return texture_image(L, info, what).mean;
-}
-
 Wrap wrap_mode(const Loader& L, int mode, const std::string& what) {
     switch (mode) {
         case TINYGLTF_TEXTURE_WRAP_REPEAT:
@@ -709,25 +705,6 @@ Wrap wrap_mode(const Loader& L, int mode, const std::string& what) {
         default:
             L.fail(fmt::format("{}: wrap mode {} is not a glTF wrap mode", what, mode));
     }
-}
-
-// The decoded texture a material's texture reads, with its sampler's wrap modes (none when the
-// material has no such texture). Decodes the image if no texture has yet.
-TextureSlot texture_slot(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
-    TextureSlot slot;
-    if (info.index < 0) return slot;
-    const ImageMean& image = texture_image(L, info, what);  // fails for a bad texture or image
-    const tinygltf::Texture& tex = L.model.textures[std::size_t(info.index)];
-    slot.texture = L.texture_of_image.at(tex.source);
-    if (tex.sampler >= 0) {
-        if (std::size_t(tex.sampler) >= L.model.samplers.size())
-            L.fail(fmt::format("{}: texture {} names sampler {}, out of range", what, info.index, tex.sampler));
-        const tinygltf::Sampler& sampler = L.model.samplers[std::size_t(tex.sampler)];
-        slot.wrap_s = wrap_mode(L, sampler.wrapS, fmt::format("{}: sampler {} wrapS", what, tex.sampler));
-        slot.wrap_t = wrap_mode(L, sampler.wrapT, fmt::format("{}: sampler {} wrapT", what, tex.sampler));
-    }
-    (void)image;
-    return slot;
 }
 
 // A number of a KHR_texture_transform object, or `fallback` where absent.
@@ -765,6 +742,31 @@ UvSource uv_source(const Loader& L, const tinygltf::TextureInfo& info, const std
     }
     if (src.set < 0) L.fail(fmt::format("{}: texCoord {} is negative", what, src.set));
     return src;
+}
+
+// All a material reads of one of its textures: the image's means (white and opaque without a
+// texture), the decoded texture with its sampler's wrap modes, and the coordinates it is read
+// through. Decodes the image if no texture has yet; fails for a bad texture, image or sampler.
+struct MaterialTexture {
+    const ImageMean* image = nullptr;
+    TextureSlot slot;
+    UvSource uv;
+};
+
+MaterialTexture read_texture(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
+    MaterialTexture out{&texture_image(L, info, what), {}, {}};
+    if (info.index < 0) return out;
+    const tinygltf::Texture& tex = L.model.textures[std::size_t(info.index)];
+    out.slot.texture = L.texture_of_image.at(tex.source);
+    if (tex.sampler >= 0) {
+        if (std::size_t(tex.sampler) >= L.model.samplers.size())
+            L.fail(fmt::format("{}: texture {} names sampler {}, out of range", what, info.index, tex.sampler));
+        const tinygltf::Sampler& sampler = L.model.samplers[std::size_t(tex.sampler)];
+        out.slot.wrap_s = wrap_mode(L, sampler.wrapS, fmt::format("{}: sampler {} wrapS", what, tex.sampler));
+        out.slot.wrap_t = wrap_mode(L, sampler.wrapT, fmt::format("{}: sampler {} wrapT", what, tex.sampler));
+    }
+    out.uv = uv_source(L, info, what);
+    return out;
 }
 
 std::string material_label(const tinygltf::Material& mat, int index) {
@@ -840,34 +842,29 @@ Material convert_material(Loader& L, int index) {
     const std::vector<double>& base = mat.pbrMetallicRoughness.baseColorFactor;
     if (base.size() != 4) L.fail(label + ": baseColorFactor must have 4 components");
     check_factor(L, base, label + ": baseColorFactor");
-    const tinygltf::TextureInfo& base_info = mat.pbrMetallicRoughness.baseColorTexture;
-    out.base_color = dvec3(base[0], base[1], base[2]) * texture_average(L, base_info, label + " baseColorTexture");
-    out.base_texture = texture_slot(L, base_info, label + " baseColorTexture");
+    const MaterialTexture base_texture =
+        read_texture(L, mat.pbrMetallicRoughness.baseColorTexture, label + " baseColorTexture");
+    out.base_color = dvec3(base[0], base[1], base[2]) * base_texture.image->mean;
+    out.base_texture = base_texture.slot;
+    out.coloured_texture = base_texture.image->coloured;
     out.alpha_factor = base[3];
     if (mat.alphaMode == "MASK") {
         out.alpha_cutoff = mat.alphaCutoff;
         if (!(out.alpha_cutoff >= 0.0) || !std::isfinite(out.alpha_cutoff))
             L.fail(fmt::format("{}: alphaCutoff {} must be finite and >= 0", label, mat.alphaCutoff));
     }
-    std::array<UvSource, 2> uv{};
-    if (out.base_texture) {
-        uv[0] = uv_source(L, base_info, label + " baseColorTexture");
-        out.coloured_texture = texture_image(L, base_info, label + " baseColorTexture").coloured;
-    }
+    std::array<UvSource, 2> uv{base_texture.uv, UvSource{}};
 
     const std::vector<double>& emissive = mat.emissiveFactor;
     if (!emissive.empty() && emissive.size() != 3) L.fail(label + ": emissiveFactor must have 3 components");
     check_factor(L, emissive, label + ": emissiveFactor");
     const double strength = emissive_strength(L, mat, label);
     if (!emissive.empty() && (emissive[0] > 0.0 || emissive[1] > 0.0 || emissive[2] > 0.0) && strength > 0.0) {
-        out.emission = dvec3(emissive[0], emissive[1], emissive[2]) * strength *
-                       texture_average(L, mat.emissiveTexture, label + " emissiveTexture");
-        out.emissive_texture = texture_slot(L, mat.emissiveTexture, label + " emissiveTexture");
-        if (out.emissive_texture) {
-            uv[1] = uv_source(L, mat.emissiveTexture, label + " emissiveTexture");
-            out.coloured_texture =
-                out.coloured_texture || texture_image(L, mat.emissiveTexture, label + " emissiveTexture").coloured;
-        }
+        const MaterialTexture emissive_texture = read_texture(L, mat.emissiveTexture, label + " emissiveTexture");
+        out.emission = dvec3(emissive[0], emissive[1], emissive[2]) * strength * emissive_texture.image->mean;
+        out.emissive_texture = emissive_texture.slot;
+        out.coloured_texture = out.coloured_texture || emissive_texture.image->coloured;
+        uv[1] = emissive_texture.uv;
     }
     if (L.uv_sources.size() <= std::size_t(index)) L.uv_sources.resize(std::size_t(index) + 1);
     L.uv_sources[std::size_t(index)] = uv;
