@@ -16,6 +16,9 @@ writes, next to this script:
                        chains, in the closed room
     lit_room.gltf      the closed room lit by a point and a spot light (KHR_lights_punctual),
                        with a repeated floor texture, an alpha-masked card and an emissive sign
+    atrium.gltf        a 6 m x 4 m x 6 m atrium lit only by the sun (a KHR_lights_punctual
+                       directional light) through a 2 m x 2 m opening in its roof, with a block
+                       in the sunlit patch; bake it with --sky for the sky through the opening
 
 Python 3 standard library only; the output is byte-for-byte deterministic.
 
@@ -1204,6 +1207,59 @@ def make_lit_room(path):
                    double_sided=("card",))
 
 
+def make_atrium(path):
+    """A room open to the sky through its roof, lit by the sun: see scenes/README.md."""
+    h, height, opening = 3.0, 4.0, 1.0
+    inside = (0.0, height / 2.0, 0.0)
+    rules = {}
+    b = GltfBuilder(
+        {
+            "title": "Atrium",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres; the sun's illuminance in lux",
+            "layout": "room 6 x 4 x 6 m (x, y, z): x, z in [-3, 3], y in [0, 4]; its roof has a 2 m x 2 m "
+                      "opening over the centre. The sun (azimuth 200 degrees, elevation 60 degrees, 10 lux) "
+                      "shines through it onto the floor and the north wall; a 0.6 m block stands in that "
+                      "patch. North = -Z, east = +X",
+        }
+    )
+    b.material("plaster", (0.75, 0.72, 0.68))
+    b.material("stone", (0.55, 0.5, 0.45))
+    b.material("block", (0.6, 0.25, 0.2))
+    shell = box_faces(-h, h, 0.0, height, -h, h)
+    for name in ("floor", "wall_north", "wall_south", "wall_east", "wall_west"):
+        rules[name] = faces_towards(inside)
+        b.mesh_node(name, [orient_quad(shell[name], rules[name])], "stone" if name == "floor" else "plaster")
+    # The roof: four one-sided quads around the opening, facing down into the room (their backs,
+    # outside, stop the sun).
+    y = height
+    roof = [
+        [(-h, y, -h), (h, y, -h), (h, y, -opening), (-h, y, -opening)],
+        [(-h, y, opening), (h, y, opening), (h, y, h), (-h, y, h)],
+        [(-h, y, -opening), (-opening, y, -opening), (-opening, y, opening), (-h, y, opening)],
+        [(opening, y, -opening), (h, y, -opening), (h, y, opening), (opening, y, opening)],
+    ]
+    rules["roof"] = faces_direction((0.0, -1.0, 0.0))
+    b.mesh_node("roof", [orient_quad(q, rules["roof"]) for q in roof], "plaster")
+    # The sun's direction of travel, and where its light through the opening's centre meets the
+    # floor: (0.79, -2.17) in x, z. The block stands there, five faces (no bottom).
+    azimuth, elevation = math.radians(200.0), math.radians(60.0)
+    towards = (math.sin(azimuth) * math.cos(elevation), math.sin(elevation), -math.cos(azimuth) * math.cos(elevation))
+    travel = (-towards[0], -towards[1], -towards[2])
+    s = 0.6
+    bx, bz = 0.7, -1.6
+    block = box_faces(bx - s / 2, bx + s / 2, 0.0, s, bz - s / 2, bz + s / 2)
+    rules["block"] = faces_away_from((bx, s / 2, bz))
+    b.mesh_node("block", [orient_quad(block[k], rules["block"])
+                          for k in ("ceiling", "wall_north", "wall_south", "wall_east", "wall_west")], "block")
+    b.light_node("sun", {"name": "sun", "type": "directional", "intensity": 10.0},
+                 (0.0, height + 2.0, 0.0), look_at_quat((0.0, 0.0, 0.0), travel))
+    cam_pos, cam_at = (2.8, 1.0, 2.8), (-0.6, 1.9, -2.2)  # from the south-east corner, up at the opening
+    b.camera_node("camera", "atrium", math.radians(80.0), 4.0 / 3.0, 0.01, cam_pos, look_at_quat(cam_pos, cam_at))
+    b.write(path)
+    load_and_check(path, rules)
+
+
 def main():
     for name, make in (
         ("cornell_box.gltf", make_cornell),
@@ -1213,6 +1269,7 @@ def main():
         ("lamp_facing_sky.gltf", make_lamp_facing_sky),
         ("curved_objects.gltf", make_curved_objects),
         ("lit_room.gltf", make_lit_room),
+        ("atrium.gltf", make_atrium),
     ):
         path = os.path.join(HERE, name)
         make(path)  # writes the file, reads it back and checks it (raises AssertionError on failure)

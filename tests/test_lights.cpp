@@ -126,19 +126,6 @@ TEST_CASE("a light's hemicubes give every engine the same solid angles, and the 
     }
 }
 
-TEST_CASE("a scene lit only by a directional light is refused, naming it", "[lights][cli]") {
-    TempDir dir;
-    const json lights = {{{"type", "directional"}, {"intensity", 3.0}}};
-    const json nodes = {{{"name", "sun"}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}}};
-    write_json(dir / "sun.gltf", rect_scene(dir, floor_squares(), kMaterials, lights, nodes));
-    const RunResult r = run_hemirad(dir, bake_args(dir / "sun.gltf", dir / "out"));
-    INFO(r.err);
-    CHECK(r.code == 2);
-    CHECK(r.err.find("sun.gltf: nothing emits light: 0 emissive triangles") != std::string::npos);
-    CHECK(r.err.find("1 directional light, which it does not bake yet") != std::string::npos);
-    CHECK(!fs::exists(dir / "out"));
-}
-
 TEST_CASE("malformed punctual lights are refused with one line naming the light", "[lights][cli]") {
     TempDir dir;
     const auto refused = [&](const json& light, const std::string& problem) {

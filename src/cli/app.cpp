@@ -150,6 +150,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--sky", o.sky,
                     "light the scene with a sky dome of this radiance (emission / pi): RADIANCE, or "
                     "HORIZON,ZENITH radiances (between them by the sine of the elevation)");
+    bake.add_option("--sun", o.sun,
+                    "light the scene with a sun: AZIMUTH,ELEVATION,LUX (degrees clockwise from north, -Z, towards "
+                    "east, +X; degrees above the horizon; illuminance on a surface facing it)");
     bake.add_option("--refine-levels", o.refine_levels,
                     "adaptive refinement: split an element at most this often where the irradiance contrasts (0: off)")
         ->transform(integer_in(0, 6))

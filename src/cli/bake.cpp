@@ -237,10 +237,10 @@ glm::dvec3 parse_point(const std::string& text, const std::string& option) {
     return p;
 }
 
-// The point and spot lights of a scene that shine: hemirad bakes those (directional ones not yet).
+// The punctual lights of a scene that shine (point, spot and directional ones).
 std::size_t shining_lights(const scene::Scene& scene) {
     return static_cast<std::size_t>(std::count_if(scene.lights.begin(), scene.lights.end(), [](const scene::PunctualLight& l) {
-        return l.type != scene::PunctualLight::Type::directional && l.intensity != glm::dvec3(0.0);
+        return l.intensity != glm::dvec3(0.0);
     }));
 }
 
@@ -250,17 +250,11 @@ void check_scene(const scene::Scene& scene) {
     if (shining_lights(scene) > 0 ||
         std::any_of(scene.triangles.begin(), scene.triangles.end(), [&](const scene::Triangle& t) { return emits(scene, t); }))
         return;
-    const auto directional = std::count_if(scene.lights.begin(), scene.lights.end(), [](const scene::PunctualLight& l) {
-        return l.type == scene::PunctualLight::Type::directional;
-    });
     throw InputError(fmt::format(
-        "{}: nothing emits light: 0 emissive triangles (no triangle's material has emission > 0) and {} KHR_lights_punctual "
-        "point or spot light{} of intensity > 0{}; hemirad bakes emissive materials and point and spot lights, and "
-        "--sky RADIANCE[,ZENITH_RADIANCE] adds a sky",
-        scene.path.string(), shining_lights(scene), shining_lights(scene) == 1 ? "" : "s",
-        directional == 0 ? std::string()
-                         : fmt::format(" ({} directional light{}, which it does not bake yet)", directional,
-                                       directional == 1 ? "" : "s")));
+        "{}: nothing emits light: 0 emissive triangles (no triangle's material has emission > 0) and {} "
+        "KHR_lights_punctual light{} of intensity > 0 (of {}); hemirad bakes emissive materials and point, spot and "
+        "directional lights, --sky RADIANCE[,ZENITH_RADIANCE] adds a sky and --sun AZIMUTH,ELEVATION,LUX a sun",
+        scene.path.string(), shining_lights(scene), shining_lights(scene) == 1 ? "" : "s", scene.lights.size()));
 }
 
 // After the see_through decision: a scene whose only emitters were see-through (faint blended
@@ -548,6 +542,8 @@ void run_bake(const BakeOptions& options) {
                             : std::optional(std::pair(parse_point(o.look_from, "--look-from"), parse_point(o.look_at, "--look-at")));
     const std::optional<scene::Sky> sky =
         o.sky.empty() ? std::nullopt : std::optional<scene::Sky>(scene::parse_sky(o.sky, "--sky"));
+    const std::optional<scene::PunctualLight> sun =
+        o.sun.empty() ? std::nullopt : std::optional(scene::parse_sun(o.sun, "--sun"));
 
     // Files named by options, before any work: a wrong --resume fails at once, and a --checkpoint
     // naming the scene (or any file not a checkpoint) must not be overwritten.
@@ -559,6 +555,7 @@ void run_bake(const BakeOptions& options) {
     auto t0 = Clock::now();
     scene::Scene scene = scene::load(o.scene);
     if (sky && !scene.triangles.empty()) scene::add_sky(scene, *sky);
+    if (sun) scene.lights.push_back(*sun);
     check_scene(scene);
     const double t_load = seconds_since(t0);
     if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while loading a large scene
@@ -756,7 +753,7 @@ void run_bake(const BakeOptions& options) {
         ProgressLine progress(o.progress, o.progress_tty);
         // The punctual lights shoot first: the solvers start from their direct light.
         std::vector<glm::dvec3> direct;
-        if (!mesh.lights.empty()) direct = solve::direct_light(mesh, scene.lights, engine, 0);
+        if (solve::has_direct_light(mesh, scene.lights)) direct = solve::direct_light(mesh, scene.lights, engine, 0);
         const SolveContext context{o, threshold, matrix_settings, fingerprint, resume_state, progress,
                                    [&](const solve::Progressive& solver) {
                                        write_png_preview(scene, mesh, solver, view, width, height,

@@ -1386,14 +1386,7 @@ Scene load(const std::filesystem::path& file) {
         L.warn(fmt::format("{} material{} reflect{} 1, which cannot conserve energy; clamped to {}: {}", L.clamped.size(),
                            L.clamped.size() == 1 ? "" : "s", L.clamped.size() == 1 ? "s" : "", kMaxReflectance, names));
     }
-    const auto directional = std::count_if(scene.lights.begin(), scene.lights.end(), [](const PunctualLight& l) {
-        return l.type == PunctualLight::Type::directional;
-    });
-    if (directional > 0)
-        L.warn(fmt::format("{} directional KHR_lights_punctual light{} not baked: hemirad bakes point and spot lights "
-                           "and emissive materials",
-                           directional, directional == 1 ? " is" : "s are"));
-    compute_bbox(scene);
+compute_bbox(scene);
     return scene;
 }
 

@@ -32,6 +32,36 @@ Sky parse_sky(const std::string& text, const std::string& option) {
     return sky;
 }
 
+PunctualLight parse_sun(const std::string& text, const std::string& option) {
+    std::vector<double> values;
+    std::stringstream in(text);
+    std::string part;
+    while (std::getline(in, part, ',')) {
+        char* end = nullptr;
+        const double v = std::strtod(part.c_str(), &end);
+        if (part.empty() || end != part.c_str() + part.size() || !std::isfinite(v))
+            throw InputError(fmt::format("{} '{}': expected AZIMUTH,ELEVATION,ILLUMINANCE, three finite numbers "
+                                         "(degrees, degrees, lux)",
+                                         option, text));
+        values.push_back(v);
+    }
+    if (values.size() != 3 || text.back() == ',')
+        throw InputError(fmt::format("{} '{}': expected AZIMUTH,ELEVATION,ILLUMINANCE (degrees, degrees, lux)", option, text));
+    const double azimuth = values[0] * M_PI / 180.0, elevation = values[1] * M_PI / 180.0, lux = values[2];
+    if (!(values[1] > 0.0 && values[1] <= 90.0))
+        throw InputError(fmt::format("{} '{}': the elevation must be above 0 (the horizon) and at most 90 degrees", option, text));
+    if (!(lux > 0.0 && lux <= kMaxEmission))
+        throw InputError(fmt::format("{} '{}': the illuminance must be above 0 and at most {:g} lux", option, text, kMaxEmission));
+    PunctualLight sun;
+    sun.type = PunctualLight::Type::directional;
+    sun.name = "sun";
+    sun.intensity = glm::dvec3(lux);
+    const glm::dvec3 towards(std::sin(azimuth) * std::cos(elevation), std::sin(elevation),
+                             -std::cos(azimuth) * std::cos(elevation));
+    sun.direction = -glm::normalize(towards);
+    return sun;
+}
+
 void add_sky(Scene& scene, const Sky& sky) {
     const double diagonal = std::max(scene.diagonal(), 1e-6);
     const double radius = kSkyRadius * diagonal;

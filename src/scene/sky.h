@@ -1,5 +1,6 @@
-// A sky for scenes without lights of their own (`--sky RADIANCE[,ZENITH_RADIANCE]`): a dome of
-// emitting patches around the scene, shot like any emitter and so occluded by the scene itself.
+// A sky and a sun for scenes without lights of their own. `--sky RADIANCE[,ZENITH_RADIANCE]`: a
+// dome of emitting patches around the scene, shot like any emitter and so occluded by the scene
+// itself. `--sun AZIMUTH,ELEVATION,ILLUMINANCE`: a directional light (solve/lights.h).
 #pragma once
 
 #include <string>
@@ -28,5 +29,11 @@ inline constexpr double kSkyRadius = 2.0;
 // (its own material). Its node is synthetic and its materials coarse; the scene's bounding box is
 // left as it was (the camera still frames the scene).
 void add_sky(Scene& scene, const Sky& sky);
+
+// Parses "AZIMUTH,ELEVATION,ILLUMINANCE" (degrees, degrees, lux) into a white directional light
+// named "sun". Azimuth turns clockwise seen from above, from north (−Z, glTF's forward: Blender's
+// +Y) towards east (+X); elevation rises from the horizon (0 < elevation ≤ 90) towards +Y. The sun
+// lights a surface facing it with ILLUMINANCE × cos θ. Throws InputError naming `option`.
+PunctualLight parse_sun(const std::string& text, const std::string& option);
 
 }  // namespace hemirad::scene

@@ -1,16 +1,41 @@
 // Direct light of punctual lights (see lights.h).
 #include "solve/lights.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/error.h"
+#include "formfactor/parallel.h"
 
 namespace hemirad::solve {
+
+namespace {
+
+bool shines_in_parallel(const scene::PunctualLight& light) {
+    return light.type == scene::PunctualLight::Type::directional && light.intensity != glm::dvec3(0.0);
+}
+
+}  // namespace
+
+bool has_direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights) {
+    return !mesh.lights.empty() || std::any_of(lights.begin(), lights.end(), shines_in_parallel);
+}
 
 std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
                                      formfactor::Engine& engine, int level, glm::dvec3* landed) {
     std::vector<glm::dvec3> H(mesh.elements.size(), glm::dvec3(0.0));
     if (landed) *landed = glm::dvec3(0.0);
+    // Directional lights: a parallel shot each, its grid turned by the level and the light.
+    formfactor::ShotResult lit;
+    for (std::size_t l = 0; l < lights.size(); ++l) {
+        if (!shines_in_parallel(lights[l])) continue;
+        formfactor::shoot_parallel(mesh, lights[l].direction, static_cast<std::uint64_t>(level) * lights.size() + l, lit);
+        for (std::size_t i = 0; i < lit.size(); ++i) {
+            const glm::dvec3 irradiance = lights[l].intensity * lit.F[i];
+            H[lit.element[i]] += irradiance;
+            if (landed) *landed += irradiance * mesh.elements[lit.element[i]].area;
+        }
+    }
     if (mesh.lights.empty()) return H;
     std::vector<formfactor::ShotRequest> requests;
     const std::uint64_t first = kLightShots + static_cast<std::uint64_t>(level) * mesh.lights.size();

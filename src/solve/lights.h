@@ -1,6 +1,8 @@
 // Punctual lights' direct light: each point light shoots the two hemicubes of a full cube, each
 // spot light the one along its direction, through the same engines as patches (rows of solid
-// angles, formfactor::Weights); an element receives I × attenuation × Ω / A of each. The solvers
+// angles, formfactor::Weights); an element receives I × attenuation × Ω / A of each. Each
+// directional light (a KHR_lights_punctual one, or --sun) takes a parallel shot
+// (formfactor/parallel.h): an element receives E × its lit area across the light / A. The solvers
 // start from this light, as if the lights had shot first.
 #pragma once
 
@@ -19,8 +21,12 @@ namespace hemirad::solve {
 // re-gathers from 2^40): hemicube i of a mesh at refinement level L takes kLightShots + L·n + i.
 inline constexpr std::uint64_t kLightShots = std::uint64_t{1} << 42;
 
-// Per element, the irradiance of every light hemicube of the mesh, shot in one batch. `landed`,
-// if set, receives the flux that reached elements (per channel).
+// Whether the mesh's lights give any direct light: a light hemicube, or a directional light of
+// intensity > 0.
+bool has_direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights);
+
+// Per element, the irradiance of every light hemicube of the mesh, shot in one batch, and of
+// every directional light. `landed`, if set, receives the flux that reached elements (per channel).
 std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
                                      formfactor::Engine& engine, int level, glm::dvec3* landed = nullptr);
 

@@ -157,7 +157,7 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
         }
 
         // The lights' direct light, shot again onto the refined mesh: their shadows are the sharpest.
-        if (settings.lights && !m.lights.empty()) {
+        if (settings.lights && has_direct_light(m, *settings.lights)) {
             const std::vector<glm::dvec3> direct = direct_light(m, *settings.lights, *engine, depth + 1);
             for (std::size_t k = 0; k < m.elements.size(); ++k)
                 if (refined.is_new[k]) gathered[k] += direct[k];
