@@ -233,7 +233,7 @@ TEST_CASE("bake writes exactly the five output files and a complete report", "[c
 TEST_CASE("baked.gltf is a valid glTF with one node per mesh node and finite COLOR_0", "[cli]") {
     TempDir dir;
     const fs::path out = dir / "out";
-    bake_ok(dir, kClosedRoom, out);
+    bake_ok(dir, kClosedRoom, out, {"--output-mode", "radiosity"});
 
     const std::string baked_text = read_text(out / "baked.gltf");
     CHECK(baked_text.find(".hemirad-tmp") == std::string::npos);  // no staging path leaked

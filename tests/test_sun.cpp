@@ -66,7 +66,7 @@ TEST_CASE("a directional light of E lux gives a floor E cos(theta), and the occl
     }
 }
 
-TEST_CASE("--sun AZIMUTH,ELEVATION,LUX lights a scene that has no light, from the compass direction it names",
+TEST_CASE("the --sun AZIMUTH,ELEVATION,LUX option lights a scene that has no light, from the compass direction it names",
           "[sun][cli]") {
     TempDir dir;
     write_json(dir / "floor.gltf", rect_scene(dir, shadow_scene(), kMaterials));

@@ -150,6 +150,12 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--sky", o.sky,
                     "light the scene with a sky dome of this radiance (emission / pi): RADIANCE, or "
                     "HORIZON,ZENITH radiances (between them by the sine of the elevation)");
+    bake.add_option("--output-mode", o.output_mode,
+                    "baked.gltf: scene (the input's nodes, materials, textures, cameras and lights, each baked "
+                    "primitive refined, with COLOR_0 a viewer shows under unlit materials and the linear light in "
+                    "_RADIOSITY and _IRRADIANCE) or radiosity (the element mesh alone, COLOR_0 = linear radiosity)")
+        ->check(CLI::IsMember({"scene", "radiosity"}))
+        ->capture_default_str();
     bake.add_option("--sun", o.sun,
                     "light the scene with a sun: AZIMUTH,ELEVATION,LUX (degrees clockwise from north, -Z, towards "
                     "east, +X; degrees above the horizon; illuminance on a surface facing it)");

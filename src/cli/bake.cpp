@@ -845,12 +845,23 @@ void run_bake(const BakeOptions& options) {
     const auto& irradiance = solution.irradiance;
     if (!output::all_finite(radiosity) || !output::all_finite(irradiance))
         throw InternalError("the solution has a non-finite value; nothing written");
-    output::write_baked_gltf(out.staged("baked.gltf"), scene, mesh, radiosity);
     const output::Image image = output::render(scene, mesh, radiosity, view, width, height);
     if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
     output::write_exr(image, out.staged("render.exr"));
     const double exposure = std::isnan(o.exposure) ? output::auto_exposure(image) : std::exp2(o.exposure);
     output::write_png(image, out.staged("render.png"), exposure);
+    // The user's scene with the light baked in; or (--output-mode radiosity, and scenes not read
+    // from a file) the element mesh alone.
+    if (o.output_mode == "scene" && scene.source) {
+        for (const std::string& w : output::write_scene_gltf(out.staged("baked.gltf"), o.output, scene, mesh, radiosity,
+                                                             irradiance, exposure)) {
+            const std::string warning = "baked.gltf: " + w;
+            if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
+            warnings.push_back(warning);
+        }
+    } else {
+        output::write_baked_gltf(out.staged("baked.gltf"), scene, mesh, radiosity);
+    }
     const double t_output_files = seconds_since(t0);
 
     const solve::Energy& energy = solution.energy;
@@ -877,6 +888,7 @@ void run_bake(const BakeOptions& options) {
         {"contrast", o.contrast},
         {"camera", view.name},
         {"exposure", exposure},
+        {"output_mode", o.output_mode},
         {"image", {width, height}},
         {"preview_every", o.preview_every},
         {"checkpoint", o.checkpoint},

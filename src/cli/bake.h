@@ -34,6 +34,7 @@ struct BakeOptions {
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
     std::string solver = "auto";  // auto | matrix | progressive
     std::string effects;          // overrides: "occlusion=off,colour=on,…" (scene::parse_effect_overrides)
+    std::string output_mode = "scene";  // --output-mode scene|radiosity (output.h)
     std::string sun;              // --sun AZIMUTH,ELEVATION,LUX (scene::parse_sun); empty: none
     std::string sky;              // --sky RADIANCE[,ZENITH_RADIANCE] (scene::parse_sky); empty: none
     int refine_levels = 2;        // adaptive refinement: splits of one element at most

@@ -6,13 +6,14 @@
 
 #include "core/error.h"
 #include "output/output.h"
+#include "output/gltf_write.h"
 #include "output/welded_mesh.h"
 #include "scene/gltf_views.h"
 
 namespace hemirad::output {
-namespace {
-
 namespace fs = std::filesystem;
+
+namespace {
 
 // A float VEC3 accessor over `values`; POSITION must carry min/max (glTF 2.0 §5.1.1).
 int add_vec3(tinygltf::Model& model, const std::vector<glm::dvec3>& values, bool unit_length, bool with_bounds) {
@@ -88,21 +89,6 @@ void add_node(tinygltf::Model& model, const std::string& name, const WeldedNode&
     model.scenes[0].nodes.push_back(static_cast<int>(model.nodes.size() - 1));
 }
 
-// A file name as a URI reference (RFC 3986): unreserved characters kept, the rest %XX.
-std::string percent_encode(const std::string& name) {
-    std::string uri;
-    for (const unsigned char c : name) {
-        const bool unreserved = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
-                                c == '-' || c == '.' || c == '_' || c == '~';
-        if (unreserved) {
-            uri += static_cast<char>(c);
-        } else {
-            uri += fmt::format("%{:02X}", c);
-        }
-    }
-    return uri;
-}
-
 tinygltf::Model build_model(const scene::Scene& scene, const WeldedMesh& welded) {
     tinygltf::Model model;
     model.asset.version = "2.0";
@@ -117,6 +103,23 @@ tinygltf::Model build_model(const scene::Scene& scene, const WeldedMesh& welded)
     }
     if (model.buffers[0].data.empty()) model.buffers.clear();  // glTF forbids empty buffers
     return model;
+}
+
+}  // namespace
+
+// A file name as a URI reference (RFC 3986): unreserved characters kept, the rest %XX.
+std::string percent_encode(const std::string& name) {
+    std::string uri;
+    for (const unsigned char c : name) {
+        const bool unreserved = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                                c == '-' || c == '.' || c == '_' || c == '~';
+        if (unreserved) {
+            uri += static_cast<char>(c);
+        } else {
+            uri += fmt::format("%{:02X}", c);
+        }
+    }
+    return uri;
 }
 
 // tinygltf 2.7 saves an external buffer to <directory of file>/<buffer.uri> verbatim, while
@@ -141,7 +144,6 @@ void write_model(const tinygltf::Model& model, const fs::path& file, const std::
     }
 }
 
-}  // namespace
 
 void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene, const mesh::Mesh& mesh,
                       const std::vector<glm::dvec3>& radiosity) {

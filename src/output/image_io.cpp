@@ -24,13 +24,6 @@ double luminance(const float* rgb) {  // Rec. 709 / sRGB primaries
     return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
 }
 
-double tone(double x) {
-    if (!(x > 0.0)) return 0.0;  // NaN too: a broken pixel shows black, not garbage
-    if (x <= kKnee) return x;
-    if (std::isinf(x)) return 1.0;
-    const double t = (x - kKnee) / (1.0 - kKnee);
-    return kKnee + (1.0 - kKnee) * t / (1.0 + t);
-}
 
 double srgb_oetf(double linear) {  // IEC 61966-2-1
     return linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
@@ -58,6 +51,14 @@ void check_size(const Image& image, const std::filesystem::path& file) {
 }
 
 }  // namespace
+
+double tone(double x) {
+    if (!(x > 0.0)) return 0.0;  // NaN too: a broken pixel shows black, not garbage
+    if (x <= kKnee) return x;
+    if (std::isinf(x)) return 1.0;
+    const double t = (x - kKnee) / (1.0 - kKnee);
+    return kKnee + (1.0 - kKnee) * t / (1.0 + t);
+}
 
 double auto_exposure(const Image& image) {
     std::vector<double> lit;

@@ -31,6 +31,27 @@ std::vector<NodeSummary> summarize(const scene::Scene& scene, const mesh::Mesh& 
 void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene,
                       const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity);
 
+// The user's scene back (--output-mode scene): the file the scene was loaded from
+// (scene.source), its nodes, names, transforms, materials, textures, samplers, cameras, lights,
+// skins, animations and extras kept, each baked mesh node given a mesh of its own whose
+// primitives hold the refined element mesh (welded as above, in the node's local space) with
+// the file's vertex attributes interpolated at its vertices, and the baked light:
+// - `_RADIOSITY`: linear radiosity B; `_IRRADIANCE`: linear irradiance H (incident light);
+// - `COLOR_0`: what a viewer multiplies with the material, in display range: tone(exposure × H)
+//   × the file's own COLOR_0 under an unlit copy of the material (KHR_materials_unlit: base
+//   colour texture kept at full resolution, so the viewer shows ρ × H = B); for an emitting
+//   material tone(exposure × B) under an unlit white one.
+// doubleSided surfaces get a primitive side for each face (each side its own light), under
+// materials that are not doubleSided. Primitives with nothing baked (see-through, other modes)
+// and meshes of nodes not baked are copied as they were. Images the file names by uri are
+// referred to where they are (a path relative to `final_dir`, where baked.gltf will lie); embedded
+// ones are copied into the buffer. Writes `file` and its buffer (same stem, .bin). Returns
+// warnings (each a line) for what could not be carried over.
+std::vector<std::string> write_scene_gltf(const std::filesystem::path& file, const std::filesystem::path& final_dir,
+                                          const scene::Scene& scene,
+                                          const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
+                                          const std::vector<glm::dvec3>& irradiance, double exposure);
+
 // A linear RGB image, row 0 at the top.
 struct Image {
     int width = 0, height = 0;
@@ -62,6 +83,10 @@ Image render(const scene::Scene& scene, const mesh::Mesh& mesh,
 // Exposure that puts the 90th percentile of lit pixels (emitters are too few to matter) at
 // 0.6 linear, about 0.8 on the display.
 double auto_exposure(const Image& image);
+
+// render.png's tone curve, on linear values: identity up to a knee (0.8), then a shoulder that
+// approaches 1 smoothly.
+double tone(double x);
 
 // Linear half-float EXR, and a tone-mapped (exposure, then filmic-free Reinhard-style
 // shoulder, then sRGB) 8-bit PNG. Both through OpenImageIO; throw InternalError on failure.

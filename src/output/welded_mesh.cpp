@@ -51,8 +51,8 @@ struct PositionKeyHash {
 // (T-junctions) of finer neighbours added after it.
 class NodeWelder {
 public:
-    void add(const mesh::Element& element, const glm::dvec3& radiosity) {
-        Placed placed{&element, {}};
+    void add(const mesh::Element& element, std::uint32_t index, const glm::dvec3& radiosity) {
+        Placed placed{&element, index, {}};
         for (int i = 0; i < element.poly.n; ++i) {
             placed.ids[i] = vertex(element.poly.v[i], element.normal, element.back);
             accumulate(placed.ids[i], element, radiosity);
@@ -84,6 +84,7 @@ private:
 
     struct Placed {
         const mesh::Element* element;
+        std::uint32_t index;  // in the mesh
         std::uint32_t ids[4];
     };
 
@@ -179,6 +180,7 @@ private:
         if (a == b || b == c || a == c) return;  // collapsed: nothing to draw, and validators warn
         node_.indices.insert(node_.indices.end(), {a, b, c});
         node_.has_twin.push_back(has_twin ? 1 : 0);
+        node_.element.push_back(element_);
     }
 
     // An element's triangles: a quad as two (v0 v1 v2, v0 v2 v3), a triangle as itself, as
@@ -186,6 +188,7 @@ private:
     // with those vertices, cut into triangles by ear clipping (see clip_ears).
     void triangulate(const Placed& placed) {
         const mesh::Element& e = *placed.element;
+        element_ = placed.index;
         const int n = e.poly.n;
         const std::uint32_t* ids = placed.ids;
         // Fast path: no vertex may be at any edge's midpoint (the four filter probes are
@@ -322,6 +325,7 @@ private:
     };
 
     WeldedNode node_;
+    std::uint32_t element_ = 0;  // the element being triangulated
     std::unordered_map<PositionKey, std::uint32_t, PositionKeyHash> first_at_;
     std::vector<std::uint32_t> next_at_same_position_;  // vertices on different sides of a crease
     std::vector<glm::dvec3> cluster_normal_;            // the first element's: what others match
@@ -351,7 +355,7 @@ WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vecto
         if (element.node >= node_count) {
             throw InternalError(fmt::format("output: element {} names node {} of {}", i, element.node, node_count));
         }
-        welders[element.node].add(element, radiosity[i]);
+        welders[element.node].add(element, static_cast<std::uint32_t>(i), radiosity[i]);
     }
     WeldedMesh welded;
     welded.nodes.reserve(node_count);

@@ -20,6 +20,7 @@ struct WeldedNode {
     // Per triangle: its element has a twin facing the other way, so its back is never seen
     // (the twin's front is drawn there instead).
     std::vector<std::uint8_t> has_twin;
+    std::vector<std::uint32_t> element;  // per triangle: the element it is part of (mesh index)
 
     std::size_t triangle_count() const { return indices.size() / 3; }
 };

@@ -28,6 +28,7 @@
 #include "core/error.h"
 #include "core/regular_file.h"
 #include "scene/gltf_compression.h"
+#include "scene/gltf_source.h"
 #include "scene/image_mean.h"
 
 namespace hemirad::scene {
@@ -52,6 +53,7 @@ struct UvSource {
 // built, and which once-per-kind warnings have already been given.
 struct Loader {
     const tinygltf::Model& model;
+    GltfSource& source;  // holds model
     std::string file;  // as the caller named it; every message starts with it
     Scene& scene;
     std::set<std::string> warned;
@@ -1114,6 +1116,7 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
     const bool mirrored = glm::determinant(glm::dmat3(world)) < 0.0;
     bool clamped = false;
     const std::uint32_t primitive = primitive_counter++;
+    L.source.primitives.push_back({ref.mesh, ref.index});
     for (std::size_t k = 0; k < indices.size(); k += 3) {
         Triangle t;
         for (int v = 0; v < 3; ++v) {
@@ -1129,9 +1132,11 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
             t.rho[std::size_t(v)] = rho;
             if (!uvs[0].empty()) t.uv_base[std::size_t(v)] = glm::vec2(uvs[0][i]);
             if (!uvs[1].empty()) t.uv_emissive[std::size_t(v)] = glm::vec2(uvs[1][i]);
+            t.corner[std::size_t(v)] = i;
         }
         if (mirrored) {
             std::swap(t.p[1], t.p[2]);
+            std::swap(t.corner[1], t.corner[2]);
             std::swap(t.rho[1], t.rho[2]);
             std::swap(t.uv_base[1], t.uv_base[2]);
             std::swap(t.uv_emissive[1], t.uv_emissive[2]);
@@ -1334,8 +1339,17 @@ Scene load(const std::filesystem::path& file) {
     scene.path = file;
     const std::string name = file.string();
     std::map<int, EncodedImage> images;
-    const tinygltf::Model model = parse(file, name, scene.warnings, images);
-    Loader L{model, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}, {}, {}};
+    auto source = std::make_shared<GltfSource>();
+    source->model = parse(file, name, scene.warnings, images);
+    source->base_dir = base_dir(name);
+    const tinygltf::Model& model = source->model;
+    for (std::size_t i = 0; i < model.images.size(); ++i) {  // data uris: tinygltf keeps no uri for them
+        const tinygltf::Image& image = model.images[i];
+        const auto kept = images.find(int(i));
+        if (image.uri.empty() && image.bufferView < 0 && kept != images.end() && !kept->second.bytes.empty())
+            source->embedded_images[int(i)] = kept->second.bytes;
+    }
+    Loader L{model, *source, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}, {}, {}};
 
     // Converted in file order so a primitive's material index is also its Scene index.
     for (std::size_t i = 0; i < model.materials.size(); ++i) scene.materials.push_back(convert_material(L, int(i)));
@@ -1367,6 +1381,7 @@ Scene load(const std::filesystem::path& file) {
                          : !mesh.name.empty() ? mesh.name
                                               : fmt::format("node{}", inst.node);
         mesh_node.gltf_node = inst.node;
+        mesh_node.world = inst.world;
         const auto scene_node = std::uint32_t(scene.nodes.size());
         scene.nodes.push_back(mesh_node);
         for (std::size_t p = 0; p < mesh.primitives.size(); ++p) {
@@ -1386,7 +1401,8 @@ Scene load(const std::filesystem::path& file) {
         L.warn(fmt::format("{} material{} reflect{} 1, which cannot conserve energy; clamped to {}: {}", L.clamped.size(),
                            L.clamped.size() == 1 ? "" : "s", L.clamped.size() == 1 ? "s" : "", kMaxReflectance, names));
     }
-compute_bbox(scene);
+    compute_bbox(scene);
+    scene.source = std::move(source);
     return scene;
 }
 

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,8 @@
 #include "scene/texture.h"
 
 namespace hemirad::scene {
+
+struct GltfSource;
 
 struct Material {
     std::string name;
@@ -51,12 +54,16 @@ struct Triangle {
     // emissive textures, KHR_texture_transform applied; zero when it has none.
     std::array<glm::vec2, 3> uv_base{}, uv_emissive{};
     std::uint8_t uv_slots = 0;  // bit 0: uv_base holds coordinates; bit 1: uv_emissive does
+    // The primitive's vertex index at each corner (in p's order): baked.gltf interpolates the
+    // file's attributes from them (GltfSource).
+    std::array<std::uint32_t, 3> corner{};
 };
 
 // A glTF node that holds a mesh: one entry per such node, in glTF node order.
 struct MeshNode {
     std::string name;  // node name, else mesh name, else "node<index>"
     int gltf_node = -1;
+    glm::dmat4 world{1.0};  // the node's world transform (its triangles are in world space)
     // Added by hemirad, not the file (the sky dome): left out of baked.gltf and report.json's
     // meshes. It comes after the file's nodes.
     bool synthetic = false;
@@ -114,6 +121,8 @@ struct Scene {
     std::size_t skipped_primitives = 0; // non-triangle modes
     std::vector<PunctualLight> lights;  // KHR_lights_punctual lights the scene's nodes place
     glm::dvec3 bbox_min{0.0}, bbox_max{0.0};
+    // The file as loaded (null for scenes built in code): baked.gltf's source.
+    std::shared_ptr<const GltfSource> source;
 
     double diagonal() const { return glm::length(bbox_max - bbox_min); }
 };
