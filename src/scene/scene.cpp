@@ -331,7 +331,8 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     // A required extension the loader does not know may change what the file means: said, not
     // silently ignored (those that change geometry are all decoded above).
     static const std::set<std::string> kRead = {"KHR_mesh_quantization", "EXT_meshopt_compression",
-                                                "KHR_draco_mesh_compression", "KHR_materials_emissive_strength"};
+                                                "KHR_draco_mesh_compression", "KHR_materials_emissive_strength",
+                                                "KHR_lights_punctual", "KHR_texture_transform"};
     for (const std::string& required : model.extensionsRequired)
         if (kRead.count(required) == 0)
             warnings.push_back(fmt::format("{}: required extension {} is not supported; the scene is read without it",
