@@ -167,3 +167,62 @@ TEST_CASE("the bundled atrium takes in the sun's flux through its roof's opening
     }
     CHECK(landed == Approx(flux).epsilon(1e-3));
 }
+
+TEST_CASE("a sun on a tessellated ball lights each front element by exactly cos(theta) and shades the floor by its outline",
+          "[sun]") {
+    // A one-sided UV sphere of radius 1 (64 × 32) 1.2 m above an 8 m floor. The ball is convex: no
+    // front element can shade another, so each gets cos θ exactly, whether it holds cell centres
+    // or (with cells twice the median element) is lit by its centroid's test against its
+    // neighbours' planes, which must not shade a curved surface by itself. The floor loses the
+    // ball's outline: E (A cos θ − P), P the sum over the ball's front elements of cos θ A.
+    hemirad::scene::Scene s;
+    const std::uint32_t grey = hemirad::scene::add_material(s, dvec3(0.5), dvec3(0.0));
+    hemirad::scene::add_quad(s, {-4, 0, -4}, {-4, 0, 4}, {4, 0, 4}, {4, 0, -4}, grey, "floor");
+    s.nodes.push_back({"ball", 1});
+    const int segments = 64, rings = 32;
+    const dvec3 centre(0, 1.2, 0);
+    const auto at = [&](int ring, int segment) {
+        const double polar = M_PI * ring / rings, azimuth = 2 * M_PI * segment / segments;
+        return centre + dvec3(std::sin(polar) * std::cos(azimuth), std::cos(polar), std::sin(polar) * std::sin(azimuth));
+    };
+    for (int r = 0; r < rings; ++r)
+        for (int g = 0; g < segments; ++g) {
+            const dvec3 a = at(r, g), b = at(r, g + 1), c = at(r + 1, g + 1), d = at(r + 1, g);
+            // Counter-clockwise seen from outside.
+            if (r > 0) s.triangles.push_back({{a, b, c}, {dvec3(0.5), dvec3(0.5), dvec3(0.5)}, grey, 1, 1});
+            if (r < rings - 1) s.triangles.push_back({{a, c, d}, {dvec3(0.5), dvec3(0.5), dvec3(0.5)}, grey, 1, 1});
+        }
+    hemirad::scene::finish(s);
+    const hemirad::mesh::Mesh mesh = hemirad::mesh::build(s, {0.5, 0.25});
+    const double theta = 0.5;
+    const dvec3 d(std::sin(theta), -std::cos(theta), 0.0);
+    for (const double cell : {1.0 / 16.0, 2.0}) {
+        DYNAMIC_SECTION("cells of " << cell << " of the median element") {
+            hemirad::formfactor::ShotResult row;
+            hemirad::formfactor::shoot_parallel(mesh, d, 1, row, {cell, 4096, 0});
+            const std::vector<double> F = row.dense(mesh.elements.size());
+            double outline = 0.0, floor_lit = 0.0, floor_area = 0.0;
+            std::size_t front = 0;
+            for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
+                const hemirad::mesh::Element& e = mesh.elements[k];
+                const double cos_theta = -glm::dot(e.normal, d);
+                if (e.node == 1) {
+                    if (cos_theta > 0.0) {
+                        ++front;
+                        outline += cos_theta * e.area;
+                        INFO("ball element " << k << " at " << e.centroid.x << ", " << e.centroid.y << ", " << e.centroid.z);
+                        CHECK(F[k] == Approx(cos_theta).epsilon(1e-12));
+                    } else {
+                        CHECK(F[k] == 0.0);
+                    }
+                } else {
+                    floor_lit += F[k] * e.area;
+                    floor_area += e.area;
+                }
+            }
+            CHECK(front > 1000);
+            CHECK(outline == Approx(M_PI).epsilon(0.01));  // the polyhedron's outline, a little inside the circle's
+            CHECK(floor_lit == Approx(floor_area * std::cos(theta) - outline).epsilon(0.005));
+        }
+    }
+}
