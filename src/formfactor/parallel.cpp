@@ -166,6 +166,7 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
             for (int tx = d.i0 / kTile; tx <= d.i1 / kTile; ++tx)
                 bins[static_cast<std::size_t>(ty) * tiles_x + tx].push_back(static_cast<std::uint32_t>(q));
     }
+    xy = {};  // snapped: no longer needed
 
     // Draw the tiles: per cell the nearest element along the light (the first in mesh order on
     // a tie), then count the cells each element won.
