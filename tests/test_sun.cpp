@@ -9,7 +9,9 @@
 #include <glm/gtc/quaternion.hpp>
 
 #include "cli_support.h"
+#include "cl/runtime.h"
 #include "formfactor/parallel.h"
+#include "formfactor/parallel_opencl.h"
 #include "mesh/mesh.h"
 #include "rect_scenes.h"
 #include "scene/builder.h"
@@ -41,6 +43,29 @@ void check_sun(const json& report, double E) {
     CHECK(irradiance(report, "shaded") < 1e-3 * E);
     CHECK(irradiance(report, "half") == Approx(0.5 * E * std::cos(kTheta)).epsilon(0.02));
     CHECK(radiosity(report, "lit") == Approx(0.5 * irradiance(report, "lit")));
+}
+
+// A one-sided UV sphere of radius 1 (64 × 32 faces, node "ball") 1.2 m above an 8 m floor.
+hemirad::scene::Scene ball_over_floor() {
+    hemirad::scene::Scene s;
+    const std::uint32_t grey = hemirad::scene::add_material(s, dvec3(0.5), dvec3(0.0));
+    hemirad::scene::add_quad(s, {-4, 0, -4}, {-4, 0, 4}, {4, 0, 4}, {4, 0, -4}, grey, "floor");
+    s.nodes.push_back({"ball", 1});
+    const int segments = 64, rings = 32;
+    const dvec3 centre(0, 1.2, 0);
+    const auto at = [&](int ring, int segment) {
+        const double polar = M_PI * ring / rings, azimuth = 2 * M_PI * segment / segments;
+        return centre + dvec3(std::sin(polar) * std::cos(azimuth), std::cos(polar), std::sin(polar) * std::sin(azimuth));
+    };
+    for (int r = 0; r < rings; ++r)
+        for (int g = 0; g < segments; ++g) {
+            const dvec3 a = at(r, g), b = at(r, g + 1), c = at(r + 1, g + 1), d = at(r + 1, g);
+            // Counter-clockwise seen from outside.
+            if (r > 0) s.triangles.push_back({{a, b, c}, {dvec3(0.5), dvec3(0.5), dvec3(0.5)}, grey, 1, 1});
+            if (r < rings - 1) s.triangles.push_back({{a, c, d}, {dvec3(0.5), dvec3(0.5), dvec3(0.5)}, grey, 1, 1});
+        }
+    hemirad::scene::finish(s);
+    return s;
 }
 
 }  // namespace
@@ -175,24 +200,7 @@ TEST_CASE("a sun on a tessellated ball lights each front element by exactly cos(
     // or (with cells twice the median element) is lit by its centroid's test against its
     // neighbours' planes, which must not shade a curved surface by itself. The floor loses the
     // ball's outline: E (A cos θ − P), P the sum over the ball's front elements of cos θ A.
-    hemirad::scene::Scene s;
-    const std::uint32_t grey = hemirad::scene::add_material(s, dvec3(0.5), dvec3(0.0));
-    hemirad::scene::add_quad(s, {-4, 0, -4}, {-4, 0, 4}, {4, 0, 4}, {4, 0, -4}, grey, "floor");
-    s.nodes.push_back({"ball", 1});
-    const int segments = 64, rings = 32;
-    const dvec3 centre(0, 1.2, 0);
-    const auto at = [&](int ring, int segment) {
-        const double polar = M_PI * ring / rings, azimuth = 2 * M_PI * segment / segments;
-        return centre + dvec3(std::sin(polar) * std::cos(azimuth), std::cos(polar), std::sin(polar) * std::sin(azimuth));
-    };
-    for (int r = 0; r < rings; ++r)
-        for (int g = 0; g < segments; ++g) {
-            const dvec3 a = at(r, g), b = at(r, g + 1), c = at(r + 1, g + 1), d = at(r + 1, g);
-            // Counter-clockwise seen from outside.
-            if (r > 0) s.triangles.push_back({{a, b, c}, {dvec3(0.5), dvec3(0.5), dvec3(0.5)}, grey, 1, 1});
-            if (r < rings - 1) s.triangles.push_back({{a, c, d}, {dvec3(0.5), dvec3(0.5), dvec3(0.5)}, grey, 1, 1});
-        }
-    hemirad::scene::finish(s);
+    const hemirad::scene::Scene s = ball_over_floor();
     const hemirad::mesh::Mesh mesh = hemirad::mesh::build(s, {0.5, 0.25});
     const double theta = 0.5;
     const dvec3 d(std::sin(theta), -std::cos(theta), 0.0);
@@ -225,4 +233,63 @@ TEST_CASE("a sun on a tessellated ball lights each front element by exactly cos(
             CHECK(floor_lit == Approx(floor_area * std::cos(theta) - outline).epsilon(0.005));
         }
     }
+}
+
+TEST_CASE("a parallel shot on every OpenCL device gives the host's owner for every cell, and the same rows",
+          "[sun][opencl]") {
+    const auto devices = hemirad::ocl::list_devices();
+    if (devices.empty()) {
+        WARN("no OpenCL device: skipped");
+        return;
+    }
+    // The ball over its floor, and a floor under a one-sided roof and beside a double-sided card,
+    // at several angles and turns of the grid, with cells finer and coarser than the elements.
+    hemirad::scene::Scene shadow;
+    const std::uint32_t grey = hemirad::scene::add_material(shadow, dvec3(0.5), dvec3(0.0));
+    const std::uint32_t twin = hemirad::scene::add_material(shadow, dvec3(0.5), dvec3(0.0), /*double_sided=*/true);
+    hemirad::scene::add_quad(shadow, {-1, 0, -1}, {-1, 0, 1}, {1, 0, 1}, {1, 0, -1}, grey, "floor");
+    hemirad::scene::add_quad(shadow, {-0.5, 1, -0.5}, {0.5, 1, -0.5}, {0.5, 1, 0.5}, {-0.5, 1, 0.5}, grey, "roof");
+    hemirad::scene::add_quad(shadow, {2, 1, 0}, {2, 1, 0.5}, {2.5, 1, 0.5}, {2.5, 1, 0}, twin, "card");
+    hemirad::scene::finish(shadow);
+    const hemirad::scene::Scene ball = ball_over_floor();
+    const std::vector<hemirad::mesh::Mesh> meshes = {hemirad::mesh::build(shadow, {0.25, 0.125}),
+                                                     hemirad::mesh::build(ball, {0.5, 0.25})};
+    for (const hemirad::ocl::DeviceInfo& info : devices) {
+        if (!info.fp64) continue;
+        hemirad::ocl::Context context(info);
+        hemirad::formfactor::OpenCLParallelRaster device(context);
+        hemirad::formfactor::VerifyingParallelRaster checked(device);
+        for (std::size_t m = 0; m < meshes.size(); ++m)
+            for (const double theta : {0.0, 0.4, 1.2})
+                for (const double cell : {1.0 / 16.0, 2.0}) {
+                    INFO(info.name << ", mesh " << m << ", theta " << theta << ", cell " << cell);
+                    const dvec3 d(std::sin(theta) * 0.8, -std::cos(theta), std::sin(theta) * 0.6);
+                    hemirad::formfactor::ShotResult host, on_device;
+                    hemirad::formfactor::shoot_parallel(meshes[m], d, 5, host, {cell, 4096, 0});
+                    // The checked raster throws (VerifyError) at the first cell or count that differs.
+                    hemirad::formfactor::shoot_parallel(meshes[m], d, 5, on_device, {cell, 4096, 0}, &checked);
+                    CHECK(host == on_device);
+                    CHECK(host.size() > 0);
+                }
+        CHECK(checked.cells_compared() > 100000);
+    }
+}
+
+TEST_CASE("a sunlit bake gives the same bytes on the reference and on OpenCL, and passes its verification",
+          "[sun][opencl][cli]") {
+    if (hemirad::ocl::list_devices().empty()) {
+        WARN("no OpenCL device: skipped");
+        return;
+    }
+    TempDir dir;
+    const fs::path atrium = kSourceDir / "scenes" / "atrium.gltf";
+    const std::vector<std::string> draft = {"--quality", "draft"};
+    auto with = [&](std::vector<std::string> extra) {
+        extra.insert(extra.end(), draft.begin(), draft.end());
+        return extra;
+    };
+    bake_ok(dir, atrium, dir / "ref", with({"--device", "ref"}));
+    const json verified = bake_ok(dir, atrium, dir / "cl", with({"--device", "opencl", "--verify"}));
+    CHECK(read_text(dir / "ref" / "baked.bin") == read_text(dir / "cl" / "baked.bin"));
+    CHECK(verified["device"]["backend"] == "opencl");
 }

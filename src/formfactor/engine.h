@@ -12,6 +12,8 @@
 
 namespace hemirad::formfactor {
 
+class ParallelRaster;
+
 struct Settings {
     int hemicube = 256;       // resolution N: top face N×N, four half faces N×N/2; even, >= 8
     std::uint64_t seed = 1;   // drives the per-shot rotation of the hemicube about the normal
@@ -140,6 +142,9 @@ public:
         (void)i;
         return nullptr;
     }
+    // What draws a directional light's parallel shots (parallel.h) on this engine's device; null:
+    // the host does. Decorators pass their inner engine's on.
+    virtual ParallelRaster* parallel_raster() { return nullptr; }
 };
 
 }  // namespace hemirad::formfactor

@@ -922,4 +922,9 @@ const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t shot) const 
     return &ids_[i];
 }
 
+ParallelRaster* OpenCLEngine::parallel_raster() {
+    if (!parallel_) parallel_ = std::make_unique<OpenCLParallelRaster>(context_);
+    return parallel_.get();
+}
+
 }  // namespace hemirad::formfactor

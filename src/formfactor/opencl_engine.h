@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,7 @@
 #include "formfactor/device_mesh.h"
 #include "formfactor/engine.h"
 #include "formfactor/hemicube.h"
+#include "formfactor/parallel_opencl.h"
 
 namespace hemirad::formfactor {
 
@@ -111,6 +113,8 @@ public:
     static constexpr std::int32_t kBlocker = -2;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
     const std::string& build_options() const { return options_; }
+    // Directional lights' parallel shots on this device (kernels/parallel.cl), built on first use.
+    ParallelRaster* parallel_raster() override;
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
 
@@ -149,6 +153,7 @@ private:
 
     const mesh::Mesh& mesh_;
     ocl::Context& context_;
+    std::unique_ptr<OpenCLParallelRaster> parallel_;
     Settings settings_;
     OpenCLTuning tuning_;
     std::string options_;

@@ -14,16 +14,15 @@
 namespace hemirad::formfactor {
 namespace {
 
-constexpr int kTile = 128;  // cells per side of a tile, drawn by one thread at a time
 constexpr double kMaxSlope = 64.0;  // of the centroid test's bias: grazing surfaces are not lit through walls
+constexpr std::uint32_t kNoRecord = 0xffffffffu;
 
-// One element as the grid sees it: its snapped polygon (counter-clockwise, kSubcell units per
-// cell), its cell box, and its plane, which gives the depth along the light at a cell's centre.
+// One element as the grid sees it, before it becomes a record: its projected polygon, its plane,
+// which gives the depth along the light at a cell's centre, and its centroid.
 struct Drawn {
     std::uint32_t element = 0;
     int n = 0;
-    std::int64_t px[4], py[4];
-    int i0 = 0, i1 = -1, j0 = 0, j1 = -1;  // cells whose centres its box holds
+    double x[4], y[4];
     double nu = 0.0, nv = 0.0, nw = 0.0, c = 0.0;  // n·(x u + y v + z w) = c in the grid's frame
     double cx = 0.0, cy = 0.0, cz = 0.0;           // its centroid in the grid's frame
     bool blocker = false;
@@ -32,12 +31,11 @@ struct Drawn {
     double slope() const { return std::sqrt(nu * nu + nv * nv) / std::abs(nw); }  // |∇ depth|
 };
 
-// Per element: the cell centres its polygon holds, those of them where it is the nearest, and
-// (for elements that hold none) whether its centroid is in the light.
-struct Counts {
-    std::vector<std::int64_t> covered, won;
-    explicit Counts(std::size_t n) : covered(n, 0), won(n + 1, 0) {}
-};
+// Record r's depth at the centre of cell (i, j): exactly as kernels/parallel.cl computes it.
+double record_depth(const ParallelRecords& r, std::size_t q, int i, int j) {
+    const double x = (i + 0.5) * r.grid.cell + r.xmin, y = (j + 0.5) * r.grid.cell + r.ymin;
+    return (r.plane[4 * q + 3] - r.plane[4 * q] * x - r.plane[4 * q + 1] * y) / r.plane[4 * q + 2];
+}
 
 std::int64_t snap(double cells) { return static_cast<std::int64_t>(std::floor(cells * kSubcell + 0.5)); }
 
@@ -54,8 +52,62 @@ double median_edge(const mesh::Mesh& mesh) {
 
 }  // namespace
 
+void draw_parallel(const ParallelRecords& records, std::vector<std::int32_t>& owner, std::vector<std::uint32_t>& covered,
+                   int threads) {
+    const ParallelGrid& grid = records.grid;
+    owner.assign(static_cast<std::size_t>(grid.width) * static_cast<std::size_t>(grid.height), -1);
+    const std::size_t tiles = static_cast<std::size_t>(records.tiles_x) * static_cast<std::size_t>(records.tiles_y);
+    const int workers = std::max(1, std::min<int>(threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency()),
+                                                  static_cast<int>(std::max<std::size_t>(tiles, 1))));
+    // Cell-centre counts per worker, summed after: integers, so in any order.
+    std::vector<std::vector<std::uint32_t>> counts(static_cast<std::size_t>(workers),
+                                                   std::vector<std::uint32_t>(records.size(), 0));
+    std::atomic<std::size_t> next{0};
+    const auto work = [&](std::vector<std::uint32_t>& count) {
+        constexpr int T = kParallelTile;
+        double depth[T * T];
+        std::int32_t best[T * T];
+        for (std::size_t t; (t = next.fetch_add(1)) < tiles;) {
+            const std::uint32_t first = records.bin_start[t], end = records.bin_start[t + 1];
+            if (first == end) continue;
+            const int ti = static_cast<int>(t % static_cast<std::size_t>(records.tiles_x)) * T;
+            const int tj = static_cast<int>(t / static_cast<std::size_t>(records.tiles_x)) * T;
+            std::fill(best, best + T * T, -1);
+            for (std::uint32_t k = first; k < end; ++k) {
+                const std::uint32_t q = records.bin_items[k];
+                const std::int32_t* shape = &records.shape[5 * std::size_t(q)];
+                const int i0 = std::max(shape[1], ti), i1 = std::min(shape[2], ti + T - 1);
+                const int j0 = std::max(shape[3], tj), j1 = std::min(shape[4], tj + T - 1);
+                for (int j = j0; j <= j1; ++j)
+                    for (int i = i0; i <= i1; ++i) {
+                        if (!covers_cell(&records.px[4 * std::size_t(q)], &records.py[4 * std::size_t(q)], shape[0], i, j))
+                            continue;
+                        ++count[q];
+                        const double z = record_depth(records, q, i, j);
+                        const int c = (j - tj) * T + (i - ti);
+                        if (best[c] < 0 || z < depth[c]) {  // records ascend: a tie keeps the first
+                            depth[c] = z;
+                            best[c] = static_cast<std::int32_t>(q);
+                        }
+                    }
+            }
+            for (int j = tj; j < std::min(tj + T, grid.height); ++j)
+                for (int i = ti; i < std::min(ti + T, grid.width); ++i)
+                    owner[static_cast<std::size_t>(j) * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(i)] =
+                        best[(j - tj) * T + (i - ti)];
+        }
+    };
+    std::vector<std::thread> pool;
+    for (int i = 1; i < workers; ++i) pool.emplace_back(work, std::ref(counts[static_cast<std::size_t>(i)]));
+    work(counts[0]);
+    for (std::thread& t : pool) t.join();
+    covered = std::move(counts[0]);
+    for (std::size_t i = 1; i < counts.size(); ++i)
+        for (std::size_t q = 0; q < covered.size(); ++q) covered[q] += counts[i][q];
+}
+
 ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction, std::uint64_t shot, ShotResult& out,
-                            const ParallelSettings& settings) {
+                            const ParallelSettings& settings, ParallelRaster* raster) {
     out.clear();
     const double length = glm::length(direction);
     if (!(std::abs(length - 1.0) < 1e-9)) throw InternalError("parallel shot: the direction must be a unit vector");
@@ -76,7 +128,6 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
 
     // Project the elements that face the light, or block it.
     std::vector<Drawn> drawn;
-    std::vector<std::array<double, 8>> xy;  // their projected vertices, x then y
     double xmin = HUGE_VAL, xmax = -HUGE_VAL, ymin = HUGE_VAL, ymax = -HUGE_VAL;
     for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
         const mesh::Element& e = mesh.elements[k];
@@ -92,11 +143,10 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
         d.nu = glm::dot(e.normal, frame.u);
         d.nv = glm::dot(e.normal, frame.v);
         d.nw = nw;
-        std::array<double, 8> p{};
         for (int i = 0; i < e.poly.n; ++i) {
             const glm::dvec3 local = frame.to_local(e.poly.v[i]);
-            p[i] = local.x;
-            p[4 + i] = local.y;
+            d.x[i] = local.x;
+            d.y[i] = local.y;
             xmin = std::min(xmin, local.x);
             xmax = std::max(xmax, local.x);
             ymin = std::min(ymin, local.y);
@@ -108,7 +158,6 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
         d.cy = centroid.y;
         d.cz = centroid.z;
         drawn.push_back(d);
-        xy.push_back(p);
     }
     if (drawn.empty()) return grid;
 
@@ -118,38 +167,36 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
     if (!(cell > 0.0) || extent / cell > settings.max_cells - 1) cell = extent / (settings.max_cells - 1);
     if (!(cell > 0.0)) return grid;  // every element edge-on or a point
     grid.cell = cell;
-    // Depths closer than this are one surface (the centroid test below).
-    const double tolerance = 1e-9 * std::max({extent, xmax - xmin, std::abs(xmin), std::abs(xmax), std::abs(ymin), std::abs(ymax)});
     grid.width = std::min(settings.max_cells, static_cast<int>(std::ceil((xmax - xmin) / cell)) + 1);
     grid.height = std::min(settings.max_cells, static_cast<int>(std::ceil((ymax - ymin) / cell)) + 1);
-    const int tiles_x = (grid.width + kTile - 1) / kTile, tiles_y = (grid.height + kTile - 1) / kTile;
+    // Depths closer than this are one surface (the centroid test below).
+    const double tolerance = 1e-9 * std::max({extent, std::abs(xmin), std::abs(xmax), std::abs(ymin), std::abs(ymax)});
 
-    // Snap, orient counter-clockwise, and bin each element into the tiles its cell box meets, and
-    // into the probes of the tile that holds its centroid.
-    std::vector<std::vector<std::uint32_t>> bins(static_cast<std::size_t>(tiles_x) * tiles_y);
-    std::vector<std::vector<std::uint32_t>> probes(bins.size());
-    const auto cell_of = [cell](double at, double from, int cells) {
-        return std::clamp(static_cast<int>(std::floor((at - from) / cell)), 0, cells - 1);
-    };
+    // Records: snapped, counter-clockwise, with their cell boxes, binned by tile.
+    ParallelRecords records;
+    records.grid = grid;
+    records.xmin = xmin;
+    records.ymin = ymin;
+    records.tiles_x = (grid.width + kParallelTile - 1) / kParallelTile;
+    records.tiles_y = (grid.height + kParallelTile - 1) / kParallelTile;
+    std::vector<std::uint32_t> record_of(drawn.size(), kNoRecord);
+    std::vector<std::uint32_t> drawn_of;  // per record
     for (std::size_t q = 0; q < drawn.size(); ++q) {
-        Drawn& d = drawn[q];
+        const Drawn& d = drawn[q];
+        std::int64_t px[4] = {0, 0, 0, 0}, py[4] = {0, 0, 0, 0};
+        for (int i = 0; i < d.n; ++i) {
+            px[i] = snap((d.x[i] - xmin) / cell);
+            py[i] = snap((d.y[i] - ymin) / cell);
+        }
         std::int64_t area2 = 0;
         for (int i = 0; i < d.n; ++i) {
-            d.px[i] = snap((xy[q][i] - xmin) / cell);
-            d.py[i] = snap((xy[q][4 + i] - ymin) / cell);
-        }
-        for (int i = 0; i < d.n; ++i) {
             const int j = (i + 1) % d.n;
-            area2 += d.px[i] * d.py[j] - d.px[j] * d.py[i];
+            area2 += px[i] * py[j] - px[j] * py[i];
         }
         if (area2 == 0) continue;
-        if (!d.blocker) {
-            const int ci = cell_of(d.cx, xmin, grid.width), cj = cell_of(d.cy, ymin, grid.height);
-            probes[static_cast<std::size_t>(cj / kTile) * tiles_x + ci / kTile].push_back(static_cast<std::uint32_t>(q));
-        }
         if (area2 < 0) {
-            std::reverse(d.px, d.px + d.n);
-            std::reverse(d.py, d.py + d.n);
+            std::reverse(px, px + d.n);
+            std::reverse(py, py + d.n);
         }
         const auto first = [](std::int64_t lo) {
             return static_cast<int>(std::ceil(static_cast<double>(lo - kSubcell / 2) / kSubcell));
@@ -157,92 +204,88 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
         const auto last = [](std::int64_t hi) {
             return static_cast<int>(std::floor(static_cast<double>(hi - kSubcell / 2) / kSubcell));
         };
-        d.i0 = std::max(0, first(*std::min_element(d.px, d.px + d.n)));
-        d.i1 = std::min(grid.width - 1, last(*std::max_element(d.px, d.px + d.n)));
-        d.j0 = std::max(0, first(*std::min_element(d.py, d.py + d.n)));
-        d.j1 = std::min(grid.height - 1, last(*std::max_element(d.py, d.py + d.n)));
-        if (d.i0 > d.i1 || d.j0 > d.j1) continue;
-        for (int ty = d.j0 / kTile; ty <= d.j1 / kTile; ++ty)
-            for (int tx = d.i0 / kTile; tx <= d.i1 / kTile; ++tx)
-                bins[static_cast<std::size_t>(ty) * tiles_x + tx].push_back(static_cast<std::uint32_t>(q));
+        const int i0 = std::max(0, first(*std::min_element(px, px + d.n)));
+        const int i1 = std::min(grid.width - 1, last(*std::max_element(px, px + d.n)));
+        const int j0 = std::max(0, first(*std::min_element(py, py + d.n)));
+        const int j1 = std::min(grid.height - 1, last(*std::max_element(py, py + d.n)));
+        record_of[q] = static_cast<std::uint32_t>(drawn_of.size());
+        drawn_of.push_back(static_cast<std::uint32_t>(q));
+        records.px.insert(records.px.end(), px, px + 4);
+        records.py.insert(records.py.end(), py, py + 4);
+        // An empty box (i0 > i1) holds no centre: the record is only probed (below).
+        records.shape.insert(records.shape.end(), {d.n, i0, i1, j0, j1});
+        records.plane.insert(records.plane.end(), {d.nu, d.nv, d.nw, d.c});
     }
-    xy = {};  // snapped: no longer needed
-
-    // Draw the tiles: per cell the nearest element along the light (the first in mesh order on
-    // a tie), then count the cells each element won.
-    const int threads = std::max(1, std::min<int>(settings.threads > 0 ? settings.threads
-                                                                        : static_cast<int>(std::thread::hardware_concurrency()),
-                                                  static_cast<int>(bins.size())));
-    std::vector<Counts> counts(static_cast<std::size_t>(threads), Counts(drawn.size()));
-    std::vector<char> centroid_lit(drawn.size(), 0);  // each written by the one tile that probes it
-    std::atomic<std::size_t> next{0};
-    const auto work = [&](Counts& count) {
-        std::vector<double> depth(static_cast<std::size_t>(kTile) * kTile);
-        std::vector<std::int32_t> owner(depth.size());
-        for (std::size_t t; (t = next.fetch_add(1)) < bins.size();) {
-            if (bins[t].empty() && probes[t].empty()) continue;
-            const int ti = static_cast<int>(t % tiles_x) * kTile, tj = static_cast<int>(t / tiles_x) * kTile;
-            std::fill(owner.begin(), owner.end(), -1);
-            for (const std::uint32_t q : bins[t]) {
-                const Drawn& d = drawn[q];
-                const int i0 = std::max(d.i0, ti), i1 = std::min(d.i1, ti + kTile - 1);
-                const int j0 = std::max(d.j0, tj), j1 = std::min(d.j1, tj + kTile - 1);
-                for (int j = j0; j <= j1; ++j) {
-                    const double y = (j + 0.5) * cell + ymin;
-                    for (int i = i0; i <= i1; ++i) {
-                        if (!covers_cell(d.px, d.py, d.n, i, j)) continue;
-                        ++count.covered[q];
-                        const double z = d.depth((i + 0.5) * cell + xmin, y);
-                        const std::size_t c = static_cast<std::size_t>(j - tj) * kTile + (i - ti);
-                        if (owner[c] < 0 || z < depth[c]) {
-                            depth[c] = z;
-                            owner[c] = static_cast<std::int32_t>(q);
-                        }
-                    }
-                }
-            }
-            for (const std::int32_t q : owner)
-                if (q >= 0) ++count.won[drawn[static_cast<std::size_t>(q)].blocker ? drawn.size() : static_cast<std::size_t>(q)];
-            // An element's centroid is in the light where the nearest surface over its cell's
-            // centre, extended as a plane to the centroid, lies no nearer than it (a shadow map's
-            // test): its own surface, or a neighbour of it, ties, an occluder lies nearer. Planes
-            // of a curved surface part within a cell by up to a cell times their slopes: the bias.
-            for (const std::uint32_t q : probes[t]) {
-                const Drawn& d = drawn[q];
-                const int i = cell_of(d.cx, xmin, grid.width), j = cell_of(d.cy, ymin, grid.height);
-                const std::int32_t o = owner[static_cast<std::size_t>(j - tj) * kTile + (i - ti)];
-                if (o < 0 || static_cast<std::uint32_t>(o) == q) {
-                    centroid_lit[q] = 1;
-                    continue;
-                }
-                const Drawn& nearest = drawn[static_cast<std::size_t>(o)];
-                const double bias = tolerance + cell * std::min(d.slope() + nearest.slope(), kMaxSlope);
-                centroid_lit[q] = nearest.depth(d.cx, d.cy) >= d.cz - bias;
-            }
-        }
+    // Bins, counted then filled (compressed rows), records ascending within each.
+    const std::size_t tiles = static_cast<std::size_t>(records.tiles_x) * static_cast<std::size_t>(records.tiles_y);
+    records.bin_start.assign(tiles + 1, 0);
+    const auto for_each_tile = [&](std::size_t r, auto fn) {
+        const std::int32_t* shape = &records.shape[5 * r];
+        if (shape[1] > shape[2] || shape[3] > shape[4]) return;
+        for (int ty = shape[3] / kParallelTile; ty <= shape[4] / kParallelTile; ++ty)
+            for (int tx = shape[1] / kParallelTile; tx <= shape[2] / kParallelTile; ++tx)
+                fn(static_cast<std::size_t>(ty) * static_cast<std::size_t>(records.tiles_x) + static_cast<std::size_t>(tx));
     };
-    std::vector<std::thread> pool;
-    for (int i = 1; i < threads; ++i) pool.emplace_back(work, std::ref(counts[static_cast<std::size_t>(i)]));
-    work(counts[0]);
-    for (std::thread& t : pool) t.join();
-    Counts& total = counts[0];
-    for (std::size_t i = 1; i < counts.size(); ++i)
-        for (std::size_t q = 0; q <= drawn.size(); ++q) {
-            if (q < drawn.size()) total.covered[q] += counts[i].covered[q];
-            total.won[q] += counts[i].won[q];
-        }
+    for (std::size_t r = 0; r < records.size(); ++r) for_each_tile(r, [&](std::size_t t) { ++records.bin_start[t + 1]; });
+    for (std::size_t t = 0; t < tiles; ++t) records.bin_start[t + 1] += records.bin_start[t];
+    records.bin_items.resize(records.bin_start[tiles]);
+    {
+        std::vector<std::uint32_t> fill(records.bin_start.begin(), records.bin_start.end() - 1);
+        for (std::size_t r = 0; r < records.size(); ++r)
+            for_each_tile(r, [&](std::size_t t) { records.bin_items[fill[t]++] = static_cast<std::uint32_t>(r); });
+    }
+
+    std::vector<std::int32_t> owner;
+    std::vector<std::uint32_t> covered;
+    if (raster) {
+        raster->draw(records, owner, covered);
+    } else {
+        draw_parallel(records, owner, covered, settings.threads);
+    }
+    if (owner.size() != static_cast<std::size_t>(grid.width) * static_cast<std::size_t>(grid.height) ||
+        covered.size() != records.size())
+        throw InternalError("parallel shot: the raster returned buffers of the wrong size");
+
+    // The cells each record won; the blockers' cells are the blocked share.
+    std::vector<std::uint64_t> won(records.size(), 0);
+    std::uint64_t blocked = 0;
+    for (const std::int32_t r : owner) {
+        if (r < 0) continue;
+        if (static_cast<std::size_t>(r) >= records.size()) throw InternalError("parallel shot: a cell names no record");
+        if (drawn[drawn_of[static_cast<std::size_t>(r)]].blocker) ++blocked;
+        else ++won[static_cast<std::size_t>(r)];
+    }
 
     // An element's lit share is the share of the cell centres it holds that it won: exact for
-    // one in full light or in full shadow at any cell size. One that holds no centre (smaller
-    // than a cell) is lit or not as its centroid is.
+    // one in full light or in full shadow at any cell size. One that holds none (smaller than a
+    // cell) is lit as its centroid is: the nearest surface over its cell's centre, extended as a
+    // plane to the centroid, lies no nearer than it (a shadow map's test). Its own surface, or a
+    // neighbour of it, ties; an occluder lies nearer. Planes of a curved surface part within a
+    // cell by up to a cell times their slopes: the bias.
+    const auto cell_of = [cell](double at, double from, int cells) {
+        return std::clamp(static_cast<int>(std::floor((at - from) / cell)), 0, cells - 1);
+    };
     for (std::size_t q = 0; q < drawn.size(); ++q) {  // drawn is in element order: the row is ascending
         const Drawn& d = drawn[q];
-        if (d.blocker) continue;
-        const double lit = total.covered[q] > 0 ? static_cast<double>(total.won[q]) / static_cast<double>(total.covered[q])
-                                                : (centroid_lit[q] ? 1.0 : 0.0);
+        const std::uint32_t r = record_of[q];
+        if (d.blocker || r == kNoRecord) continue;
+        double lit = 0.0;
+        if (covered[r] > 0) {
+            lit = static_cast<double>(won[r]) / static_cast<double>(covered[r]);
+        } else {
+            const int i = cell_of(d.cx, xmin, grid.width), j = cell_of(d.cy, ymin, grid.height);
+            const std::int32_t o = owner[static_cast<std::size_t>(j) * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(i)];
+            if (o < 0 || static_cast<std::uint32_t>(o) == r) {
+                lit = 1.0;
+            } else {
+                const Drawn& nearest = drawn[drawn_of[static_cast<std::size_t>(o)]];
+                const double bias = tolerance + cell * std::min(d.slope() + nearest.slope(), kMaxSlope);
+                lit = nearest.depth(d.cx, d.cy) >= d.cz - bias ? 1.0 : 0.0;
+            }
+        }
         if (lit > 0.0) out.push(d.element, -d.nw * lit);
     }
-    out.blocked = static_cast<double>(total.won[drawn.size()]) * cell * cell;
+    out.blocked = static_cast<double>(blocked) * cell * cell;
     return grid;
 }
 

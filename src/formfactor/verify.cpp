@@ -7,6 +7,8 @@
 
 #include <fmt/core.h>
 
+#include "formfactor/parallel_opencl.h"
+
 namespace hemirad::formfactor {
 
 std::string compare_shot(const ShotResult& got, const ShotResult& want, VerifySummary* summary) {
@@ -60,6 +62,13 @@ void VerifyingEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::ve
                                           shots[i].shooter.patch, engine_->name(), problem, summary_.cells_mismatched,
                                           summary_.cells_compared));
     }
+}
+
+ParallelRaster* VerifyingEngine::parallel_raster() {
+    ParallelRaster* raster = engine_->parallel_raster();
+    if (!raster) return nullptr;
+    if (!parallel_) parallel_ = std::make_unique<VerifyingParallelRaster>(*raster);
+    return parallel_.get();
 }
 
 }  // namespace hemirad::formfactor

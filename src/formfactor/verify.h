@@ -9,6 +9,7 @@
 #include <string>
 
 #include "formfactor/engine.h"
+#include "formfactor/parallel.h"
 
 namespace hemirad::formfactor {
 
@@ -43,8 +44,12 @@ public:
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return engine_->last_ids(i); }
     const VerifySummary& summary() const { return summary_; }
+    // The engine's parallel raster checked against the host's on every parallel shot; null where
+    // the engine has none (the host draws them, which needs no check).
+    ParallelRaster* parallel_raster() override;
 
 private:
+    std::unique_ptr<ParallelRaster> parallel_;
     std::unique_ptr<Engine> engine_, reference_;
     long every_;
     ShotResult expected_;

@@ -29,7 +29,8 @@ std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<s
     formfactor::ShotResult lit;
     for (std::size_t l = 0; l < lights.size(); ++l) {
         if (!shines_in_parallel(lights[l])) continue;
-        formfactor::shoot_parallel(mesh, lights[l].direction, static_cast<std::uint64_t>(level) * lights.size() + l, lit);
+        formfactor::shoot_parallel(mesh, lights[l].direction, static_cast<std::uint64_t>(level) * lights.size() + l, lit,
+                                   {}, engine.parallel_raster());
         for (std::size_t i = 0; i < lit.size(); ++i) {
             const glm::dvec3 irradiance = lights[l].intensity * lit.F[i];
             H[lit.element[i]] += irradiance;
