@@ -293,3 +293,18 @@ TEST_CASE("a sunlit bake gives the same bytes on the reference and on OpenCL, an
     CHECK(read_text(dir / "ref" / "baked.bin") == read_text(dir / "cl" / "baked.bin"));
     CHECK(verified["device"]["backend"] == "opencl");
 }
+
+TEST_CASE("a sunlit bake counts its parallel shots' memory in its estimate", "[sun][cli]") {
+    // Under 100 MB the atrium is refused, and the refusal lists the estimate's parts.
+    TempDir dir;
+    const fs::path atrium = kSourceDir / "scenes" / "atrium.gltf";
+    const RunResult r = run_hemirad(dir, bake_args(atrium, dir / "out", {"--max-memory", "100M", "--device", "ref"}));
+    INFO(r.err);
+    CHECK(r.code == 2);
+    CHECK(r.err.find("parallel shots") != std::string::npos);
+    CHECK(!fs::exists(dir / "out"));
+    // Without the sun (the lit room: point and spot lights) there is no such part.
+    const RunResult lit = run_hemirad(dir, bake_args(kSourceDir / "scenes" / "lit_room.gltf", dir / "lit",
+                                                     {"--max-memory", "100M", "--device", "ref"}));
+    CHECK(lit.err.find("parallel shots") == std::string::npos);
+}

@@ -32,6 +32,7 @@
 #include "core/memory.h"
 #include "core/timing.h"
 #include "formfactor/near_field.h"
+#include "formfactor/parallel.h"
 #include "formfactor/row_cache.h"
 #include "mesh/mesh.h"
 #include "mesh/texturing.h"
@@ -615,6 +616,14 @@ void run_bake(const BakeOptions& options) {
         for (const glm::dvec3& rho : t.rho) shape.max_reflectance = std::max({shape.max_reflectance, rho.x, rho.y, rho.z});
     shape.refine_levels = plan.refinement.on ? o.refine_levels : 0;
     shape.pixels = double(width) * double(height);
+    // A parallel shot's grid follows the median element, which the counts do not give (clusters'
+    // faces can be far smaller than the element size): counted at its cap.
+    if (std::any_of(scene.lights.begin(), scene.lights.end(), [](const scene::PunctualLight& l) {
+            return l.type == scene::PunctualLight::Type::directional && l.intensity != glm::dvec3(0.0);
+        })) {
+        const double side = formfactor::ParallelSettings().max_cells;
+        shape.parallel_cells = side * side;
+    }
     std::string solver_name = o.solver, solver_why = "--solver " + o.solver;
     MemoryEstimate memory;
     const auto plan_memory = [&](const mesh::Counts& counts) {

@@ -28,6 +28,9 @@ constexpr double kRowCacheMin = 64.0 * (1 << 20), kRowCacheMax = 512.0 * (1 << 2
 // Output: the welded mesh (about four vertices per element: position, normal, radiosity, index)
 // and the renderer's supersampled strip and image (3 × 3 samples of depth and colour per pixel).
 constexpr double kWeldedPerElement = 4 * 40.0;
+// A parallel shot's bytes per element: its projection (the element's corners and plane, ~130 B),
+// its record (corners in fixed point, box and plane, ~116 B) and a few bin entries.
+constexpr double kParallelPerElement = 260.0;
 constexpr double kRenderPerPixel = 9 * 32.0 + 32.0;
 
 // The model's constants, fitted on 2 EPYC cores through PoCL after clusters, sparse rows and
@@ -109,6 +112,11 @@ MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
     }
     m.parts.push_back({"output", E * (s.refine_levels > 0 ? kRefinedGrowth : 1.0) * kWeldedPerElement +
                                      s.pixels * kRenderPerPixel});
+    // A parallel shot, while it runs: per element its projection, record and bin entries, and per
+    // cell its owner twice (the raster's and, on a device, its copy).
+    if (s.parallel_cells > 0.0)
+        m.parts.push_back({"parallel shots", E * (s.refine_levels > 0 ? kRefinedGrowth : 1.0) * kParallelPerElement +
+                                                 2.0 * s.parallel_cells * sizeof(std::int32_t)});
     return m;
 }
 

@@ -23,6 +23,8 @@ struct BakeShape {
     double max_reflectance = 0.0;
     int refine_levels = 2;
     double pixels = 640.0 * 480.0;  // of render.exr/.png
+    // Where a directional light shines, the cells of its parallel shots' grid (formfactor/parallel.h); 0: none.
+    double parallel_cells = 0.0;
 };
 
 struct MemoryPart {
