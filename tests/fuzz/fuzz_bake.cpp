@@ -28,6 +28,9 @@ namespace {
 using namespace hemirad;
 
 bool g_opencl = false;
+// The input being run: a finding prints it, so that it can be run again from the log alone.
+const std::uint8_t* g_data = nullptr;
+std::size_t g_size = 0;
 
 // What the run did, printed at exit.
 struct Tally {
@@ -54,6 +57,10 @@ protected:
     std::fprintf(stderr, "fuzz_bake: FINDING: %s\n  scene: %s\n  settings: %s (device %s)\n", what.c_str(),
                  bake.scene.summary.c_str(), bake.settings.c_str(), bake.options.device.c_str());
     for (const std::string& d : details) std::fprintf(stderr, "  %s\n", d.c_str());
+    // The input's bytes, in hex on one line (at most 2 × 4096 digits): `xxd -r -p` turns them back.
+    std::fprintf(stderr, "fuzz_bake: input (%zu bytes, hex): ", g_size);
+    for (std::size_t i = 0; i < g_size; ++i) std::fprintf(stderr, "%02x", g_data[i]);
+    std::fprintf(stderr, "\n");
     std::abort();
 }
 
@@ -87,6 +94,8 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+    g_data = data;
+    g_size = size;
     test::ScratchDir dir("hemirad-fuzz-bake");
     scene::Choices choices(data, size);
     // Smaller than the seeded test's: a run is worth many inputs more than a few large ones.
