@@ -37,8 +37,6 @@ double record_depth(const ParallelRecords& r, std::size_t q, int i, int j) {
     return (r.plane[4 * q + 3] - r.plane[4 * q] * x - r.plane[4 * q + 1] * y) / r.plane[4 * q + 2];
 }
 
-std::int64_t snap(double cells) { return static_cast<std::int64_t>(std::floor(cells * kSubcell + 0.5)); }
-
 double median_edge(const mesh::Mesh& mesh) {
     std::vector<double> areas;
     areas.reserve(mesh.elements.size());
@@ -198,16 +196,10 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
             std::reverse(px, px + d.n);
             std::reverse(py, py + d.n);
         }
-        const auto first = [](std::int64_t lo) {
-            return static_cast<int>(std::ceil(static_cast<double>(lo - kSubcell / 2) / kSubcell));
-        };
-        const auto last = [](std::int64_t hi) {
-            return static_cast<int>(std::floor(static_cast<double>(hi - kSubcell / 2) / kSubcell));
-        };
-        const int i0 = std::max(0, first(*std::min_element(px, px + d.n)));
-        const int i1 = std::min(grid.width - 1, last(*std::max_element(px, px + d.n)));
-        const int j0 = std::max(0, first(*std::min_element(py, py + d.n)));
-        const int j1 = std::min(grid.height - 1, last(*std::max_element(py, py + d.n)));
+        const int i0 = std::max(0, first_centre(*std::min_element(px, px + d.n)));
+        const int i1 = std::min(grid.width - 1, last_centre(*std::max_element(px, px + d.n)));
+        const int j0 = std::max(0, first_centre(*std::min_element(py, py + d.n)));
+        const int j1 = std::min(grid.height - 1, last_centre(*std::max_element(py, py + d.n)));
         record_of[q] = static_cast<std::uint32_t>(drawn_of.size());
         drawn_of.push_back(static_cast<std::uint32_t>(q));
         records.px.insert(records.px.end(), px, px + 4);

@@ -43,18 +43,16 @@ bool clip_if_needed(ClipPolygon& poly, Plane plane) {
 // that shares the edge walks it the other way, so exactly one of the two owns the centre.
 bool owns_edge_point(std::int64_t dx, std::int64_t dy) { return dy < 0 || (dy == 0 && dx > 0); }
 
-// A cell coordinate in fixed point (kSubcell units per cell), rounded to nearest.
+}  // namespace
+
 std::int64_t snap(double cells) { return static_cast<std::int64_t>(std::floor(cells * kSubcell + 0.5)); }
 
-// The first and the last cell whose centre (index + 1/2) lies at or above lo, at or below hi.
 int first_centre(std::int64_t lo) {
     return static_cast<int>(std::ceil(static_cast<double>(lo - kSubcell / 2) / kSubcell));
 }
 int last_centre(std::int64_t hi) {
     return static_cast<int>(std::floor(static_cast<double>(hi - kSubcell / 2) / kSubcell));
 }
-
-}  // namespace
 
 bool covers_cell(const std::int64_t* px, const std::int64_t* py, int n, int i, int j) {
     const std::int64_t x = i * kSubcell + kSubcell / 2, y = j * kSubcell + kSubcell / 2;

@@ -13,6 +13,15 @@ namespace hemirad::formfactor {
 // it, and together they leave none of them out.
 bool covers_cell(const std::int64_t* px, const std::int64_t* py, int n, int i, int j);
 
+// A cell coordinate in fixed point (kSubcell units per cell), rounded to nearest: how every
+// engine snaps projected vertices before covers_cell.
+std::int64_t snap(double cells);
+
+// The first and the last cell whose centre (index + 1/2) lies at or above lo, at or below hi
+// (fixed point): the cells a snapped polygon's box holds.
+int first_centre(std::int64_t lo);
+int last_centre(std::int64_t hi);
+
 // A table of cell weights in fixed point, 2^HR_FIXED_SHIFT per unit, as every engine sums them.
 std::vector<std::int64_t> fixed_point(const std::vector<double>& table);
 
