@@ -258,16 +258,7 @@ private:
     // The uri of a file the input names, from the directory baked.gltf goes to: a relative
     // path where one exists, percent-encoded segment by segment.
     std::string relative_uri(const std::string& uri) const {
-        std::string decoded;
-        for (std::size_t i = 0; i < uri.size(); ++i) {
-            if (uri[i] == '%' && i + 2 < uri.size() && std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
-                std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
-                decoded += static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16));
-                i += 2;
-            } else {
-                decoded += uri[i];
-            }
-        }
+        const std::string decoded = scene::percent_decoded(uri);
         std::error_code ec;
         const fs::path base = scene_.source->base_dir.empty() ? fs::path(".") : fs::path(scene_.source->base_dir);
         fs::path target = fs::weakly_canonical(fs::absolute(base / decoded, ec), ec);

@@ -11,6 +11,9 @@
 
 namespace hemirad::scene {
 
+// "a.png" with %XX escapes decoded, as tinygltf decodes an image uri before it opens the file.
+std::string percent_decoded(const std::string& uri);
+
 struct GltfSource {
     tinygltf::Model model;  // as loaded: meshopt and Draco data decoded into its buffers and accessors
     std::string base_dir;   // where its relative uris are resolved

@@ -620,20 +620,6 @@ std::vector<dvec3> read_colors(const Loader& L, int index, const std::string& wh
 // ---------------------------------------------------------------------------------------
 // Materials
 
-// "a.png" with %XX escapes decoded, as tinygltf decodes an image uri before it opens the file.
-std::string percent_decoded(const std::string& uri) {
-    std::string out;
-    for (std::size_t i = 0; i < uri.size(); ++i) {
-        if (uri[i] == '%' && i + 2 < uri.size() && std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
-            std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
-            out += static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16));
-            i += 2;
-        } else {
-            out += uri[i];
-        }
-    }
-    return out;
-}
 
 // The decoded means (linear colour, alpha) of the image a material's texture names: white and
 // opaque when it has none. A texture whose image is missing, unreadable or does not decode is an
@@ -1317,6 +1303,20 @@ void compute_bbox(Scene& scene) {
 }
 
 }  // namespace
+
+std::string percent_decoded(const std::string& uri) {
+    std::string out;
+    for (std::size_t i = 0; i < uri.size(); ++i) {
+        if (uri[i] == '%' && i + 2 < uri.size() && std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
+            std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
+            out += static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16));
+            i += 2;
+        } else {
+            out += uri[i];
+        }
+    }
+    return out;
+}
 
 double PunctualLight::attenuation(const glm::dvec3& to_point) const {
     const double distance = glm::length(to_point);
