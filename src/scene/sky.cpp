@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <sstream>
@@ -11,17 +12,28 @@
 
 namespace hemirad::scene {
 
-Sky parse_sky(const std::string& text, const std::string& option) {
-    std::vector<double> values;
+namespace {
+
+// The comma-separated parts of `text` as numbers; false where a part is not a whole finite
+// number (a trailing comma leaves no part: callers check it).
+bool comma_numbers(const std::string& text, std::vector<double>& values) {
     std::stringstream in(text);
     std::string part;
     while (std::getline(in, part, ',')) {
         char* end = nullptr;
         const double v = std::strtod(part.c_str(), &end);
-        if (part.empty() || end != part.c_str() + part.size() || !std::isfinite(v) || v < 0.0)
-            throw InputError(fmt::format("{} '{}': each radiance must be a finite number >= 0", option, text));
+        if (part.empty() || end != part.c_str() + part.size() || !std::isfinite(v)) return false;
         values.push_back(v);
     }
+    return true;
+}
+
+}  // namespace
+
+Sky parse_sky(const std::string& text, const std::string& option) {
+    std::vector<double> values;
+    if (!comma_numbers(text, values) || std::any_of(values.begin(), values.end(), [](double v) { return v < 0.0; }))
+        throw InputError(fmt::format("{} '{}': each radiance must be a finite number >= 0", option, text));
     if (values.empty() || values.size() > 2 || text.back() == ',')
         throw InputError(fmt::format("{} '{}': expected RADIANCE or HORIZON_RADIANCE,ZENITH_RADIANCE", option, text));
     Sky sky{values[0], values.size() == 2 ? values[1] : values[0]};
@@ -34,17 +46,10 @@ Sky parse_sky(const std::string& text, const std::string& option) {
 
 PunctualLight parse_sun(const std::string& text, const std::string& option) {
     std::vector<double> values;
-    std::stringstream in(text);
-    std::string part;
-    while (std::getline(in, part, ',')) {
-        char* end = nullptr;
-        const double v = std::strtod(part.c_str(), &end);
-        if (part.empty() || end != part.c_str() + part.size() || !std::isfinite(v))
-            throw InputError(fmt::format("{} '{}': expected AZIMUTH,ELEVATION,ILLUMINANCE, three finite numbers "
-                                         "(degrees, degrees, lux)",
-                                         option, text));
-        values.push_back(v);
-    }
+    if (!comma_numbers(text, values))
+        throw InputError(fmt::format("{} '{}': expected AZIMUTH,ELEVATION,ILLUMINANCE, three finite numbers "
+                                     "(degrees, degrees, lux)",
+                                     option, text));
     if (values.size() != 3 || text.back() == ',')
         throw InputError(fmt::format("{} '{}': expected AZIMUTH,ELEVATION,ILLUMINANCE (degrees, degrees, lux)", option, text));
     const double azimuth = values[0] * M_PI / 180.0, elevation = values[1] * M_PI / 180.0, lux = values[2];
