@@ -270,3 +270,25 @@ TEST_CASE("the radiosity output mode (--output-mode radiosity) writes the elemen
     const RunResult bad = run_hemirad(dir, bake_args(dir / "tree.gltf", dir / "bad", {"--output-mode", "both"}));
     CHECK(bad.code == 2);
 }
+
+TEST_CASE("attributes the loader does not read and that do not fit their buffers are left out of baked.gltf with a warning",
+          "[output][cli]") {
+    TempDir dir;
+    json g = scene_with_tree(dir);
+    g["accessors"][1]["bufferView"] = 99;           // the floor's NORMAL names no bufferView that exists
+    g["accessors"][13]["count"] = 1000000000000000;  // the glass's NORMAL claims 10^15 elements of a 48-byte view
+    write_json(dir / "broken.gltf", g);
+    const json report = bake_ok(dir, dir / "broken.gltf", dir / "out", {});
+    std::string warnings;
+    for (const json& w : report["warnings"]) warnings += w.get<std::string>() + "\n";
+    INFO(warnings);
+    CHECK(warnings.find("baked.gltf: NORMAL of a primitive of node 'floor' left out: accessor 1 runs past its "
+                        "bufferView") != std::string::npos);
+    CHECK(warnings.find("baked.gltf: accessor 13 runs past its bufferView") != std::string::npos);
+    const tinygltf::Model m = load_model(dir / "out" / "baked.gltf");
+    const tinygltf::Primitive& floor = mesh_of(m, "floor").primitives.at(0);
+    CHECK(floor.attributes.count("NORMAL") == 0);
+    CHECK(floor.attributes.count("TEXCOORD_0") == 1);
+    for (const tinygltf::Node& node : m.nodes)  // its copy could not be read whole: no mesh (glTF forbids an empty one)
+        if (node.name == "glass") CHECK(node.mesh == -1);
+}

@@ -26,6 +26,9 @@ using glm::dvec3;
 const std::set<std::string> kDecoded = {"EXT_meshopt_compression", "KHR_draco_mesh_compression",
                                         "KHR_mesh_quantization"};
 
+// Bytes an accessor without a bufferView may make (all zeros but its sparse values): 1 GiB.
+constexpr std::size_t kMaxLooseBytes = std::size_t{1} << 30;
+
 int component_size(int type) {
     switch (type) {
         case TINYGLTF_COMPONENT_TYPE_BYTE:
@@ -52,7 +55,8 @@ int components(int type) {
 }
 
 // An accessor's elements, tightly packed, sparse substitution applied; false (with why) for
-// one whose numbers do not fit its buffers, which the loader did not need to check.
+// one whose numbers do not fit its buffers, which the loader did not need to check. Every span is
+// checked against its bufferView and buffer before anything is allocated for it.
 bool read_raw(const tinygltf::Model& m, int index, std::vector<unsigned char>& out, std::string& why) {
     if (index < 0 || std::size_t(index) >= m.accessors.size()) {
         why = fmt::format("accessor {} does not exist", index);
@@ -64,36 +68,49 @@ bool read_raw(const tinygltf::Model& m, int index, std::vector<unsigned char>& o
         why = fmt::format("accessor {} has a layout hemirad does not copy", index);
         return false;
     }
-    out.assign(a.count * size, 0);
-    const auto view_bytes = [&](int view_index, std::size_t offset, std::size_t stride, std::size_t count,
-                                std::size_t element, unsigned char* dst) {
-        if (view_index < 0 || std::size_t(view_index) >= m.bufferViews.size()) return false;
+    // The first byte of `count` elements of `element` bytes, `stride` apart (0: packed), from
+    // `offset` into a bufferView; null where the view, its buffer or the span does not exist.
+    const auto span = [&](int view_index, std::size_t offset, std::size_t stride, std::size_t count,
+                          std::size_t element) -> const unsigned char* {
+        if (view_index < 0 || std::size_t(view_index) >= m.bufferViews.size()) return nullptr;
         const tinygltf::BufferView& v = m.bufferViews[std::size_t(view_index)];
-        if (v.buffer < 0 || std::size_t(v.buffer) >= m.buffers.size()) return false;
+        if (v.buffer < 0 || std::size_t(v.buffer) >= m.buffers.size()) return nullptr;
         const std::vector<unsigned char>& data = m.buffers[std::size_t(v.buffer)].data;
+        if (v.byteOffset > data.size() || v.byteLength > data.size() - v.byteOffset || offset > v.byteLength)
+            return nullptr;
         if (stride == 0) stride = element;
-        if (count == 0) return true;
-        const std::size_t last = offset + (count - 1) * stride + element;
-        if (last > v.byteLength || v.byteOffset > data.size() || v.byteLength > data.size() - v.byteOffset) return false;
-        for (std::size_t i = 0; i < count; ++i)
-            std::memcpy(dst + i * element, data.data() + v.byteOffset + offset + i * stride, element);
-        return true;
+        if (count > 0 && (element > v.byteLength - offset || (count - 1) > (v.byteLength - offset - element) / stride))
+            return nullptr;
+        return data.data() + v.byteOffset + offset;
     };
+    const auto copy = [](const unsigned char* from, std::size_t stride, std::size_t count, std::size_t element,
+                         unsigned char* to) {
+        if (stride == 0) stride = element;
+        for (std::size_t i = 0; i < count; ++i) std::memcpy(to + i * element, from + i * stride, element);
+    };
+    const unsigned char* data = nullptr;
+    const std::size_t stride =
+        a.bufferView >= 0 && std::size_t(a.bufferView) < m.bufferViews.size() ? m.bufferViews[std::size_t(a.bufferView)].byteStride : 0;
     if (a.bufferView >= 0) {
-        const std::size_t stride = std::size_t(m.bufferViews[std::size_t(a.bufferView)].byteStride);
-        if (std::size_t(a.bufferView) >= m.bufferViews.size() ||
-            !view_bytes(a.bufferView, a.byteOffset, stride, a.count, size, out.data())) {
+        if (!(data = span(a.bufferView, a.byteOffset, stride, a.count, size))) {
             why = fmt::format("accessor {} runs past its bufferView", index);
             return false;
         }
+    } else if (a.count > kMaxLooseBytes / size) {
+        why = fmt::format("accessor {} has no bufferView and {} elements, too many to copy", index, a.count);
+        return false;
     }
+    out.assign(a.count * size, 0);
+    if (data) copy(data, stride, a.count, size, out.data());
     if (a.sparse.isSparse && a.sparse.count > 0) {
         const std::size_t n = std::size_t(a.sparse.count);
         const int index_size = component_size(a.sparse.indices.componentType);
-        std::vector<unsigned char> indices(n * std::size_t(index_size)), values(n * size);
-        if (index_size == 0 || (index_size == 4 && a.sparse.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT) ||
-            !view_bytes(a.sparse.indices.bufferView, a.sparse.indices.byteOffset, 0, n, std::size_t(index_size), indices.data()) ||
-            !view_bytes(a.sparse.values.bufferView, a.sparse.values.byteOffset, 0, n, size, values.data())) {
+        const unsigned char* indices =
+            index_size == 0 || (index_size == 4 && a.sparse.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+                ? nullptr
+                : span(a.sparse.indices.bufferView, a.sparse.indices.byteOffset, 0, n, std::size_t(index_size));
+        const unsigned char* values = span(a.sparse.values.bufferView, a.sparse.values.byteOffset, 0, n, size);
+        if (!indices || !values) {
             why = fmt::format("accessor {}'s sparse data runs past its bufferViews", index);
             return false;
         }
@@ -106,7 +123,7 @@ bool read_raw(const tinygltf::Model& m, int index, std::vector<unsigned char>& o
                 why = fmt::format("accessor {}'s sparse index {} is out of range", index, at);
                 return false;
             }
-            std::memcpy(out.data() + std::size_t(at) * size, values.data() + i * size, size);
+            std::memcpy(out.data() + std::size_t(at) * size, values + i * size, size);
         }
     }
     return true;
@@ -319,8 +336,7 @@ private:
             if (copy_primitive(in.primitives[p], copy)) mesh.primitives.push_back(copy);
             else warn(fmt::format("mesh '{}' primitive {} left out: its data could not be read", in.name, p));
         }
-        out_.meshes.push_back(mesh);
-        return copied_meshes_[index] = int(out_.meshes.size() - 1);
+        return copied_meshes_[index] = add_mesh(mesh);
     }
 
     // The unlit copy of material m (-1: the default material) that baked primitives use: for an
@@ -384,6 +400,13 @@ private:
             for (const bool back : {false, true})
                 if (bake_primitive(node, in.primitives[p], baked->second, w, h, back, prim)) mesh.primitives.push_back(prim);
         }
+        return add_mesh(mesh);
+    }
+
+    // A mesh of the output, or −1 (its node holds none) where no primitive is left: glTF
+    // requires at least one.
+    int add_mesh(const tinygltf::Mesh& mesh) {
+        if (mesh.primitives.empty()) return -1;
         out_.meshes.push_back(mesh);
         return int(out_.meshes.size() - 1);
     }
