@@ -9,6 +9,7 @@
 #include <system_error>
 
 #include "cli/bench_effects.h"
+#include "cli/bench_image.h"
 #include "core/error.h"
 
 namespace hemirad::cli {
@@ -64,6 +65,10 @@ void run_bench(const BenchCommand& command, std::ostream& log) {
     nlohmann::ordered_json doc;
     if (command.accuracy) {
         doc = bench::run_accuracy({command.device, command.quick}, log);
+        ImageAccuracyOptions image;
+        image.device = command.device;
+        image.quick = command.quick;
+        doc["accuracy"]["cornell"] = run_image_accuracy(image, log);
     } else if (command.effects) {
         EffectsBenchOptions options;
         options.device = command.device;

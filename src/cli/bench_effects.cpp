@@ -1,6 +1,7 @@
 // `hemirad bench --effects` (see bench_effects.h): each effect as planned against forced the
 // other way, baked in-process, timed and compared mesh by mesh.
 #include "cli/bench_effects.h"
+#include "cli/bench_support.h"
 
 #include <fmt/core.h>
 #include <unistd.h>
@@ -26,35 +27,6 @@ namespace {
 // Convergence forced off shoots until 1e-6 is left; the Cornell box takes a few thousand passes,
 // so this only guards against a bake that never gets there.
 constexpr long kManyPasses = 200000;
-
-// A fresh directory under the system's temporary directory, removed with everything in it when
-// this goes out of scope (on a throw too).
-class TempDir {
-public:
-    TempDir() {
-        const fs::path base = fs::temp_directory_path();
-        for (int i = 0;; ++i) {
-            const fs::path p = base / fmt::format("hemirad-bench-effects-{}-{}", static_cast<long>(getpid()), i);
-            std::error_code ec;
-            if (fs::create_directory(p, ec)) {
-                path_ = p;
-                return;
-            }
-            if (ec || i >= 1000)
-                throw InternalError(fmt::format("{}: cannot create a temporary directory", base.string()));
-        }
-    }
-    TempDir(const TempDir&) = delete;
-    TempDir& operator=(const TempDir&) = delete;
-    ~TempDir() {
-        std::error_code ec;  // destructors never throw
-        fs::remove_all(path_, ec);
-    }
-    const fs::path& path() const { return path_; }
-
-private:
-    fs::path path_;
-};
 
 // One bake configuration; bakes shared by several cases run once.
 struct BakeSpec {
@@ -109,12 +81,6 @@ std::string describe(const BakeSpec& s, const std::string& quality) {
     if (!s.effects.empty()) out += " --effects " + s.effects;
     if (s.max_passes != 100000) out += fmt::format(" --max-passes {}", s.max_passes);
     return out;
-}
-
-ordered_json read_report(const fs::path& file) {
-    std::ifstream in(file);
-    if (!in) throw InternalError(fmt::format("{}: the bake wrote no report", file.string()));
-    return ordered_json::parse(in);
 }
 
 double median(const std::vector<double>& v) {
@@ -231,7 +197,7 @@ ordered_json run_effects_bench(const EffectsBenchOptions& o, std::ostream& log) 
                                     file.string()));
             }
 
-    const TempDir temp;
+    const TempDir temp("hemirad-bench-effects");
     long counter = 0;
     const auto bake = [&](const BakeSpec& s) {
         BakeOptions b;

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Renders the converged path-traced references `hemirad bench --accuracy` compares against, into
+# bench/reference/<scene>/ (reference.exr, reference.json). Offline, once: the results are
+# committed. Needs the build's hemirad_pathtrace (built when Embree 3 is found):
+#   cmake --preset release && cmake --build --preset release --target hemirad_pathtrace
+#   bench/make_references.sh
+# 1728 paths a pixel (192 at each of the renderer's 3 × 3 sample positions) and 16384 points ×
+# 256 paths a face: about 6 minutes on 2 cores for the Cornell box.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+tracer=${HEMIRAD_PATHTRACE:-build/release/hemirad_pathtrace}
+for scene in cornell_box; do
+  "$tracer" "scenes/$scene.gltf" --out "bench/reference/$scene" --width 640 --spp 192 \
+    --face-points 16384 --face-spp 256 --seed 1
+done

@@ -1,0 +1,63 @@
+// `hemirad bench --accuracy`, the image part: the bundled Cornell box baked the way a user bakes it
+// (`hemirad bake`, the planner's engines and solvers) at the presets and along --hemicube and
+// --element-size sweeps, each compared pixel by pixel and face by face with a converged reference
+// of an independent path tracer (bench/pathtrace.cpp, rendered offline by
+// bench/make_references.sh into bench/reference/<scene>/ and committed).
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace hemirad::cli {
+
+// A path-traced reference: reference.exr (R, G, B radiosity; noise.Y, its luminance's standard error; face:
+// the face all of a pixel's samples hit, −1 for none or several) and reference.json (faces with
+// node, normal, offset, area, emitter and area-averaged radiosity).
+struct ImageReference {
+    int width = 0, height = 0;
+    std::vector<float> rgb;        // width × height × 3
+    std::vector<float> noise_y;    // the luminance's standard error, per pixel
+    std::vector<int> face;         // per pixel, −1: an edge or nothing
+    nlohmann::ordered_json json;   // reference.json
+};
+
+// Reads `dir`/reference.exr and `dir`/reference.json. Throws InputError naming the file when one
+// is missing or not a reference.
+ImageReference load_image_reference(const std::string& dir);
+
+// Per-pixel error of a linear RGB image (same size, row 0 at the top) against the reference, over
+// the reference's interior pixels (all samples on one face that does not emit): relative error of
+// the luminance, (hemirad − reference) / reference. rms: the RMS relative error with the
+// reference's own noise removed (sqrt(max(0, mean e² − mean σ²)), σ its relative standard error);
+// raw_rms without that; noise_rms the reference's; worst_tile the largest |mean e| over 16 × 16
+// tiles with at least a quarter of their pixels interior, and where it lies.
+struct PixelErrors {
+    double rms = 0.0, raw_rms = 0.0, noise_rms = 0.0, mean = 0.0;
+    double worst_tile = 0.0;
+    int worst_tile_x = 0, worst_tile_y = 0;  // pixel coordinates of its top-left corner
+    long pixels = 0;
+};
+PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height, const ImageReference& reference);
+
+// Each reference face's area-averaged radiosity from a baked glTF written with --output-mode
+// radiosity (world-space triangles with COLOR_0 per vertex, one node per scene node): the linear
+// interpolant integrated over the node's triangles lying in the face's plane. Returns one entry
+// per reference face: {node, normal, reference, hemirad, error (relative, luminance)}; a face with
+// no baked triangle gets hemirad null. Throws InputError when the file cannot be read.
+nlohmann::ordered_json compare_faces(const std::string& baked_gltf, const ImageReference& reference);
+
+struct ImageAccuracyOptions {
+    std::string device = "auto";
+    bool quick = false;  // draft and default only, no sweeps
+    std::string reference_dir = "bench/reference/cornell_box";
+    std::string scene = "scenes/cornell_box.gltf";
+};
+
+// Bakes the scene at each preset and sweep point and returns {scene, reference, runs: [{label,
+// quality, options, seconds, elements, solver, pixels: PixelErrors, faces, worst_block_face}]};
+// prints a table to `log`.
+nlohmann::ordered_json run_image_accuracy(const ImageAccuracyOptions& options, std::ostream& log);
+
+}  // namespace hemirad::cli
