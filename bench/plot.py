@@ -365,6 +365,40 @@ def plot_accuracy_pareto(doc, acc, out):
            extra=f"reference: {ref_text}" if ref_text else "")
 
 
+def plot_accuracy_cornell(doc, acc, out):
+    cornell = acc.get("cornell")
+    if not cornell or not cornell.get("runs"):
+        return "no 'accuracy.cornell.runs'"
+    runs = cornell["runs"]
+    fig, ax = plt.subplots(figsize=(8, 6))
+    for sweep in unique(r["sweep"] for r in runs if r["sweep"] != "preset"):
+        pts = sorted((r for r in runs if r["sweep"] == sweep), key=lambda r: r["seconds"])
+        ax.plot([r["seconds"] for r in pts], [r["pixels"]["rms"] for r in pts], marker="o", ms=4, lw=1,
+                alpha=0.8, label=f"sweep: {sweep}")
+        for r in pts:
+            ax.annotate(r["label"].split(", ")[-1], (r["seconds"], r["pixels"]["rms"]), xytext=(4, -9),
+                        textcoords="offset points", fontsize=7, alpha=0.8)
+    presets = sorted((r for r in runs if r["sweep"] == "preset"), key=lambda r: r["seconds"])
+    ax.plot([r["seconds"] for r in presets], [r["pixels"]["rms"] for r in presets], color="k", lw=1.2,
+            label="--quality presets")
+    for r in presets:
+        ax.scatter([r["seconds"]], [r["pixels"]["rms"]], marker="*", s=260, color="gold", edgecolors="k",
+                   linewidths=0.8, zorder=5)
+        ax.annotate(r["label"], (r["seconds"], r["pixels"]["rms"]), xytext=(9, 6), textcoords="offset points",
+                    fontsize=10, weight="bold")
+    ax.set(xscale="log", yscale="log", xlabel="bake time (s)",
+           ylabel="per-pixel relative RMS error (reference noise removed)")
+    plain_log(ax)
+    plain_log(ax, "x")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), frameon=False)
+    ref = cornell.get("reference", {})
+    finish(fig, os.path.join(out, "accuracy_cornell.png"), doc,
+           f"Cornell box against a converged path tracer (device: {acc.get('device', '?')})",
+           extra=f"reference: {ref.get('settings', {}).get('samples_per_pixel', '?')} paths a pixel, "
+                 f"{ref.get('image', ['?', '?'])[0]}x{ref.get('image', ['?', '?'])[1]}")
+
+
 def plot_accuracy_analytic(doc, acc, out):
     cases = unique(a["case"] for a in acc.get("analytic", []))
     if not cases:
@@ -508,7 +542,7 @@ def main():
         plots += [(f, (doc, rows, out, colour)) for f in
                   (plot_scaling_triangles, plot_scaling_hemicube, plot_fraction_of_limit, plot_opencl_stages)]
     if "accuracy" in doc:
-        plots += [(f, (doc, doc["accuracy"], out)) for f in (plot_accuracy_pareto, plot_accuracy_analytic)]
+        plots += [(f, (doc, doc["accuracy"], out)) for f in (plot_accuracy_pareto, plot_accuracy_cornell, plot_accuracy_analytic)]
     try:
         for plot, plot_args in plots:
             skipped = plot(*plot_args)

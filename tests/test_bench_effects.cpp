@@ -34,7 +34,7 @@ int leftover_temp_dirs() {
 }
 
 double stage_sum(const ordered_json& bake) {
-    return bake["formfactors_s"].get<double>() + bake["refine_s"].get<double>();
+    return bake["formfactors_s"].get<double>() + bake["refine_s"].get<double>() + bake["gather_s"].get<double>();
 }
 
 }  // namespace

@@ -107,9 +107,10 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     std::string presets;
     std::vector<std::string> names;
     for (const QualityPreset& p : kQualityPresets) {
-        presets += fmt::format("{}{} (N {}, patches diagonal/{:g}, {:g} elements a side, threshold {:g})",
+        presets += fmt::format("{}{} (N {}, patches diagonal/{:g}, {:g} elements a side, threshold {:g}, contrast "
+                               "{:g}, gather N {} × {})",
                                presets.empty() ? "" : ", ", p.name, p.hemicube, 1.0 / p.patch_fraction,
-                               p.elements_per_patch_edge, p.threshold);
+                               p.elements_per_patch_edge, p.threshold, p.contrast, p.gather, p.gather_passes);
         names.emplace_back(p.name);
     }
     bake.add_option("--quality", o.quality,
@@ -120,6 +121,13 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--hemicube", o.hemicube,
                     "hemicube resolution N: top face N×N plus four N×N/2 half faces (default: the quality's)")
         ->transform(integer_in(8, 4096));
+    bake.add_option("--gather", o.gather,
+                    "final gather: a hemicube of this resolution from every output vertex gathers the solved light "
+                    "(0: none; default: the quality's)")
+        ->transform(integer_in(0, 4096));
+    bake.add_option("--gather-passes", o.gather_passes,
+                    "final gathers, each drawing the last one's light (default: the quality's)")
+        ->transform(integer_in(1, 8));
     bake.add_option("--patch-size", o.patch_size,
                     "maximum patch edge, scene units (default: scene diagonal × the quality's fraction)")
         ->transform(real_in(0.0, kLargestSize, true));
@@ -164,9 +172,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->transform(integer_in(0, 6))
         ->capture_default_str();
     bake.add_option("--contrast", o.contrast,
-                    "adaptive refinement: split neighbours whose irradiance differs by more than this share")
-        ->transform(real_in(0.01, 1.0))
-        ->capture_default_str();
+                    "adaptive refinement: split neighbours whose irradiance differs by more than this share "
+                    "(default: the quality's)")
+        ->transform(real_in(0.01, 1.0));
     bake.add_option("--checkpoint", o.checkpoint,
                     "progressive solver: write its state to this file every --checkpoint-every passes (atomically)");
     bake.add_option("--checkpoint-every", o.checkpoint_every, "passes between checkpoints")

@@ -37,6 +37,8 @@
 #include "mesh/mesh.h"
 #include "mesh/texturing.h"
 #include "scene/sky.h"
+#include "formfactor/hemicube.h"
+#include "solve/final_gather.h"
 #include "solve/lights.h"
 #include "output/finite.h"
 #include "output/output.h"
@@ -351,6 +353,10 @@ public:
         if (!due(done >= total)) return;
         print(fmt::format("form-factor rows {} / {}  {:.1f} s", done, total, seconds_since(start_)));
     }
+    void gathering(long points, long total) {
+        if (!due(points >= total)) return;
+        print(fmt::format("final gather {} / {} vertices  {:.1f} s", points, total, seconds_since(start_)));
+    }
     void refining(int level, long shots, long total) {
         if (!due(shots >= total)) return;
         print(fmt::format("refinement level {}: re-gather {} / {} shots  {:.1f} s", level, shots, total,
@@ -528,6 +534,12 @@ void run_bake(const BakeOptions& options) {
     if (o.hemicube == 0) o.hemicube = quality.hemicube;
     if (o.threshold < 0.0) o.threshold = quality.threshold;
     if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
+    if (o.contrast < 0.0) o.contrast = quality.contrast;
+    if (o.gather < 0) o.gather = quality.gather;
+    if (o.gather_passes <= 0) o.gather_passes = quality.gather_passes;
+    if (o.gather % 2 != 0 || (o.gather != 0 && (o.gather < 8 || o.gather > formfactor::kMaxHemicube)))
+        throw InputError(fmt::format("--gather {}: expected 0 (none) or an even resolution from 8 to {}", o.gather,
+                                     formfactor::kMaxHemicube));
     if (o.solver != "auto" && o.solver != "matrix" && o.solver != "progressive")
         throw InputError(fmt::format("--solver {}: expected auto, matrix or progressive", o.solver));
     scene::EffectOverrides overrides;
@@ -739,7 +751,9 @@ void run_bake(const BakeOptions& options) {
     ordered_json fallback;  // that device and why it failed, when it did
     Solution solution;
     std::vector<solve::RefineLevel> levels;
-    double t_formfactors = 0.0, t_solve = 0.0, t_refine = 0.0;
+    double t_formfactors = 0.0, t_solve = 0.0, t_refine = 0.0, t_gather = 0.0;
+    output::VertexLight gathered;  // the final gather's light at the output vertices
+    long gather_points = 0;
     std::optional<formfactor::VerifySummary> verified;  // what --verify compared
     formfactor::RowCacheEngine* row_cache = nullptr;      // the progressive solve's, while it runs
     std::optional<formfactor::RowCacheStats> row_cache_stats;
@@ -822,6 +836,39 @@ void run_bake(const BakeOptions& options) {
             levels = std::move(refined.levels);
         }
         t_refine = seconds_since(t0);
+
+        // Final gather: the light at every output vertex from the converged solution.
+        t0 = Clock::now();
+        gather_points = 0;
+        if (o.gather > 0) {
+            // Every vertex of the output but the sky dome's, through the patches' cells (gather_mesh).
+            const auto gathered_node = [&](std::size_t n) { return !scene.nodes[n].synthetic; };
+            const output::WeldedMesh welded = output::weld(scene.nodes.size(), mesh, solution.radiosity);
+            std::vector<glm::dvec3> direct;  // punctual and directional lights' light, on the solved mesh
+            if (solve::has_direct_light(mesh, scene.lights)) {
+                std::unique_ptr<formfactor::Engine> lights_engine = make_engine(mesh, 0);
+                direct = solve::direct_light(mesh, scene.lights, *lights_engine, o.refine_levels + 1);
+            }
+            mesh::Mesh drawn = solve::gather_mesh(mesh);
+            drawn.gather_points = solve::gather_points(welded, gathered_node);
+            formfactor::Settings s = ff_settings;
+            s.hemicube = o.gather;
+            std::unique_ptr<formfactor::Engine> gather_engine =
+                plan.occlusion.on ? observed(engine_like(choice, drawn, s), o.on_shot)
+                                  : observed(std::make_unique<formfactor::UnoccludedEngine>(drawn), o.on_shot);
+            solve::GatherSettings gs;
+            gs.batch = std::max(o.batch, 64);
+            gs.passes = o.gather_passes;
+            gs.cancelled = [&] { return o.interrupted && *o.interrupted; };
+            ProgressLine gathering(o.progress, o.progress_tty);
+            gs.progress = [&](long done, long total) { gathering.gathering(done, total); };
+            const bool done = solve::final_gather(mesh, welded, gathered_node, solution.radiosity, solution.irradiance,
+                                                  direct, drawn, *gather_engine, gs, gathered);
+            gathering.finish();
+            if (!done) throw Interrupted();
+            gather_points = static_cast<long>(drawn.gather_points.size());
+        }
+        t_gather = seconds_since(t0);
     };
 
     for (;;) {
@@ -856,7 +903,8 @@ void run_bake(const BakeOptions& options) {
     const auto& irradiance = solution.irradiance;
     if (!output::all_finite(radiosity) || !output::all_finite(irradiance))
         throw InternalError("the solution has a non-finite value; nothing written");
-    const output::Image image = output::render(scene, mesh, radiosity, view, width, height);
+    const output::VertexLight* vertex_light = gather_points > 0 ? &gathered : nullptr;
+    const output::Image image = output::render(scene, mesh, radiosity, view, width, height, vertex_light);
     if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
     output::write_exr(image, out.staged("render.exr"));
     const double exposure = std::isnan(o.exposure) ? output::auto_exposure(image) : std::exp2(o.exposure);
@@ -865,13 +913,13 @@ void run_bake(const BakeOptions& options) {
     // from a file) the element mesh alone.
     if (o.output_mode == "scene" && scene.source) {
         for (const std::string& w : output::write_scene_gltf(out.staged("baked.gltf"), o.output, scene, mesh, radiosity,
-                                                             irradiance, exposure)) {
+                                                             irradiance, exposure, vertex_light)) {
             const std::string warning = "baked.gltf: " + w;
             if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
             warnings.push_back(warning);
         }
     } else {
-        output::write_baked_gltf(out.staged("baked.gltf"), scene, mesh, radiosity);
+        output::write_baked_gltf(out.staged("baked.gltf"), scene, mesh, radiosity, vertex_light);
     }
     const double t_output_files = seconds_since(t0);
 
@@ -889,6 +937,8 @@ void run_bake(const BakeOptions& options) {
         {"threshold", threshold},
         {"max_passes", max_passes_for(o, mesh.patches.size())},
         {"batch", o.batch},
+        {"gather", o.gather},
+        {"gather_passes", o.gather_passes},
         {"seed", o.seed},
         {"device", o.device},
         {"verify", o.verify},
@@ -910,6 +960,7 @@ void run_bake(const BakeOptions& options) {
                         {"patches", mesh.patches.size()},
                         {"elements", mesh.elements.size()},
                         {"elements_before_refinement", elements_before},
+                        {"gather_points", gather_points},
                         {"quads", mesh.quads},
                         {"clusters", mesh.clusters},
                         {"split_clusters", mesh.split_clusters},
@@ -1006,6 +1057,7 @@ void run_bake(const BakeOptions& options) {
                            {"formfactors", t_formfactors},
                            {"solve", t_solve},
                            {"refine", t_refine},
+                           {"gather", t_gather},
                            {"output", t_output_files},
                            {"total", seconds_since(t_total)}};
     // NaN and Inf would be written as null: refuse the whole bake rather than a report that lies.

@@ -32,13 +32,15 @@ struct BakeOptions {
     double threshold = -1.0;      // < 0: from the quality
     long max_passes = -1;         // < 0: kDefaultMaxPasses or twice the patches, whichever is more (max_passes_for)
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
+    int gather = -1;              // final gather hemicube N (0: none); < 0: from the quality
+    int gather_passes = 0;        // final gathers, each from the last one's light; 0: from the quality
     std::string solver = "auto";  // auto | matrix | progressive
     std::string effects;          // overrides: "occlusion=off,colour=on,…" (scene::parse_effect_overrides)
     std::string output_mode = "scene";  // --output-mode scene|radiosity (output.h)
     std::string sun;              // --sun AZIMUTH,ELEVATION,LUX (scene::parse_sun); empty: none
     std::string sky;              // --sky RADIANCE[,ZENITH_RADIANCE] (scene::parse_sky); empty: none
     int refine_levels = 2;        // adaptive refinement: splits of one element at most
-    double contrast = 0.25;       // … of neighbours whose irradiance differs by more than this share
+    double contrast = -1.0;       // … of neighbours whose irradiance differs by more than this share; < 0: the quality's
     std::uint64_t seed = 1;
     std::string checkpoint;       // progressive: write the solver's state here every checkpoint_every passes
     long checkpoint_every = 500;

@@ -64,10 +64,11 @@ void run_bench(const BenchCommand& command, std::ostream& log) {
         throw InputError("bench: --quick goes with --accuracy or --effects");
     nlohmann::ordered_json doc;
     if (command.accuracy) {
-        doc = bench::run_accuracy({command.device, command.quick}, log);
         ImageAccuracyOptions image;
         image.device = command.device;
         image.quick = command.quick;
+        load_image_reference(image.reference_dir);  // before minutes of work: run from the repository root
+        doc = bench::run_accuracy({command.device, command.quick}, log);
         doc["accuracy"]["cornell"] = run_image_accuracy(image, log);
     } else if (command.effects) {
         EffectsBenchOptions options;

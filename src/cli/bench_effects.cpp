@@ -47,7 +47,7 @@ struct CaseSpec {
 };
 
 struct BakeResult {
-    std::vector<double> total, formfactors, refine, solve;
+    std::vector<double> total, formfactors, refine, solve, gather;
     ordered_json report;  // of the first run (the rest differ only in their timings)
 };
 
@@ -106,6 +106,7 @@ ordered_json bake_json(const BakeSpec& spec, const BakeResult& r, const std::str
             {"formfactors_s", median(r.formfactors)},
             {"solve_s", median(r.solve)},
             {"refine_s", median(r.refine)},
+            {"gather_s", median(r.gather)},
             {"solver", rep["settings"]["solver"]},
             {"device", rep["device"]["id"]},
             {"passes", rep["passes"]},
@@ -232,6 +233,7 @@ ordered_json run_effects_bench(const EffectsBenchOptions& o, std::ostream& log) 
             res.formfactors.push_back(t["formfactors"].get<double>());
             res.refine.push_back(t["refine"].get<double>());
             res.solve.push_back(t["solve"].get<double>());
+            res.gather.push_back(t["gather"].get<double>());
             log << fmt::format("  repeat {}/{}: {}: {:.3f} s\n", r + 1, repeats, describe(bakes[k], quality),
                                res.total.back());
             if (res.report.is_null()) res.report = std::move(report);

@@ -2,7 +2,6 @@
 #include "cli/bench_image.h"
 
 #include <fmt/core.h>
-#include <tiny_gltf.h>
 
 #include <OpenImageIO/imageio.h>
 
@@ -28,7 +27,6 @@ namespace {
 constexpr int kTile = 16;
 
 double luminance(double r, double g, double b) { return 0.2126 * r + 0.7152 * g + 0.0722 * b; }
-double luminance(const glm::dvec3& c) { return luminance(c.x, c.y, c.z); }
 
 glm::dvec3 vec3(const ordered_json& j) { return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()}; }
 
@@ -49,51 +47,12 @@ std::vector<float> read_rgb(const fs::path& file, int& width, int& height) {
     return rgb;
 }
 
-// A float VEC3 or an index accessor of a file hemirad wrote (tightly packed or strided).
-std::vector<glm::dvec3> read_vec3(const tinygltf::Model& m, int accessor) {
-    const tinygltf::Accessor& a = m.accessors.at(accessor);
-    const tinygltf::BufferView& v = m.bufferViews.at(a.bufferView);
-    if (a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT || a.type != TINYGLTF_TYPE_VEC3)
-        throw InputError("baked glTF: an attribute is not float VEC3");
-    const std::size_t stride = v.byteStride ? v.byteStride : 12;
-    const unsigned char* base = m.buffers.at(v.buffer).data.data() + v.byteOffset + a.byteOffset;
-    if (v.byteOffset + a.byteOffset + (a.count ? (a.count - 1) * stride + 12 : 0) > m.buffers.at(v.buffer).data.size())
-        throw InputError("baked glTF: an accessor runs past its buffer");
-    std::vector<glm::dvec3> out(a.count);
-    for (std::size_t i = 0; i < a.count; ++i) {
-        float f[3];
-        std::memcpy(f, base + i * stride, 12);
-        out[i] = glm::dvec3(f[0], f[1], f[2]);
-    }
-    return out;
-}
-
-std::vector<std::uint32_t> read_indices(const tinygltf::Model& m, int accessor, std::size_t vertices) {
-    std::vector<std::uint32_t> out;
-    if (accessor < 0) {
-        for (std::size_t i = 0; i < vertices; ++i) out.push_back(std::uint32_t(i));
-        return out;
-    }
-    const tinygltf::Accessor& a = m.accessors.at(accessor);
-    const tinygltf::BufferView& v = m.bufferViews.at(a.bufferView);
-    const int size = tinygltf::GetComponentSizeInBytes(a.componentType);
-    if (size != 1 && size != 2 && size != 4) throw InputError("baked glTF: bad index type");
-    const unsigned char* base = m.buffers.at(v.buffer).data.data() + v.byteOffset + a.byteOffset;
-    if (v.byteOffset + a.byteOffset + a.count * size > m.buffers.at(v.buffer).data.size())
-        throw InputError("baked glTF: an accessor runs past its buffer");
-    for (std::size_t i = 0; i < a.count; ++i) {
-        std::uint32_t x = 0;
-        std::memcpy(&x, base + i * size, size);  // little-endian
-        if (x >= vertices) throw InputError("baked glTF: an index out of range");
-        out.push_back(x);
-    }
-    return out;
-}
-
 struct Run {
-    std::string label, quality;
+    std::string label, sweep, quality;
     int hemicube = 0;
     double element_size = 0.0;
+    int gather = -1;
+    int gather_passes = 0;
 };
 
 }  // namespace
@@ -187,54 +146,32 @@ PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height,
     return out;
 }
 
-ordered_json compare_faces(const std::string& baked_gltf, const ImageReference& ref) {
-    tinygltf::Model model;
-    tinygltf::TinyGLTF loader;
-    std::string err, warn;
-    if (!loader.LoadASCIIFromFile(&model, &err, &warn, baked_gltf))
-        throw InputError(fmt::format("{}: cannot read the baked glTF: {}", baked_gltf, err));
+ordered_json compare_faces(const std::vector<float>& rgb, int width, int height, const ImageReference& ref,
+                           long min_pixels) {
+    if (width != ref.width || height != ref.height || rgb.size() != std::size_t(width) * height * 3)
+        throw InternalError(fmt::format("bench --accuracy: a {}x{} image against a {}x{} reference", width, height,
+                                        ref.width, ref.height));
     const ordered_json& faces = ref.json.at("faces");
-    std::vector<double> area(faces.size(), 0.0);
-    std::vector<glm::dvec3> integral(faces.size(), glm::dvec3(0.0));
-    for (const tinygltf::Node& node : model.nodes) {
-        if (node.mesh < 0) continue;
-        for (const tinygltf::Primitive& prim : model.meshes.at(node.mesh).primitives) {
-            if (!prim.attributes.count("POSITION") || !prim.attributes.count("COLOR_0")) continue;
-            const std::vector<glm::dvec3> pos = read_vec3(model, prim.attributes.at("POSITION"));
-            const std::vector<glm::dvec3> col = read_vec3(model, prim.attributes.at("COLOR_0"));
-            if (col.size() != pos.size()) throw InputError(fmt::format("{}: COLOR_0 and POSITION differ in count", baked_gltf));
-            const std::vector<std::uint32_t> idx = read_indices(model, prim.indices, pos.size());
-            for (std::size_t t = 0; t + 2 < idx.size(); t += 3) {
-                const glm::dvec3 a = pos[idx[t]], b = pos[idx[t + 1]], c = pos[idx[t + 2]];
-                const glm::dvec3 cr = glm::cross(b - a, c - a);
-                const double ar = 0.5 * glm::length(cr);
-                if (!(ar > 0.0)) continue;
-                const glm::dvec3 normal = cr / (2.0 * ar), centre = (a + b + c) / 3.0;
-                for (std::size_t f = 0; f < faces.size(); ++f) {
-                    if (faces[f].at("node").get<std::string>() != node.name) continue;
-                    if (glm::dot(vec3(faces[f].at("normal")), normal) < 0.999) continue;
-                    if (std::abs(glm::dot(vec3(faces[f].at("normal")), centre) - faces[f].at("offset").get<double>()) > 1e-4)
-                        continue;
-                    area[f] += ar;
-                    integral[f] += ar * (col[idx[t]] + col[idx[t + 1]] + col[idx[t + 2]]) / 3.0;
-                    break;
-                }
-            }
-        }
+    std::vector<double> want(faces.size(), 0.0), got(faces.size(), 0.0);
+    std::vector<long> count(faces.size(), 0);
+    for (std::size_t p = 0; p < std::size_t(width) * height; ++p) {
+        const int f = ref.face[p];
+        if (f < 0 || std::size_t(f) >= faces.size()) continue;
+        want[f] += luminance(ref.rgb[3 * p], ref.rgb[3 * p + 1], ref.rgb[3 * p + 2]);
+        got[f] += luminance(rgb[3 * p], rgb[3 * p + 1], rgb[3 * p + 2]);
+        ++count[f];
     }
     ordered_json out = ordered_json::array();
     for (std::size_t f = 0; f < faces.size(); ++f) {
-        const glm::dvec3 want = vec3(faces[f].at("radiosity"));
-        ordered_json row = {{"node", faces[f].at("node")}, {"normal", faces[f].at("normal")},
-                            {"emitter", faces[f].at("emitter")}, {"reference", faces[f].at("radiosity")}};
-        if (area[f] > 0.0) {
-            const glm::dvec3 got = integral[f] / area[f];
-            row["hemirad"] = {got.x, got.y, got.z};
-            row["error"] = luminance(got) / luminance(want) - 1.0;
-        } else {
-            row["hemirad"] = nullptr;
-        }
-        out.push_back(row);
+        if (count[f] < min_pixels || !(want[f] > 0.0)) continue;
+        out.push_back({{"face", f},
+                       {"node", faces[f].at("node")},
+                       {"normal", faces[f].at("normal")},
+                       {"emitter", faces[f].at("emitter")},
+                       {"pixels", count[f]},
+                       {"reference", want[f] / double(count[f])},
+                       {"hemirad", got[f] / double(count[f])},
+                       {"error", got[f] / want[f] - 1.0}});
     }
     return out;
 }
@@ -246,18 +183,24 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, std::ostream& log
         if (!fs::is_regular_file(o.scene, ec))
             throw InputError(fmt::format("{}: not found (run bench --accuracy from the repository root)", o.scene));
     }
-    std::vector<Run> runs = {{"draft", "draft", 0, 0.0}, {"default", "default", 0, 0.0}};
+    // The presets, then sweeps of one setting at a time from the default preset: the final gather's
+    // resolution and passes, the solve's hemicube resolution, the element size.
+    std::vector<Run> runs = {{"draft", "preset", "draft"}, {"default", "preset", "default"}};
     if (!o.quick) {
-        runs.push_back({"high", "high", 0, 0.0});
-        for (const int n : {64, 128, 512, 1024}) runs.push_back({fmt::format("default, N {}", n), "default", n, 0.0});
-        for (const double e : {0.03, 0.015, 0.01})
-            runs.push_back({fmt::format("default, elements {:g}", e), "default", 0, e});
+        runs.push_back({"high", "preset", "high"});
+        for (const int g : {0, 32, 64, 128, 256})
+            runs.push_back({fmt::format("default, gather {}", g), "gather", "default", 0, 0.0, g});
+        runs.push_back({"default, gather passes 2", "gather passes", "default", 0, 0.0, -1, 2});
+        for (const int n : {64, 256, 512})
+            runs.push_back({fmt::format("default, N {}", n), "hemicube", "default", n});
+        for (const double e : {0.03, 0.015})
+            runs.push_back({fmt::format("default, elements {:g}", e), "element size", "default", 0, e});
     }
     const TempDir temp("hemirad-bench-image");
     log << fmt::format("\nCornell box against the path-traced reference ({}: {}x{}, {} paths a pixel), --device {}\n",
                        o.reference_dir, ref.width, ref.height,
                        ref.json.at("settings").value("samples_per_pixel", 0), o.device);
-    log << "| run | bake | elements | solver | pixel RMSE | worst 16x16 tile | worst block face | worst face |\n"
+    log << "| run | bake | elements | gather | pixel RMSE | worst 16x16 tile | worst block face | worst face |\n"
            "|---|---|---|---|---|---|---|---|\n";
     ordered_json out_runs = ordered_json::array();
     for (std::size_t k = 0; k < runs.size(); ++k) {
@@ -269,19 +212,20 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, std::ostream& log
         b.quality = r.quality;
         b.hemicube = r.hemicube;
         b.element_size = r.element_size;
+        b.gather = r.gather;
+        b.gather_passes = r.gather_passes;
         b.image_width = ref.width;
-        b.output_mode = "radiosity";
         b.quiet = true;
         run_bake(b);
         const ordered_json report = read_report(fs::path(b.output) / "report.json");
         int w = 0, h = 0;
         const std::vector<float> rgb = read_rgb(fs::path(b.output) / "render.exr", w, h);
         const PixelErrors px = compare_pixels(rgb, w, h, ref);
-        const ordered_json faces = compare_faces((fs::path(b.output) / "baked.gltf").string(), ref);
+        const ordered_json faces = compare_faces(rgb, w, h, ref);
         double worst_block = 0.0, worst_face = 0.0;
         std::string worst_block_name, worst_face_name;
         for (const ordered_json& f : faces) {
-            if (f.at("emitter").get<bool>() || f.at("hemirad").is_null()) continue;
+            if (f.at("emitter").get<bool>()) continue;
             const double e = f.at("error").get<double>();
             const std::string node = f.at("node").get<std::string>();
             const glm::dvec3 n = vec3(f.at("normal"));
@@ -293,16 +237,26 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, std::ostream& log
         const double seconds = report.at("timings_s").at("total").get<double>();
         const long elements = report.at("counts").at("elements").get<long>();
         const std::string solver = report.at("settings").value("solver", std::string());
+        const ordered_json& settings = report.at("settings");
+        const std::string gather = settings.at("gather").get<int>() > 0
+                                       ? fmt::format("N {} × {}", settings.at("gather").get<int>(),
+                                                     settings.at("gather_passes").get<int>())
+                                       : std::string("none");
         log << fmt::format("| {} | {:.2f} s | {} | {} | {:.2f}% | {:+.1f}% at ({}, {}) | {:+.2f}% {} | {:+.2f}% {} |\n",
-                           r.label, seconds, elements, solver, 100.0 * px.rms, 100.0 * px.worst_tile,
+                           r.label, seconds, elements, gather, 100.0 * px.rms, 100.0 * px.worst_tile,
                            px.worst_tile_x, px.worst_tile_y, 100.0 * worst_block, worst_block_name,
                            100.0 * worst_face, worst_face_name);
         log.flush();
         out_runs.push_back({{"label", r.label},
+                            {"sweep", r.sweep},
                             {"quality", r.quality},
                             {"options", {{"hemicube", report.at("settings").at("hemicube")},
                                          {"element_size", report.at("settings").at("element_size")},
-                                         {"patch_size", report.at("settings").at("patch_size")}}},
+                                         {"patch_size", report.at("settings").at("patch_size")},
+                                         {"contrast", report.at("settings").at("contrast")},
+                                         {"gather", report.at("settings").at("gather")},
+                                         {"gather_passes", report.at("settings").at("gather_passes")}}},
+                            {"gather_points", report.at("counts").at("gather_points")},
                             {"seconds", seconds},
                             {"timings_s", report.at("timings_s")},
                             {"elements", elements},

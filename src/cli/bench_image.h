@@ -1,6 +1,6 @@
 // `hemirad bench --accuracy`, the image part: the bundled Cornell box baked the way a user bakes it
-// (`hemirad bake`, the planner's engines and solvers) at the presets and along --hemicube and
-// --element-size sweeps, each compared pixel by pixel and face by face with a converged reference
+// (`hemirad bake`, the planner's engines and solvers) at the presets and along --gather,
+// --gather-passes, --hemicube and --element-size sweeps from the default, each compared pixel by pixel and face by face with a converged reference
 // of an independent path tracer (bench/pathtrace.cpp, rendered offline by
 // bench/make_references.sh into bench/reference/<scene>/ and committed).
 #pragma once
@@ -41,12 +41,15 @@ struct PixelErrors {
 };
 PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height, const ImageReference& reference);
 
-// Each reference face's area-averaged radiosity from a baked glTF written with --output-mode
-// radiosity (world-space triangles with COLOR_0 per vertex, one node per scene node): the linear
-// interpolant integrated over the node's triangles lying in the face's plane. Returns one entry
-// per reference face: {node, normal, reference, hemirad, error (relative, luminance)}; a face with
-// no baked triangle gets hemirad null. Throws InputError when the file cannot be read.
-nlohmann::ordered_json compare_faces(const std::string& baked_gltf, const ImageReference& reference);
+// Per face of the reference seen from the camera: the mean luminance over its interior pixels
+// (as compare_pixels counts them) of the image and of the reference, and their relative
+// difference. Faces with fewer than `min_pixels` interior pixels are left out. Returns
+// [{face, node, normal, emitter, pixels, reference, hemirad, error}]. (The reference's area
+// averages, reference.json's faces, count the parts no one sees too: the floor under a box, the
+// ceiling behind the lamp, where a final gather gives a vertex its seen neighbours' light; the
+// image is what a user compares.)
+nlohmann::ordered_json compare_faces(const std::vector<float>& rgb, int width, int height,
+                                     const ImageReference& reference, long min_pixels = 200);
 
 struct ImageAccuracyOptions {
     std::string device = "auto";
@@ -56,8 +59,8 @@ struct ImageAccuracyOptions {
 };
 
 // Bakes the scene at each preset and sweep point and returns {scene, reference, runs: [{label,
-// quality, options, seconds, elements, solver, pixels: PixelErrors, faces, worst_block_face}]};
-// prints a table to `log`.
+// sweep, quality, options, gather_points, seconds, timings_s, elements, solver, pixels:
+// PixelErrors, worst_block_face, worst_face, faces (compare_faces)}]}; prints a table to `log`.
 nlohmann::ordered_json run_image_accuracy(const ImageAccuracyOptions& options, std::ostream& log);
 
 }  // namespace hemirad::cli

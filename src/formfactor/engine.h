@@ -78,19 +78,25 @@ void for_each_in_union(const ShotResult& a, const ShotResult& b, Fn fn) {
 }
 
 // What shoots, as data: every engine takes a Shooter, so that new kinds of shooter come as new
-// kinds here, not as new engine interfaces. Two kinds:
+// kinds here, not as new engine interfaces. Three kinds:
 // - a patch of the mesh, shooting its hemicube from its centre along its normal (a planar cell
 //   skips its own elements and its twin's; a cluster draws its own, see shot_skips); the row
 //   holds form factors;
 // - one hemicube of a punctual light (mesh::Mesh::lights), from the light along its axis,
-//   skipping nothing; the row holds each element's visible solid angle over 4π (Weights).
+//   skipping nothing; the row holds each element's visible solid angle over 4π (Weights);
+// - a final gather's point (mesh::Mesh::gather_points), a hemicube from the point along its
+//   normal, skipping nothing (its own surface lies in the base plane); the row holds the point's
+//   form factors to the elements, F(dA → element), so that Σ F·B is its irradiance.
 struct Shooter {
-    enum class Kind : std::uint8_t { patch, light };
+    enum class Kind : std::uint8_t { patch, light, point };
     Kind kind = Kind::patch;
-    std::uint32_t patch = 0;  // Kind::patch: the patch; Kind::light: the index in mesh::Mesh::lights
+    // Kind::patch: the patch; Kind::light: the index in mesh::Mesh::lights; Kind::point: in
+    // mesh::Mesh::gather_points.
+    std::uint32_t patch = 0;
 
     static Shooter of_patch(std::uint32_t patch) { return {Kind::patch, patch}; }
     static Shooter of_light(std::uint32_t light) { return {Kind::light, light}; }
+    static Shooter of_point(std::uint32_t point) { return {Kind::point, point}; }
     bool operator==(const Shooter& o) const { return kind == o.kind && patch == o.patch; }
 };
 
@@ -102,6 +108,7 @@ struct ShotRequest {
 
     static ShotRequest of_patch(std::uint32_t patch, std::uint64_t shot) { return {Shooter::of_patch(patch), shot}; }
     static ShotRequest of_light(std::uint32_t light, std::uint64_t shot) { return {Shooter::of_light(light), shot}; }
+    static ShotRequest of_point(std::uint32_t point, std::uint64_t shot) { return {Shooter::of_point(point), shot}; }
 };
 
 // The patches whose elements a shot leaves out (mesh::kNoPatch: none): a planar cell's own
@@ -112,7 +119,7 @@ struct ShotSkips {
     bool skips(std::uint32_t patch) const { return patch == own || patch == twin; }
 };
 inline ShotSkips shot_skips(const mesh::Mesh& mesh, const Shooter& shooter) {
-    if (shooter.kind == Shooter::Kind::light) return {};
+    if (shooter.kind != Shooter::Kind::patch) return {};
     const mesh::Patch& p = mesh.patches.at(shooter.patch);
     if (p.cluster()) return {};
     return {shooter.patch, p.twin};

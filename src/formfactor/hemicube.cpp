@@ -81,6 +81,10 @@ Frame make_frame(const mesh::Mesh& mesh, const Shooter& shooter, std::uint64_t s
         const mesh::LightShooter& light = mesh.lights.at(shooter.patch);
         return make_frame(light.position, light.axis, seed, shot);
     }
+    if (shooter.kind == Shooter::Kind::point) {
+        const mesh::GatherPoint& point = mesh.gather_points.at(shooter.patch);
+        return make_frame(point.position, point.normal, seed, shot);
+    }
     return make_frame(mesh.patches.at(shooter.patch), seed, shot);
 }
 

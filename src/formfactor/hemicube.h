@@ -70,9 +70,11 @@ struct Frame {
 };
 Frame make_frame(const glm::dvec3& origin, const glm::dvec3& normal, std::uint64_t seed, std::uint64_t shot);
 Frame make_frame(const mesh::Patch& shooter, std::uint64_t seed, std::uint64_t shot);
-// The frame of any shooter: a patch's, or a light's hemicube from the light along its axis.
+// The frame of any shooter: a patch's, a light's hemicube from the light along its axis, or a
+// gather point's along its normal.
 Frame make_frame(const mesh::Mesh& mesh, const Shooter& shooter, std::uint64_t seed, std::uint64_t shot);
-// Which cell weights a shooter's shot sums: form factors for a patch, solid angles for a light.
+// Which cell weights a shooter's shot sums: form factors for a patch or a gather point, solid
+// angles for a light.
 Weights weights_of(const Shooter& shooter);
 
 }  // namespace hemirad::formfactor

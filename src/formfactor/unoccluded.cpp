@@ -113,6 +113,20 @@ void UnoccludedEngine::shoot(const ShotRequest& request, ShotResult& out) {
         }
         return;
     }
+    if (request.shooter.kind == Shooter::Kind::point) {
+        // A gather point: the exact form factor from the point to each element facing it, over
+        // the element's part in front of the point's plane.
+        const mesh::GatherPoint& point = mesh_.gather_points.at(request.shooter.patch);
+        out.clear();
+        for (std::size_t k = 0; k < receivers_.size(); ++k) {
+            const mesh::Element& e = mesh_.elements[k];
+            // Its back faces the point, or the point lies in its plane (its own surface's).
+            if (!(glm::dot(e.normal, point.position - e.centroid) > eps_)) continue;
+            const double f = point_to_polygon(point.position, point.normal, e.poly);
+            if (f > 0.0) out.push(static_cast<std::uint32_t>(k), f);
+        }
+        return;
+    }
     const std::uint32_t patch = request.shooter.patch;
     out.clear();
     const mesh::Patch& shooter = mesh_.patches[patch];

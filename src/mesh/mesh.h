@@ -76,6 +76,13 @@ struct LightShooter {
     std::uint32_t light = 0;  // index of the light in scene::Scene::lights
 };
 
+// A point a final gather shoots from (formfactor::Shooter::Kind::point): an output vertex, just
+// inside its surface, looking along the surface's normal there.
+struct GatherPoint {
+    glm::dvec3 position{0.0};
+    glm::dvec3 normal{0.0, 1.0, 0.0};  // unit
+};
+
 struct Settings {
     double patch_size = 0.0;    // maximum patch edge length, scene units (> 0)
     double element_size = 0.0;  // maximum element edge length, scene units (> 0, <= patch_size)
@@ -92,6 +99,7 @@ inline constexpr double kClusterCos = 0.9063077870366499;
 struct Mesh {
     std::vector<Patch> patches;
     std::vector<LightShooter> lights;  // the scene's punctual lights' hemicubes
+    std::vector<GatherPoint> gather_points;  // the final gather's points (solve/final_gather.h); set by it
     std::vector<Element> elements;  // elements of patch p are [first_element, first_element + element_count)
     std::size_t dropped_triangles = 0;  // zero or near-zero area
     std::size_t quads = 0;              // triangle pairs meshed as quads

@@ -12,6 +12,8 @@
 
 namespace hemirad::output {
 
+struct VertexLight;  // welded_mesh.h: a final gather's light at the welded vertices
+
 // Area-weighted averages over one scene mesh node's front-face elements (report.json "meshes").
 struct NodeSummary {
     std::string name;
@@ -28,8 +30,10 @@ std::vector<NodeSummary> summarize(const scene::Scene& scene, const mesh::Mesh& 
 // Writes `file` (.gltf) and its buffer beside it (same stem, .bin). One glTF node per scene
 // mesh node, named as in the scene; COLOR_0 holds linear radiosity; materials are unlit
 // (KHR_materials_unlit) so any viewer shows the baked light.
+// With `gathered`, its radiosity at the vertices instead of the elements' averages.
 void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene,
-                      const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity);
+                      const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
+                      const VertexLight* gathered = nullptr);
 
 // The user's scene back (--output-mode scene): the file the scene was loaded from
 // (scene.source), its nodes, names, transforms, materials, textures, samplers, cameras, lights,
@@ -46,11 +50,13 @@ void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& sce
 // and meshes of nodes not baked are copied as they were. Images the file names by uri are
 // referred to where they are (a path relative to `final_dir`, where baked.gltf will lie); embedded
 // ones are copied into the buffer. Writes `file` and its buffer (same stem, .bin). Returns
-// warnings (each a line) for what could not be carried over.
+// warnings (each a line) for what could not be carried over. With `gathered`, its light at the
+// vertices instead of the elements' averages.
 std::vector<std::string> write_scene_gltf(const std::filesystem::path& file, const std::filesystem::path& final_dir,
                                           const scene::Scene& scene,
                                           const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
-                                          const std::vector<glm::dvec3>& irradiance, double exposure);
+                                          const std::vector<glm::dvec3>& irradiance, double exposure,
+                                          const VertexLight* gathered = nullptr);
 
 // A linear RGB image, row 0 at the top.
 struct Image {
@@ -76,9 +82,10 @@ View look_view(const glm::dvec3& from, const glm::dvec3& at, double yfov);
 
 // Rasterizes the element mesh (welded, smooth per-vertex radiosity as in the baked glTF) from
 // `view`: z-buffered, perspective-correct, supersampled. Back faces of one-sided surfaces are
-// black; nothing hit is black.
+// black; nothing hit is black. With `gathered`, its radiosity at the vertices.
 Image render(const scene::Scene& scene, const mesh::Mesh& mesh,
-             const std::vector<glm::dvec3>& radiosity, const View& view, int width, int height);
+             const std::vector<glm::dvec3>& radiosity, const View& view, int width, int height,
+             const VertexLight* gathered = nullptr);
 
 // Exposure that puts the 90th percentile of lit pixels (emitters are too few to matter) at
 // 0.6 linear, about 0.8 on the display.

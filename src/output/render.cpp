@@ -257,14 +257,14 @@ double mesh_diagonal(const scene::Scene& scene, const WeldedMesh& welded) {
 }  // namespace
 
 Image render(const scene::Scene& scene, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
-             const View& view, int width, int height) {
+             const View& view, int width, int height, const VertexLight* gathered) {
     if (width <= 0 || height <= 0) {
         throw InternalError(fmt::format("output: cannot render a {}x{} image", width, height));
     }
     Image image{width, height, std::vector<float>(std::size_t(width) * height * 3, 0.0f)};
     std::vector<ScreenTriangle> triangles;
     {  // the welded mesh only while its triangles are set up: it is freed before they are drawn
-        const WeldedMesh welded = weld(scene.nodes.size(), mesh, radiosity);
+        const WeldedMesh welded = weld(scene.nodes.size(), mesh, radiosity, gathered ? &gathered->radiosity : nullptr);
         const double diagonal = mesh_diagonal(scene, welded);
         if (diagonal <= 0.0) return image;  // nothing (or nothing with extent) to draw
         const TriangleSetup setup(view, width, height, kNearFraction * diagonal);

@@ -618,10 +618,11 @@ private:
 
 std::vector<std::string> write_scene_gltf(const fs::path& file, const fs::path& final_dir, const scene::Scene& scene,
                                           const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
-                                          const std::vector<glm::dvec3>& irradiance, double exposure) {
+                                          const std::vector<glm::dvec3>& irradiance, double exposure,
+                                          const VertexLight* gathered) {
     if (!scene.source) throw InternalError("write_scene_gltf: the scene has no source file");
-    const WeldedMesh light = weld(scene.nodes.size(), mesh, radiosity);
-    const WeldedMesh incident = weld(scene.nodes.size(), mesh, irradiance);
+    const WeldedMesh light = weld(scene.nodes.size(), mesh, radiosity, gathered ? &gathered->radiosity : nullptr);
+    const WeldedMesh incident = weld(scene.nodes.size(), mesh, irradiance, gathered ? &gathered->irradiance : nullptr);
     Writer writer(scene, mesh, light, incident, exposure, final_dir);
     tinygltf::Model model = writer.build();
     const std::string bin_name = file.stem().string() + ".bin";

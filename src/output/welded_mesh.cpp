@@ -344,7 +344,8 @@ private:
 
 }  // namespace
 
-WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity) {
+WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
+                const VertexValues* vertex_values) {
     if (radiosity.size() != mesh.elements.size()) {
         throw InternalError(
             fmt::format("output: {} radiosity values for {} elements", radiosity.size(), mesh.elements.size()));
@@ -360,6 +361,18 @@ WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vecto
     WeldedMesh welded;
     welded.nodes.reserve(node_count);
     for (NodeWelder& welder : welders) welded.nodes.push_back(welder.finish());
+    if (vertex_values) {
+        if (vertex_values->size() != node_count) {
+            throw InternalError(fmt::format("output: vertex values for {} nodes of {}", vertex_values->size(), node_count));
+        }
+        for (std::size_t n = 0; n < node_count; ++n) {
+            if ((*vertex_values)[n].size() != welded.nodes[n].positions.size()) {
+                throw InternalError(fmt::format("output: node {}: {} vertex values for {} vertices", n,
+                                                (*vertex_values)[n].size(), welded.nodes[n].positions.size()));
+            }
+            welded.nodes[n].radiosity = (*vertex_values)[n];
+        }
+    }
     return welded;
 }
 

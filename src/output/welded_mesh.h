@@ -30,6 +30,15 @@ struct WeldedMesh {
     std::vector<WeldedNode> nodes;
 };
 
+// Values at the welded vertices, per node (scene node index), one per vertex in weld's order.
+using VertexValues = std::vector<std::vector<glm::dvec3>>;
+
+// The light at the output's vertices from a final gather (solve/final_gather.h), which the outputs
+// show instead of the elements' averages.
+struct VertexLight {
+    VertexValues radiosity, irradiance;
+};
+
 // Welds within one node and one side: vertices at bit-identical positions whose element
 // normals are within a crease angle (40°) become one vertex, so tessellated curves shade
 // smoothly but nothing blurs across a crease such as a box edge. Quads become two triangles.
@@ -44,8 +53,12 @@ struct WeldedMesh {
 // same way). An unrefined mesh, whose elements meet vertex to vertex, gets exactly its old
 // vertices and triangles.
 //
-// Throws InternalError when `radiosity` is not one value per element or an element names a
-// node that does not exist.
-WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity);
+// `vertex_values`, when given, replaces every vertex's value (a final gather's light; the mesh must
+// be the one it was gathered on).
+//
+// Throws InternalError when `radiosity` is not one value per element, an element names a node
+// that does not exist, or `vertex_values` does not hold one value per welded vertex.
+WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
+                const VertexValues* vertex_values = nullptr);
 
 }  // namespace hemirad::output

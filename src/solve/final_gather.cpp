@@ -1,0 +1,255 @@
+// Final gather (see final_gather.h).
+#include "solve/final_gather.h"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+#include "core/error.h"
+#include "formfactor/analytic.h"
+
+namespace hemirad::solve {
+
+namespace {
+
+// A hidden vertex's light is never seen, but a triangle from it to a seen vertex (across the edge
+// of a box's footprint, of a lamp's outline) would carry its darkness into the light. Each hidden
+// vertex takes the mean of its seen neighbours' (along the triangles' edges) instead, ring by ring
+// inward; hidden vertices with no seen vertex around them keep their own.
+void fill_hidden(const output::WeldedMesh& welded, const std::vector<std::pair<std::uint32_t, std::uint32_t>>& where,
+                 const std::vector<char>& hidden, output::VertexLight& out) {
+    std::vector<std::vector<char>> state(welded.nodes.size());  // per vertex: 0 seen, 1 hidden, 2 filled
+    bool any = false;
+    for (std::size_t i = 0; i < where.size(); ++i) {
+        if (!hidden[i]) continue;
+        auto& node_state = state[where[i].first];
+        if (node_state.empty()) node_state.assign(welded.nodes[where[i].first].positions.size(), 0);
+        node_state[where[i].second] = 1;
+        any = true;
+    }
+    if (!any) return;
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        std::vector<char>& st = state[n];
+        if (st.empty()) continue;
+        const output::WeldedNode& node = welded.nodes[n];
+        std::vector<std::vector<std::uint32_t>> neighbours(node.positions.size());
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+            for (int a = 0; a < 3; ++a) {
+                const std::uint32_t u = node.indices[3 * t + a], w = node.indices[3 * t + (a + 1) % 3];
+                if (st[u] == 1) neighbours[u].push_back(w);
+                if (st[w] == 1) neighbours[w].push_back(u);
+            }
+        }
+        for (bool changed = true; changed;) {
+            changed = false;
+            std::vector<std::pair<std::uint32_t, std::pair<glm::dvec3, glm::dvec3>>> ring;
+            for (std::uint32_t v = 0; v < st.size(); ++v) {
+                if (st[v] != 1) continue;
+                glm::dvec3 b(0.0), h(0.0);
+                int count = 0;
+                for (const std::uint32_t u : neighbours[v]) {
+                    if (st[u] == 1) continue;
+                    b += out.radiosity[n][u];
+                    h += out.irradiance[n][u];
+                    ++count;
+                }
+                if (count > 0) ring.push_back({v, {b / double(count), h / double(count)}});
+            }
+            for (const auto& [v, value] : ring) {  // a ring at a time: the result is independent of order
+                out.radiosity[n][v] = value.first;
+                out.irradiance[n][v] = value.second;
+                st[v] = 2;
+                changed = true;
+            }
+        }
+    }
+}
+
+}  // namespace
+
+std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
+                                             const std::function<bool(std::size_t node)>& gathered) {
+    std::vector<mesh::GatherPoint> points;
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (!gathered(n)) continue;
+        const output::WeldedNode& node = welded.nodes[n];
+        // Per vertex: the sum of the centroids of the triangles around it, and their count.
+        std::vector<glm::dvec3> around(node.positions.size(), glm::dvec3(0.0));
+        std::vector<int> count(node.positions.size(), 0);
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+            const std::uint32_t* v = &node.indices[3 * t];
+            const glm::dvec3 c = (node.positions[v[0]] + node.positions[v[1]] + node.positions[v[2]]) / 3.0;
+            for (int k = 0; k < 3; ++k) {
+                around[v[k]] += c;
+                ++count[v[k]];
+            }
+        }
+        for (std::size_t v = 0; v < node.positions.size(); ++v) {
+            mesh::GatherPoint p;
+            p.position = node.positions[v];
+            if (count[v] > 0) p.position += kGatherInset * (around[v] / double(count[v]) - node.positions[v]);
+            p.normal = node.normals[v];
+            points.push_back(p);
+        }
+    }
+    return points;
+}
+
+mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {
+    mesh::Mesh out;
+    out.lights = mesh.lights;
+    out.patches.reserve(mesh.patches.size());
+    for (const mesh::Patch& p : mesh.patches) {
+        mesh::Patch q = p;
+        q.first_element = static_cast<std::uint32_t>(out.elements.size());
+        const std::uint32_t index = static_cast<std::uint32_t>(out.patches.size());
+        if (p.cluster() || p.element_count <= 1) {
+            for (std::uint32_t k = p.first_element; k < p.first_element + p.element_count; ++k) {
+                out.elements.push_back(mesh.elements[k]);
+                out.elements.back().patch = index;
+            }
+        } else {
+            mesh::Element e = mesh.elements[p.first_element];  // node, material, sides as its elements'
+            e.poly = p.poly;
+            e.normal = p.normal;
+            e.centroid = p.centroid;
+            e.area = p.area;
+            e.emission = p.emission;
+            e.patch = index;
+            out.elements.push_back(e);
+        }
+        q.element_count = static_cast<std::uint32_t>(out.elements.size()) - q.first_element;
+        out.patches.push_back(q);
+    }
+    return out;
+}
+
+bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
+                  const std::function<bool(std::size_t node)>& gathered, const std::vector<glm::dvec3>& radiosity,
+                  const std::vector<glm::dvec3>& irradiance, const std::vector<glm::dvec3>& direct,
+                  const mesh::Mesh& drawn, formfactor::Engine& engine, const GatherSettings& settings,
+                  output::VertexLight& out) {
+    const std::size_t node_count = welded.nodes.size();
+    if (radiosity.size() != mesh.elements.size() || irradiance.size() != mesh.elements.size() ||
+        (!direct.empty() && direct.size() != mesh.elements.size()) || drawn.patches.size() != mesh.patches.size()) {
+        throw InternalError("final gather: the solution, the lights' light or the drawn mesh do not match the mesh");
+    }
+    std::vector<glm::dvec3> emission(mesh.elements.size()), rho(mesh.elements.size());
+    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
+        emission[k] = mesh.elements[k].emission;
+        rho[k] = mesh.elements[k].rho;
+    }
+    // The elements' means at the vertices (the same weld, so the same vertices in the same order).
+    const output::WeldedMesh e = output::weld(node_count, mesh, emission);
+    const output::WeldedMesh r = output::weld(node_count, mesh, rho);
+    const output::WeldedMesh h = output::weld(node_count, mesh, irradiance);
+    const output::WeldedMesh d = direct.empty() ? output::WeldedMesh{} : output::weld(node_count, mesh, direct);
+    out.radiosity.assign(node_count, {});
+    out.irradiance.assign(node_count, {});
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> where;  // point i's node and vertex
+    for (std::size_t n = 0; n < node_count; ++n) {
+        out.radiosity[n] = welded.nodes[n].radiosity;
+        out.irradiance[n] = h.nodes[n].radiosity;
+        if (!gathered(n)) continue;
+        for (std::size_t v = 0; v < welded.nodes[n].positions.size(); ++v)
+            where.push_back({static_cast<std::uint32_t>(n), static_cast<std::uint32_t>(v)});
+    }
+    const std::size_t total = where.size();
+    if (total != drawn.gather_points.size()) {
+        throw InternalError("final gather: the drawn mesh's gather points are not the welded mesh's vertices");
+    }
+
+    // What the gather draws: per element of the solved mesh, its radiosity (the solver's, then the
+    // last pass's), and per drawn element the area-weighted mean of the elements it stands for.
+    std::vector<glm::dvec3> fine = radiosity, coarse(drawn.elements.size(), glm::dvec3(0.0));
+    const auto draw = [&] {
+        for (std::size_t p = 0; p < mesh.patches.size(); ++p) {
+            const mesh::Patch& fp = mesh.patches[p];
+            const mesh::Patch& cp = drawn.patches[p];
+            if (cp.element_count == fp.element_count) {  // elements drawn as they are
+                for (std::uint32_t k = 0; k < fp.element_count; ++k) coarse[cp.first_element + k] = fine[fp.first_element + k];
+                continue;
+            }
+            glm::dvec3 sum(0.0);
+            double area = 0.0;
+            for (std::uint32_t k = fp.first_element; k < fp.first_element + fp.element_count; ++k) {
+                sum += mesh.elements[k].area * fine[k];
+                area += mesh.elements[k].area;
+            }
+            coarse[cp.first_element] = area > 0.0 ? sum / area : glm::dvec3(0.0);
+        }
+    };
+    // A drawn cell close to the point: its elements weighed by their exact unoccluded form factors
+    // from the point (the cell's visible form factor, the hemicube's, shared out by them).
+    constexpr double kNearPatches = 2.0;
+    const auto seen_radiosity = [&](const mesh::GatherPoint& point, std::uint32_t c) {
+        const mesh::Patch& fp = mesh.patches[drawn.elements[c].patch];
+        if (fp.cluster() || fp.element_count <= 1) return coarse[c];
+        const double reach = kNearPatches * std::sqrt(fp.area);
+        const glm::dvec3 to = point.position - fp.centroid;
+        if (glm::dot(to, to) > reach * reach) return coarse[c];
+        glm::dvec3 sum(0.0);
+        double weight = 0.0;
+        for (std::uint32_t k = fp.first_element; k < fp.first_element + fp.element_count; ++k) {
+            const double f = formfactor::point_to_polygon(point.position, point.normal, mesh.elements[k].poly);
+            if (!(f > 0.0)) continue;
+            sum += f * fine[k];
+            weight += f;
+        }
+        return weight > 0.0 ? sum / weight : coarse[c];
+    };
+
+    // A point that sees mostly the backs of one-sided surfaces lies where nothing is seen.
+    constexpr double kHiddenBlocked = 0.5;
+    std::vector<char> hidden(total, 0);
+    const int passes = std::max(1, settings.passes);
+    const std::size_t batch = static_cast<std::size_t>(std::max(1, settings.batch));
+    std::vector<formfactor::ShotRequest> requests;
+    std::vector<formfactor::ShotResult> results;
+    for (int pass = 0; pass < passes; ++pass) {
+        if (pass > 0) {  // the elements' radiosity from the last pass's vertices
+            std::vector<glm::dvec3> sum(mesh.elements.size(), glm::dvec3(0.0));
+            std::vector<double> area(mesh.elements.size(), 0.0);
+            for (std::size_t n = 0; n < node_count; ++n) {
+                if (!gathered(n)) continue;
+                const output::WeldedNode& node = welded.nodes[n];
+                for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+                    const std::uint32_t* v = &node.indices[3 * t];
+                    const glm::dvec3 a = node.positions[v[0]], b = node.positions[v[1]], c = node.positions[v[2]];
+                    const double at = 0.5 * glm::length(glm::cross(b - a, c - a));
+                    sum[node.element[t]] +=
+                        at * (out.radiosity[n][v[0]] + out.radiosity[n][v[1]] + out.radiosity[n][v[2]]) / 3.0;
+                    area[node.element[t]] += at;
+                }
+            }
+            for (std::size_t k = 0; k < fine.size(); ++k)
+                if (area[k] > 0.0) fine[k] = sum[k] / area[k];
+        }
+        draw();
+        for (std::size_t first = 0; first < total; first += batch) {
+            if (settings.cancelled && settings.cancelled()) return false;
+            const std::size_t count = std::min(batch, total - first);
+            requests.clear();
+            for (std::size_t i = first; i < first + count; ++i)
+                requests.push_back(formfactor::ShotRequest::of_point(static_cast<std::uint32_t>(i), kGatherShots + i));
+            engine.shoot_batch(requests, results);
+            for (std::size_t j = 0; j < count; ++j) {
+                const formfactor::ShotResult& row = results[j];
+                const mesh::GatherPoint& point = drawn.gather_points[first + j];
+                glm::dvec3 light(0.0);
+                for (std::size_t k = 0; k < row.size(); ++k) light += row.F[k] * seen_radiosity(point, row.element[k]);
+                const auto [n, v] = where[first + j];
+                if (!direct.empty()) light += d.nodes[n].radiosity[v];
+                hidden[first + j] = row.blocked > kHiddenBlocked;
+                out.irradiance[n][v] = light;
+                out.radiosity[n][v] = e.nodes[n].radiosity[v] + r.nodes[n].radiosity[v] * light;
+            }
+            if (settings.progress)
+                settings.progress(static_cast<long>(pass * total + first + count), static_cast<long>(passes * total));
+        }
+        fill_hidden(welded, where, hidden, out);
+    }
+    return true;
+}
+
+}  // namespace hemirad::solve
