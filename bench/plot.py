@@ -372,7 +372,7 @@ def plot_accuracy_cornell(doc, acc, out):
     runs = cornell["runs"]
     fig, ax = plt.subplots(figsize=(8, 6))
     for sweep in unique(r["sweep"] for r in runs if r["sweep"] != "preset"):
-        pts = sorted((r for r in runs if r["sweep"] == sweep), key=lambda r: r["seconds"])
+        pts = [r for r in runs if r["sweep"] == sweep]  # in the setting's order, not the time's
         ax.plot([r["seconds"] for r in pts], [r["pixels"]["rms"] for r in pts], marker="o", ms=4, lw=1,
                 alpha=0.8, label=f"sweep: {sweep}")
         for r in pts:

@@ -324,6 +324,9 @@ constexpr double kUnconvergedTolerance = 1e-12;
 // reflectances are high enough to need many).
 constexpr int kMaxSweeps = 20000;
 
+// The most output vertices the quality's final gather takes on by itself (see solve_and_refine).
+constexpr std::size_t kMaxPlannedGather = 200000;
+
 class ProgressLine {
 public:
     // On a terminal (tty), one line redrawn in place five times a second; in a log, a line every
@@ -844,6 +847,22 @@ void run_bake(const BakeOptions& options) {
             // Every vertex of the output but the sky dome's, through the patches' cells (gather_mesh).
             const auto gathered_node = [&](std::size_t n) { return !scene.nodes[n].synthetic; };
             const output::WeldedMesh welded = output::weld(scene.nodes.size(), mesh, solution.radiosity);
+            std::size_t vertices = 0;
+            for (std::size_t n = 0; n < welded.nodes.size(); ++n)
+                if (gathered_node(n)) vertices += welded.nodes[n].positions.size();
+            // A hemicube per vertex: on a large scene more than the solve's shots, each costing about
+            // as much. Beyond kMaxPlannedGather vertices the quality's gather is left out (a warning
+            // says so); --gather N asks for it whatever the size.
+            if (options.gather < 0 && vertices > kMaxPlannedGather) {
+                const std::string warning = fmt::format(
+                    "final gather left out: {} vertices would each take a hemicube (more than {}); --gather {} "
+                    "asks for it",
+                    vertices, kMaxPlannedGather, o.gather);
+                if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
+                warnings.push_back(warning);
+                t_gather = seconds_since(t0);
+                return;
+            }
             std::vector<glm::dvec3> direct;  // punctual and directional lights' light, on the solved mesh
             if (solve::has_direct_light(mesh, scene.lights)) {
                 std::unique_ptr<formfactor::Engine> lights_engine = make_engine(mesh, 0);
@@ -862,8 +881,16 @@ void run_bake(const BakeOptions& options) {
             gs.cancelled = [&] { return o.interrupted && *o.interrupted; };
             ProgressLine gathering(o.progress, o.progress_tty);
             gs.progress = [&](long done, long total) { gathering.gathering(done, total); };
-            const bool done = solve::final_gather(mesh, welded, gathered_node, solution.radiosity, solution.irradiance,
-                                                  direct, drawn, *gather_engine, gs, gathered);
+            // Direct light only (interreflection off): the gather sees the emitters' light alone, or
+            // it would add the bounce the plan leaves out.
+            std::vector<glm::dvec3> emitted;
+            if (direct_only) {
+                emitted.resize(mesh.elements.size());
+                for (std::size_t k = 0; k < mesh.elements.size(); ++k) emitted[k] = mesh.elements[k].emission;
+                gs.passes = 1;
+            }
+            const bool done = solve::final_gather(mesh, welded, gathered_node, direct_only ? emitted : solution.radiosity,
+                                                  solution.irradiance, direct, drawn, *gather_engine, gs, gathered);
             gathering.finish();
             if (!done) throw Interrupted();
             gather_points = static_cast<long>(drawn.gather_points.size());

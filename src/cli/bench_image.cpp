@@ -191,7 +191,7 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, std::ostream& log
         for (const int g : {0, 32, 64, 128, 256})
             runs.push_back({fmt::format("default, gather {}", g), "gather", "default", 0, 0.0, g});
         runs.push_back({"default, gather passes 2", "gather passes", "default", 0, 0.0, -1, 2});
-        for (const int n : {64, 256, 512})
+        for (const int n : {64, 128, 512})
             runs.push_back({fmt::format("default, N {}", n), "hemicube", "default", n});
         for (const double e : {0.03, 0.015})
             runs.push_back({fmt::format("default, elements {:g}", e), "element size", "default", 0, e});
@@ -203,8 +203,10 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, std::ostream& log
     log << "| run | bake | elements | gather | pixel RMSE | worst 16x16 tile | worst block face | worst face |\n"
            "|---|---|---|---|---|---|---|---|\n";
     ordered_json out_runs = ordered_json::array();
-    for (std::size_t k = 0; k < runs.size(); ++k) {
-        const Run& r = runs[k];
+    // A device's first bake builds its kernels: a draft bake first, untimed, so that no run pays for it.
+    for (std::size_t k = o.device == "ref" ? 1 : 0; k <= runs.size(); ++k) {
+        const bool warm_up = k == 0;
+        const Run& r = warm_up ? runs.front() : runs[k - 1];
         BakeOptions b;
         b.scene = o.scene;
         b.output = (temp.path() / fmt::format("bake-{}", k)).string();
@@ -217,6 +219,11 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, std::ostream& log
         b.image_width = ref.width;
         b.quiet = true;
         run_bake(b);
+        if (warm_up) {
+            std::error_code ec;
+            fs::remove_all(b.output, ec);
+            continue;
+        }
         const ordered_json report = read_report(fs::path(b.output) / "report.json");
         int w = 0, h = 0;
         const std::vector<float> rgb = read_rgb(fs::path(b.output) / "render.exr", w, h);
