@@ -325,7 +325,7 @@ constexpr double kUnconvergedTolerance = 1e-12;
 constexpr int kMaxSweeps = 20000;
 
 // The most output vertices the quality's final gather takes on by itself (see solve_and_refine).
-constexpr std::size_t kMaxPlannedGather = 200000;
+constexpr std::size_t kMaxPlannedGather = 50000;
 
 class ProgressLine {
 public:
@@ -850,9 +850,10 @@ void run_bake(const BakeOptions& options) {
             std::size_t vertices = 0;
             for (std::size_t n = 0; n < welded.nodes.size(); ++n)
                 if (gathered_node(n)) vertices += welded.nodes[n].positions.size();
-            // A hemicube per vertex: on a large scene more than the solve's shots, each costing about
-            // as much. Beyond kMaxPlannedGather vertices the quality's gather is left out (a warning
-            // says so); --gather N asks for it whatever the size.
+            // A hemicube per vertex: on real content many times the solve's shots, each costing about
+            // as much (a 113k-vertex material ball at draft: the gather ran 15× the solve's time).
+            // Beyond kMaxPlannedGather vertices the quality's gather is left out (a warning says
+            // so); --gather N asks for it whatever the size.
             if (options.gather < 0 && vertices > kMaxPlannedGather) {
                 const std::string warning = fmt::format(
                     "final gather left out: {} vertices would each take a hemicube (more than {}); --gather {} "
