@@ -91,6 +91,8 @@ TEST_CASE("options: every number option refuses NaN, Inf, other spellings and va
         {"--contrast", "0"},          {"--contrast", "2"},          {"--refine-levels", "7"},
         {"--checkpoint-every", "0"},  {"--verify-every", "0"},      {"--preview-every", "-1"},
         {"--image-width", "15"},      {"--image-width", "16385"},
+        {"--gather", "-1"},           {"--gather", "7"},            {"--gather", "6"},
+        {"--gather", "4098"},         {"--gather-passes", "0"},     {"--gather-passes", "9"},
     };
     for (const auto& [option, value] : out_of_range) {
         INFO(option << " " << value);

@@ -541,7 +541,7 @@ void run_bake(const BakeOptions& options) {
     if (o.gather < 0) o.gather = quality.gather;
     if (o.gather_passes <= 0) o.gather_passes = quality.gather_passes;
     if (o.gather % 2 != 0 || (o.gather != 0 && (o.gather < 8 || o.gather > formfactor::kMaxHemicube)))
-        throw InputError(fmt::format("--gather {}: expected 0 (none) or an even resolution from 8 to {}", o.gather,
+        throw InputError(fmt::format("--gather: {} must be 0 (none) or an even resolution from 8 to {}", o.gather,
                                      formfactor::kMaxHemicube));
     if (o.solver != "auto" && o.solver != "matrix" && o.solver != "progressive")
         throw InputError(fmt::format("--solver {}: expected auto, matrix or progressive", o.solver));
