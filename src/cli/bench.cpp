@@ -67,9 +67,10 @@ void run_bench(const BenchCommand& command, std::ostream& log) {
         ImageAccuracyOptions image;
         image.device = command.device;
         image.quick = command.quick;
-        load_image_reference(image.reference_dir);  // before minutes of work: run from the repository root
+        // Read before minutes of work: a run outside the repository root fails at once.
+        const ImageReference reference = load_image_reference(image.reference_dir);
         doc = bench::run_accuracy({command.device, command.quick}, log);
-        doc["accuracy"]["cornell"] = run_image_accuracy(image, log);
+        doc["accuracy"]["cornell"] = run_image_accuracy(image, reference, log);
     } else if (command.effects) {
         EffectsBenchOptions options;
         options.device = command.device;

@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -30,21 +29,35 @@ double luminance(double r, double g, double b) { return 0.2126 * r + 0.7152 * g 
 
 glm::dvec3 vec3(const ordered_json& j) { return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()}; }
 
-// Linear RGB of an image file (render.exr), as floats.
-std::vector<float> read_rgb(const fs::path& file, int& width, int& height) {
+// Every channel of an image file as floats, pixel by pixel; `spec` gets its size and channels.
+std::vector<float> read_channels(const fs::path& file, OIIO::ImageSpec& spec) {
     auto in = OIIO::ImageInput::open(file.string());
     if (!in) throw InputError(fmt::format("{}: cannot read the image", file.string()));
-    const OIIO::ImageSpec& spec = in->spec();
+    spec = in->spec();
+    std::vector<float> all(std::size_t(spec.width) * spec.height * spec.nchannels);
+    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, all.data()))
+        throw InputError(fmt::format("{}: cannot read the image", file.string()));
+    return all;
+}
+
+// Linear RGB of an image file (render.exr), as floats.
+std::vector<float> read_rgb(const fs::path& file, int& width, int& height) {
+    OIIO::ImageSpec spec;
+    const std::vector<float> all = read_channels(file, spec);
     if (spec.nchannels < 3) throw InputError(fmt::format("{}: fewer than 3 channels", file.string()));
     width = spec.width;
     height = spec.height;
-    std::vector<float> all(std::size_t(width) * height * spec.nchannels);
-    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, all.data()))
-        throw InputError(fmt::format("{}: cannot read the image", file.string()));
     std::vector<float> rgb(std::size_t(width) * height * 3);
     for (std::size_t p = 0; p < std::size_t(width) * height; ++p)
         for (int c = 0; c < 3; ++c) rgb[3 * p + c] = all[p * spec.nchannels + c];
     return rgb;
+}
+
+// An image of the reference's size, or an InternalError (the bench renders at the reference's width).
+void check_same_size(const std::vector<float>& rgb, int width, int height, const ImageReference& ref) {
+    if (width != ref.width || height != ref.height || rgb.size() != std::size_t(width) * height * 3)
+        throw InternalError(fmt::format("bench --accuracy: a {}x{} image against a {}x{} reference", width, height,
+                                        ref.width, ref.height));
 }
 
 struct Run {
@@ -70,9 +83,8 @@ ImageReference load_image_reference(const std::string& dir) {
         }
         if (!r.json.contains("faces")) throw InputError(fmt::format("{}: not a path-traced reference", json.string()));
     }
-    auto in = OIIO::ImageInput::open(exr.string());
-    if (!in) throw InputError(fmt::format("{}: cannot read the image", exr.string()));
-    const OIIO::ImageSpec& spec = in->spec();
+    OIIO::ImageSpec spec;
+    const std::vector<float> all = read_channels(exr, spec);
     const std::vector<std::string> want = {"R", "G", "B", "noise.Y", "face"};
     if (spec.nchannels != int(want.size())) throw InputError(fmt::format("{}: not a path-traced reference", exr.string()));
     std::vector<int> index(want.size());
@@ -82,9 +94,6 @@ ImageReference load_image_reference(const std::string& dir) {
     }
     r.width = spec.width;
     r.height = spec.height;
-    std::vector<float> all(std::size_t(r.width) * r.height * spec.nchannels);
-    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, all.data()))
-        throw InputError(fmt::format("{}: cannot read the image", exr.string()));
     const std::size_t n = std::size_t(r.width) * r.height;
     r.rgb.resize(3 * n);
     r.noise_y.resize(n);
@@ -99,9 +108,7 @@ ImageReference load_image_reference(const std::string& dir) {
 }
 
 PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height, const ImageReference& ref) {
-    if (width != ref.width || height != ref.height || rgb.size() != std::size_t(width) * height * 3)
-        throw InternalError(fmt::format("bench --accuracy: a {}x{} image against a {}x{} reference", width, height,
-                                        ref.width, ref.height));
+    check_same_size(rgb, width, height, ref);
     const ordered_json& faces = ref.json.at("faces");
     std::vector<bool> emitter(faces.size());
     for (std::size_t f = 0; f < faces.size(); ++f) emitter[f] = faces[f].at("emitter").get<bool>();
@@ -148,9 +155,7 @@ PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height,
 
 ordered_json compare_faces(const std::vector<float>& rgb, int width, int height, const ImageReference& ref,
                            long min_pixels) {
-    if (width != ref.width || height != ref.height || rgb.size() != std::size_t(width) * height * 3)
-        throw InternalError(fmt::format("bench --accuracy: a {}x{} image against a {}x{} reference", width, height,
-                                        ref.width, ref.height));
+    check_same_size(rgb, width, height, ref);
     const ordered_json& faces = ref.json.at("faces");
     std::vector<double> want(faces.size(), 0.0), got(faces.size(), 0.0);
     std::vector<long> count(faces.size(), 0);
@@ -176,8 +181,7 @@ ordered_json compare_faces(const std::vector<float>& rgb, int width, int height,
     return out;
 }
 
-ordered_json run_image_accuracy(const ImageAccuracyOptions& o, std::ostream& log) {
-    const ImageReference ref = load_image_reference(o.reference_dir);
+ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageReference& ref, std::ostream& log) {
     {
         std::error_code ec;
         if (!fs::is_regular_file(o.scene, ec))

@@ -58,9 +58,11 @@ struct ImageAccuracyOptions {
     std::string scene = "scenes/cornell_box.gltf";
 };
 
-// Bakes the scene at each preset and sweep point and returns {scene, reference, runs: [{label,
+// Bakes the scene at each preset and sweep point, compares with `reference` (load_image_reference of
+// options.reference_dir) and returns {scene, reference, runs: [{label,
 // sweep, quality, options, gather_points, seconds, timings_s, elements, solver, pixels:
 // PixelErrors, worst_block_face, worst_face, faces (compare_faces)}]}; prints a table to `log`.
-nlohmann::ordered_json run_image_accuracy(const ImageAccuracyOptions& options, std::ostream& log);
+nlohmann::ordered_json run_image_accuracy(const ImageAccuracyOptions& options, const ImageReference& reference,
+                                          std::ostream& log);
 
 }  // namespace hemirad::cli
