@@ -331,6 +331,21 @@ def plot_opencl_stages(doc, rows, out, colour):
 # ---------------------------------------------------------------------------------------------
 # accuracy
 
+def preset_star(ax, seconds, error, name):
+    """A --quality preset on an error-against-time plot: a gold star and its name."""
+    ax.scatter([seconds], [error], marker="*", s=260, color="gold", edgecolors="k", linewidths=0.8, zorder=5)
+    ax.annotate(name, (seconds, error), xytext=(9, 6), textcoords="offset points", fontsize=10, weight="bold")
+
+
+def error_time_axes(ax, ylabel):
+    """Log-log axes of error against bake time, gridded, the legend to the right."""
+    ax.set(xscale="log", yscale="log", xlabel="bake time (s)", ylabel=ylabel)
+    plain_log(ax)
+    plain_log(ax, "x")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), frameon=False)
+
+
 def plot_accuracy_pareto(doc, acc, out):
     room = acc.get("room")
     if not room or not room["runs"]:
@@ -346,17 +361,9 @@ def plot_accuracy_pareto(doc, acc, out):
         ax.step([r["seconds"] for r in front], [r["rms_rel_error"] for r in front], where="post",
                 color="k", lw=1.2, label="Pareto front")
     for name, run in room.get("presets", {}).items():
-        ax.scatter([run["seconds"]], [run["rms_rel_error"]], marker="*", s=260, color="gold",
-                   edgecolors="k", linewidths=0.8, zorder=5)
-        ax.annotate(name, (run["seconds"], run["rms_rel_error"]), xytext=(9, 6),
-                    textcoords="offset points", fontsize=10, weight="bold")
+        preset_star(ax, run["seconds"], run["rms_rel_error"], name)
     ax.scatter([], [], marker="*", s=120, color="gold", edgecolors="k", label="--quality presets")
-    ax.set(xscale="log", yscale="log", xlabel="bake time (s)",
-           ylabel="RMS relative error of the radiosity")
-    plain_log(ax)
-    plain_log(ax, "x")
-    ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), frameon=False)
+    error_time_axes(ax, "RMS relative error of the radiosity")
     ref = room.get("reference", {})
     ref_text = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                          for k, v in ref.items() if isinstance(v, (int, float, str)))
@@ -382,16 +389,8 @@ def plot_accuracy_cornell(doc, acc, out):
     ax.plot([r["seconds"] for r in presets], [r["pixels"]["rms"] for r in presets], color="k", lw=1.2,
             label="--quality presets")
     for r in presets:
-        ax.scatter([r["seconds"]], [r["pixels"]["rms"]], marker="*", s=260, color="gold", edgecolors="k",
-                   linewidths=0.8, zorder=5)
-        ax.annotate(r["label"], (r["seconds"], r["pixels"]["rms"]), xytext=(9, 6), textcoords="offset points",
-                    fontsize=10, weight="bold")
-    ax.set(xscale="log", yscale="log", xlabel="bake time (s)",
-           ylabel="per-pixel relative RMS error (reference noise removed)")
-    plain_log(ax)
-    plain_log(ax, "x")
-    ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), frameon=False)
+        preset_star(ax, r["seconds"], r["pixels"]["rms"], r["label"])
+    error_time_axes(ax, "per-pixel relative RMS error (reference noise removed)")
     ref = cornell.get("reference", {})
     finish(fig, os.path.join(out, "accuracy_cornell.png"), doc,
            f"Cornell box against a converged path tracer (device: {acc.get('device', '?')})",
