@@ -7,6 +7,8 @@
 
 #include "core/error.h"
 #include "formfactor/analytic.h"
+#include "mesh/contact.h"
+#include "mesh/refine.h"
 
 namespace hemirad::solve {
 
@@ -93,6 +95,26 @@ std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
         }
     }
     return points;
+}
+
+std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity, std::vector<glm::dvec3>& irradiance,
+                           double min_size, const mesh::Texturing* texturing) {
+    if (radiosity.size() != mesh.elements.size() || irradiance.size() != mesh.elements.size())
+        throw InternalError("contact grading: the solution does not match the mesh");
+    const std::vector<bool> marked = mesh::contact_elements(mesh, min_size);
+    const std::size_t split = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
+    if (split == 0) return 0;
+    mesh::Refined refined = mesh::split_elements(mesh, marked, texturing);
+    std::vector<glm::dvec3> b(refined.mesh.elements.size()), h(refined.mesh.elements.size());
+    for (std::size_t k = 0; k < b.size(); ++k) {
+        const std::uint32_t parent = refined.origin[k];
+        h[k] = irradiance[parent];
+        b[k] = radiosity[parent] + (refined.mesh.elements[k].rho - mesh.elements[parent].rho) * h[k];
+    }
+    mesh = std::move(refined.mesh);
+    radiosity = std::move(b);
+    irradiance = std::move(h);
+    return split;
 }
 
 mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {

@@ -20,6 +20,7 @@
 
 #include "formfactor/engine.h"
 #include "mesh/mesh.h"
+#include "mesh/texturing.h"
 #include "output/welded_mesh.h"
 
 namespace hemirad::solve {
@@ -47,6 +48,14 @@ std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
 // come from its own hemicube at pixel resolution, and the drawing costs a patch, not its elements
 // (the Cornell box at the default quality: 742 drawn elements for 15,354).
 mesh::Mesh gather_mesh(const mesh::Mesh& mesh);
+
+// Grades `mesh` toward its contact lines (mesh/contact.h) for a gather: every element along one
+// that is longer than `min_size` is split in four (mesh::split_elements, with `texturing`). Children
+// take their parent's irradiance, and radiosity E + ρH by their own reflectance (the parent's
+// exactly where it is untextured), so every element average, and the light the gather draws, is
+// unchanged; the gather's vertices along the line double. Returns the number of elements split.
+std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity, std::vector<glm::dvec3>& irradiance,
+                           double min_size, const mesh::Texturing* texturing);
 
 struct GatherSettings {
     int batch = 64;   // shots per engine call
