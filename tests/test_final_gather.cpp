@@ -29,7 +29,7 @@ struct Gathered {
 // drawn mesh.
 template <class Make>
 Gathered gather(const scene::Scene& s, const mesh::Mesh& m, const std::vector<glm::dvec3>& radiosity, Make make,
-                int passes = 1) {
+                int passes = 1, std::size_t kept_entries = solve::kMaxKeptEntries) {
     Gathered g;
     g.welded = output::weld(s.nodes.size(), m, radiosity);
     const auto all = [](std::size_t) { return true; };
@@ -38,10 +38,30 @@ Gathered gather(const scene::Scene& s, const mesh::Mesh& m, const std::vector<gl
     auto engine = make(drawn);
     solve::GatherSettings settings;
     settings.passes = passes;
+    settings.kept_entries = kept_entries;
     const std::vector<glm::dvec3> irradiance(m.elements.size(), glm::dvec3(0.0));
     REQUIRE(solve::final_gather(m, g.welded, all, radiosity, irradiance, {}, drawn, *engine, settings, g.light));
     return g;
 }
+
+// Counts the rows an engine is asked for.
+class CountingEngine : public formfactor::Engine {
+public:
+    CountingEngine(std::unique_ptr<formfactor::Engine> inner, long& shots) : inner_(std::move(inner)), shots_(shots) {}
+    std::string name() const override { return inner_->name(); }
+    void shoot(const formfactor::ShotRequest& request, formfactor::ShotResult& out) override {
+        ++shots_;
+        inner_->shoot(request, out);
+    }
+    void shoot_batch(const std::vector<formfactor::ShotRequest>& shots, std::vector<formfactor::ShotResult>& out) override {
+        shots_ += static_cast<long>(shots.size());
+        inner_->shoot_batch(shots, out);
+    }
+
+private:
+    std::unique_ptr<formfactor::Engine> inner_;
+    long& shots_;
+};
 
 std::optional<ocl::Context> first_device() {
     const auto devices = ocl::list_devices();
@@ -165,4 +185,44 @@ TEST_CASE("final gather: the OpenCL engine gathers the reference's light, bit fo
         }
     }
     CHECK(vertices > 500);
+}
+
+TEST_CASE("final gather: later passes re-use the first pass's rows and gather what shooting again gives", "[gather]") {
+    // Every pass shoots the same points with the same frames at the same drawn mesh, so the rows
+    // kept from the first pass must give the later passes bit for bit the light that shooting them
+    // again gives, with all rows kept, none, or some (the rest shot again).
+    const scene::Scene s = scene::load(std::filesystem::path(HEMIRAD_SOURCE_DIR) / "scenes" / "cornell_box.gltf");
+    mesh::Settings ms;
+    ms.patch_size = 0.12;
+    ms.element_size = 0.04;
+    const mesh::Mesh m = mesh::build(s, ms);
+    std::vector<glm::dvec3> radiosity(m.elements.size());
+    for (std::size_t k = 0; k < m.elements.size(); ++k)
+        radiosity[k] = m.elements[k].emission + glm::dvec3(0.01 * double(k % 7), 0.02 * double(k % 3), 0.005);
+    const auto run = [&](std::size_t kept_entries, long& shots) {
+        return gather(
+            s, m, radiosity,
+            [&](const mesh::Mesh& d) {
+                return std::make_unique<CountingEngine>(
+                    std::make_unique<formfactor::ReferenceEngine>(d, formfactor::Settings{32, 5}), shots);
+            },
+            3, kept_entries);
+    };
+    long all_shots = 0, none_shots = 0, some_shots = 0;
+    const Gathered all = run(solve::kMaxKeptEntries, all_shots);
+    const Gathered none = run(0, none_shots);
+    const Gathered some = run(20000, some_shots);
+    long points = 0;
+    for (std::size_t n = 0; n < all.welded.nodes.size(); ++n) points += static_cast<long>(all.welded.nodes[n].positions.size());
+    CHECK(all_shots == points);
+    CHECK(none_shots == 3 * points);
+    CHECK(some_shots > points);
+    CHECK(some_shots < 3 * points);
+    for (std::size_t n = 0; n < all.welded.nodes.size(); ++n) {
+        for (std::size_t v = 0; v < all.light.irradiance[n].size(); ++v) {
+            CHECK(all.light.irradiance[n][v] == none.light.irradiance[n][v]);
+            CHECK(all.light.radiosity[n][v] == none.light.radiosity[n][v]);
+            CHECK(some.light.radiosity[n][v] == none.light.radiosity[n][v]);
+        }
+    }
 }

@@ -895,6 +895,9 @@ void run_bake(const BakeOptions& options) {
             solve::GatherSettings gs;
             gs.batch = std::max(o.batch, 64);
             gs.passes = o.gather_passes;
+            // The later passes re-use the first's rows, within the progressive solve's row-cache
+            // budget (its cache is gone by now).
+            gs.kept_entries = static_cast<std::size_t>(row_cache_bytes(shape) / (sizeof(std::uint32_t) + sizeof(double)));
             gs.cancelled = [&] { return o.interrupted && *o.interrupted; };
             ProgressLine gathering(o.progress, o.progress_tty);
             gs.progress = [&](long done, long total) { gathering.gathering(done, total); };

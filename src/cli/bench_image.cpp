@@ -194,7 +194,8 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
         runs.push_back({"high", "preset", "high"});
         for (const int g : {0, 32, 64, 128, 256})
             runs.push_back({fmt::format("default, gather {}", g), "gather", "default", 0, 0.0, g});
-        runs.push_back({"default, gather passes 2", "gather passes", "default", 0, 0.0, -1, 2});
+        for (const int p : {1, 2, 4})
+            runs.push_back({fmt::format("default, gather passes {}", p), "gather passes", "default", 0, 0.0, -1, p});
         for (const int n : {64, 128, 512})
             runs.push_back({fmt::format("default, N {}", n), "hemicube", "default", n});
         for (const double e : {0.03, 0.015})

@@ -228,6 +228,25 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     const std::size_t batch = static_cast<std::size_t>(std::max(1, settings.batch));
     std::vector<formfactor::ShotRequest> requests;
     std::vector<formfactor::ShotResult> results;
+    // The first pass's rows, kept for the later passes: the same point, frame and drawn mesh give
+    // the same row, so only the radiosities they weigh change. Rows of points [0, kept) in order
+    // (compressed, start[i] to start[i + 1]), up to settings.kept_entries entries; the points past
+    // those are shot again.
+    std::vector<std::size_t> start{0};
+    std::vector<std::uint32_t> kept_element;
+    std::vector<double> kept_F;
+    std::size_t kept = 0;
+    const auto gathered_light = [&](std::size_t i, const std::uint32_t* element, const double* F, std::size_t size) {
+        const mesh::GatherPoint& point = drawn.gather_points[i];
+        glm::dvec3 light(0.0);
+        for (std::size_t k = 0; k < size; ++k) light += F[k] * seen_radiosity(point, element[k]);
+        const auto [n, v] = where[i];
+        if (!direct.empty()) light += d.nodes[n].radiosity[v];
+        out.irradiance[n][v] = light;
+        out.radiosity[n][v] = e.nodes[n].radiosity[v] + r.nodes[n].radiosity[v] * light;
+    };
+    long done = 0;
+    const long work = static_cast<long>(total) * passes;
     for (int pass = 0; pass < passes; ++pass) {
         if (pass > 0) {  // the elements' radiosity from the last pass's vertices
             std::vector<glm::dvec3> sum(mesh.elements.size(), glm::dvec3(0.0));
@@ -248,7 +267,13 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
                 if (area[k] > 0.0) fine[k] = sum[k] / area[k];
         }
         draw();
-        for (std::size_t first = 0; first < total; first += batch) {
+        if (pass > 0) {
+            for (std::size_t i = 0; i < kept; ++i)
+                gathered_light(i, &kept_element[start[i]], &kept_F[start[i]], start[i + 1] - start[i]);
+            done += static_cast<long>(kept);
+            if (settings.progress) settings.progress(done, work);
+        }
+        for (std::size_t first = pass > 0 ? kept : 0; first < total; first += batch) {
             if (settings.cancelled && settings.cancelled()) return false;
             const std::size_t count = std::min(batch, total - first);
             requests.clear();
@@ -257,17 +282,18 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
             engine.shoot_batch(requests, results);
             for (std::size_t j = 0; j < count; ++j) {
                 const formfactor::ShotResult& row = results[j];
-                const mesh::GatherPoint& point = drawn.gather_points[first + j];
-                glm::dvec3 light(0.0);
-                for (std::size_t k = 0; k < row.size(); ++k) light += row.F[k] * seen_radiosity(point, row.element[k]);
-                const auto [n, v] = where[first + j];
-                if (!direct.empty()) light += d.nodes[n].radiosity[v];
-                hidden[first + j] = row.blocked > kHiddenBlocked;
-                out.irradiance[n][v] = light;
-                out.radiosity[n][v] = e.nodes[n].radiosity[v] + r.nodes[n].radiosity[v] * light;
+                const std::size_t i = first + j;
+                gathered_light(i, row.element.data(), row.F.data(), row.size());
+                hidden[i] = row.blocked > kHiddenBlocked;
+                if (pass == 0 && passes > 1 && kept == i && kept_F.size() + row.size() <= settings.kept_entries) {
+                    kept_element.insert(kept_element.end(), row.element.begin(), row.element.end());
+                    kept_F.insert(kept_F.end(), row.F.begin(), row.F.end());
+                    start.push_back(kept_F.size());
+                    ++kept;
+                }
             }
-            if (settings.progress)
-                settings.progress(static_cast<long>(pass * total + first + count), static_cast<long>(passes * total));
+            done += static_cast<long>(count);
+            if (settings.progress) settings.progress(done, work);
         }
         fill_hidden(welded, where, hidden, out);
     }

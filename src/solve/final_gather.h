@@ -57,7 +57,12 @@ mesh::Mesh gather_mesh(const mesh::Mesh& mesh);
 std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity, std::vector<glm::dvec3>& irradiance,
                            double min_size, const mesh::Texturing* texturing);
 
+// Entries (element and form factor, 12 bytes each) of the first pass's rows a multi-pass gather
+// keeps for the later passes: 384 MiB.
+inline constexpr std::size_t kMaxKeptEntries = std::size_t{32} << 20;
+
 struct GatherSettings {
+    std::size_t kept_entries = kMaxKeptEntries;  // of the first pass's rows, kept for the later passes
     int batch = 64;   // shots per engine call
     int passes = 1;   // gathers; each after the first draws the last one's light (see final_gather)
     std::function<bool()> cancelled;                       // checked between engine calls
