@@ -194,7 +194,7 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
         runs.push_back({"high", "preset", "high"});
         for (const int g : {0, 32, 64, 128, 256})
             runs.push_back({fmt::format("default, gather {}", g), "gather", "default", 0, 0.0, g});
-        for (const int p : {1, 2, 4})
+        for (const int p : {1, 2, 3})
             runs.push_back({fmt::format("default, gather passes {}", p), "gather passes", "default", 0, 0.0, -1, p});
         for (const int n : {64, 128, 512})
             runs.push_back({fmt::format("default, N {}", n), "hemicube", "default", n});

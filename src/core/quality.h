@@ -29,14 +29,15 @@ inline constexpr QualityPreset kQualityPresets[] = {
     // On the Cornell box (2 cores of the Intel Xeon of 2026-12-03, PoCL): per-pixel RMS error and
     // time. Before the final gather the defaults were 6.5% (draft 21%). A gather's passes after the
     // first re-use its rows (about 0.3 s each on the default): 2.16% with one, 1.88% with two,
-    // 1.76% with three and four. Draft keeps one, for time: 5.58% in 1.7 s, 5.25% in 2.0 s with two.
-    {"draft", 64, 1.0 / 8.0, 3.0, 1e-2, 0.5, 32, 1},      // 5.6%, 1.7 s
-    // The default keeps N 256 for the solve: 1.76% in 7.3 s, against 1.84% in 6.1 s at N 128, which
-    // the Cornell box alone would pick, but which leaves small receivers of punctual lights (their
+    // 1.76% with three and four, where the fourth takes the worst face of the blocks from -1.04%
+    // to -0.84%. Draft keeps one, for time: 5.58% in 1.5 s, 5.25% in 2.0 s with two.
+    {"draft", 64, 1.0 / 8.0, 3.0, 1e-2, 0.5, 32, 1},      // 5.6%, 1.5 s
+    // The default keeps N 256 for the solve: 1.76% against 1.84% at N 128 in about 1 s less, which
+    // the Cornell box alone might pick, but which leaves small receivers of punctual lights (their
     // hemicubes are the solve's) 9% off and rows of elements along a crease 1.5% off.
-    {"default", 256, 1.0 / 16.0, 3.0, 1e-2, 0.5, 96, 3},  // 1.8%, 7.3 s
-    // 1.54% at gather N 128 × 4 in 11 s; 1.30% with elements of 0.015 in 29 s.
-    {"high", 256, 1.0 / 16.0, 3.0, 1e-2, 0.25, 192, 3},   // 1.5%, 13 s
+    {"default", 256, 1.0 / 16.0, 3.0, 1e-2, 0.5, 96, 4},  // 1.8%, 8 s
+    // At gather N 128: 1.65%; with elements of 0.015 (4 a patch's side): 1.54% in 14 s.
+    {"high", 256, 1.0 / 16.0, 3.0, 1e-2, 0.25, 192, 4},   // 1.5%, 16 s
 };
 // The preset of that name; throws InputError for another name.
 inline const QualityPreset& quality_preset(const std::string& name) {
