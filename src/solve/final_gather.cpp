@@ -268,8 +268,9 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         }
         draw();
         if (pass > 0) {
-            for (std::size_t i = 0; i < kept; ++i)
-                gathered_light(i, &kept_element[start[i]], &kept_F[start[i]], start[i + 1] - start[i]);
+            if (settings.cancelled && settings.cancelled()) return false;
+            for (std::size_t i = 0; i < kept; ++i)  // (data() + start: a row may be empty, at the end)
+                gathered_light(i, kept_element.data() + start[i], kept_F.data() + start[i], start[i + 1] - start[i]);
             done += static_cast<long>(kept);
             if (settings.progress) settings.progress(done, work);
         }
