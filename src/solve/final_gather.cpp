@@ -109,7 +109,9 @@ std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity,
     for (std::size_t k = 0; k < b.size(); ++k) {
         const std::uint32_t parent = refined.origin[k];
         h[k] = irradiance[parent];
-        b[k] = radiosity[parent] + (refined.mesh.elements[k].rho - mesh.elements[parent].rho) * h[k];
+        const mesh::Element& child = refined.mesh.elements[k];
+        const mesh::Element& from = mesh.elements[parent];  // E + ρH with the child's own E and ρ
+        b[k] = radiosity[parent] + (child.emission - from.emission) + (child.rho - from.rho) * h[k];
     }
     mesh = std::move(refined.mesh);
     radiosity = std::move(b);

@@ -51,9 +51,9 @@ mesh::Mesh gather_mesh(const mesh::Mesh& mesh);
 
 // Grades `mesh` toward its contact lines (mesh/contact.h) for a gather: every element along one
 // that is longer than `min_size` is split in four (mesh::split_elements, with `texturing`). Children
-// take their parent's irradiance, and radiosity E + ρH by their own reflectance (the parent's
-// exactly where it is untextured), so every element average, and the light the gather draws, is
-// unchanged; the gather's vertices along the line double. Returns the number of elements split.
+// take their parent's irradiance, and radiosity E + ρH by their own emission and reflectance (the
+// parent's exactly where it is untextured), so every element average, and the light the gather
+// draws, is unchanged; the gather's vertices along the line double. Returns the elements split.
 std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity, std::vector<glm::dvec3>& irradiance,
                            double min_size, const mesh::Texturing* texturing);
 
