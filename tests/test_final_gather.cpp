@@ -63,6 +63,18 @@ private:
     long& shots_;
 };
 
+// The Cornell box meshed coarsely, with any field of radiosity: the emitters' light plus a
+// pattern over the elements.
+struct PatternedCornell {
+    scene::Scene scene = scene::load(std::filesystem::path(HEMIRAD_SOURCE_DIR) / "scenes" / "cornell_box.gltf");
+    mesh::Mesh mesh = mesh::build(scene, mesh::Settings{0.12, 0.04});
+    std::vector<glm::dvec3> radiosity;
+    PatternedCornell() : radiosity(mesh.elements.size()) {
+        for (std::size_t k = 0; k < mesh.elements.size(); ++k)
+            radiosity[k] = mesh.elements[k].emission + glm::dvec3(0.01 * double(k % 7), 0.02 * double(k % 3), 0.005);
+    }
+};
+
 std::optional<ocl::Context> first_device() {
     const auto devices = ocl::list_devices();
     if (devices.empty()) return std::nullopt;
@@ -159,15 +171,10 @@ TEST_CASE("final gather: the OpenCL engine gathers the reference's light, bit fo
         WARN("no OpenCL device: skipped");
         return;
     }
-    const scene::Scene s = scene::load(std::filesystem::path(HEMIRAD_SOURCE_DIR) / "scenes" / "cornell_box.gltf");
-    mesh::Settings ms;
-    ms.patch_size = 0.12;
-    ms.element_size = 0.04;
-    const mesh::Mesh m = mesh::build(s, ms);
-    // Any field will do: the emitters' light plus a pattern over the elements.
-    std::vector<glm::dvec3> radiosity(m.elements.size());
-    for (std::size_t k = 0; k < m.elements.size(); ++k)
-        radiosity[k] = m.elements[k].emission + glm::dvec3(0.01 * double(k % 7), 0.02 * double(k % 3), 0.005);
+    const PatternedCornell c;
+    const scene::Scene& s = c.scene;
+    const mesh::Mesh& m = c.mesh;
+    const std::vector<glm::dvec3>& radiosity = c.radiosity;
     const Gathered ref = gather(
         s, m, radiosity,
         [](const mesh::Mesh& d) { return std::make_unique<formfactor::ReferenceEngine>(d, formfactor::Settings{48, 9}); }, 2);
@@ -191,14 +198,10 @@ TEST_CASE("final gather: later passes re-use the first pass's rows and gather wh
     // Every pass shoots the same points with the same frames at the same drawn mesh, so the rows
     // kept from the first pass must give the later passes bit for bit the light that shooting them
     // again gives, with all rows kept, none, or some (the rest shot again).
-    const scene::Scene s = scene::load(std::filesystem::path(HEMIRAD_SOURCE_DIR) / "scenes" / "cornell_box.gltf");
-    mesh::Settings ms;
-    ms.patch_size = 0.12;
-    ms.element_size = 0.04;
-    const mesh::Mesh m = mesh::build(s, ms);
-    std::vector<glm::dvec3> radiosity(m.elements.size());
-    for (std::size_t k = 0; k < m.elements.size(); ++k)
-        radiosity[k] = m.elements[k].emission + glm::dvec3(0.01 * double(k % 7), 0.02 * double(k % 3), 0.005);
+    const PatternedCornell c;
+    const scene::Scene& s = c.scene;
+    const mesh::Mesh& m = c.mesh;
+    const std::vector<glm::dvec3>& radiosity = c.radiosity;
     const auto run = [&](std::size_t kept_entries, long& shots) {
         return gather(
             s, m, radiosity,

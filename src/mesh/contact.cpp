@@ -73,12 +73,6 @@ bool pierces(const dvec3& a, const dvec3& b, const Polygon& poly, const dvec3& n
     return projects_inside(a + (da / (da - db)) * (b - a), poly, normal);
 }
 
-double longest_side(const Polygon& p) {
-    double longest = 0.0;
-    for (int i = 0; i < p.n; ++i) longest = std::max(longest, glm::length(p.v[std::size_t((i + 1) % p.n)] - p.v[std::size_t(i)]));
-    return longest;
-}
-
 // How far the polygon reaches in front of the plane through `point` with unit `normal`.
 double reach_in_front(const Polygon& p, const dvec3& point, const dvec3& normal) {
     double most = -std::numeric_limits<double>::infinity();
@@ -118,7 +112,7 @@ std::vector<bool> contact_elements(const Mesh& mesh, double min_size) {
     double mean = 0.0, largest = 0.0;
     for (std::size_t k = 0; k < count; ++k) {
         const Polygon& p = mesh.elements[k].poly;
-        longest[k] = longest_side(p);
+        longest[k] = longest_edge(p);
         mean += longest[k] / double(count);
         largest = std::max(largest, longest[k]);
         lo[k] = hi[k] = p.v[0];
