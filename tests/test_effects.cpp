@@ -431,6 +431,19 @@ TEST_CASE("effects: analytic engine is deterministic and ignores the shot counte
     engine.shoot_batch({formfactor::ShotRequest::of_patch(3, 7), formfactor::ShotRequest::of_patch(5, 8)}, batch);
     REQUIRE(batch.size() == 2);
     CHECK(batch[0] == a);
+    // A batch runs on the machine's threads: every patch at once, each row shoot()'s bit for bit,
+    // in the batch's order.
+    std::vector<formfactor::ShotRequest> all;
+    for (std::uint32_t p = 0; p < m.patches.size(); ++p) all.push_back(formfactor::ShotRequest::of_patch(p, p));
+    engine.shoot_batch(all, batch);
+    REQUIRE(batch.size() == m.patches.size());
+    REQUIRE(m.patches.size() > 8);
+    for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
+        formfactor::ShotResult one;
+        engine.shoot(p, 0, one);
+        INFO("patch " << p);
+        CHECK(batch[p] == one);
+    }
     CHECK(formfactor::UnoccludedEngine::subdivisions(5.0, 1.0) == 1);
     CHECK(formfactor::UnoccludedEngine::subdivisions(3.0, 1.0) == 2);
     CHECK(formfactor::UnoccludedEngine::subdivisions(1.5, 1.0) == 4);

@@ -4,7 +4,11 @@
 #include "formfactor/unoccluded.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <exception>
+#include <mutex>
+#include <thread>
 
 #include "core/error.h"
 #include "formfactor/analytic.h"
@@ -192,6 +196,33 @@ void UnoccludedEngine::shoot(const ShotRequest& request, ShotResult& out) {
         const double scale = want / row;
         for (double& f : out.F) f *= scale;
     }
+}
+
+void UnoccludedEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
+    out.resize(shots.size());
+    const std::size_t workers =
+        std::min<std::size_t>(shots.size(), std::max(1u, std::thread::hardware_concurrency()));
+    if (workers <= 1) {
+        Engine::shoot_batch(shots, out);
+        return;
+    }
+    std::atomic<std::size_t> next{0};
+    std::mutex failed;
+    std::exception_ptr failure;  // the first exception a worker met, thrown again here
+    const auto work = [&] {
+        try {
+            for (std::size_t i; (i = next.fetch_add(1)) < shots.size();) shoot(shots[i], out[i]);
+        } catch (...) {
+            const std::lock_guard<std::mutex> lock(failed);
+            if (!failure) failure = std::current_exception();
+            next = shots.size();
+        }
+    };
+    std::vector<std::thread> pool;
+    for (std::size_t t = 1; t < workers; ++t) pool.emplace_back(work);
+    work();
+    for (std::thread& t : pool) t.join();
+    if (failure) std::rethrow_exception(failure);
 }
 
 }  // namespace hemirad::formfactor

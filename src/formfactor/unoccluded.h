@@ -24,6 +24,9 @@ public:
     // centroid is not in front of its plane. `blocked` = 0. `shot` is ignored.
     using Engine::shoot;
     void shoot(const ShotRequest& request, ShotResult& out) override;
+    // The shots on the machine's hardware threads, a shot to a thread at a time: each row is
+    // shoot()'s, whichever thread takes it (a shot reads the engine and writes its own row only).
+    void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
 
     // The quadrature's sub-cells per element side, q (q² sub-cells): d is the distance from the
     // element's centroid to the shooter's, s the larger of their longest edges. 1 if d > 4s,
