@@ -851,34 +851,51 @@ void run_bake(const BakeOptions& options) {
         // Final gather: the light at every output vertex from the converged solution.
         t0 = Clock::now();
         gather_points = 0;
+        contact_split = 0;
         if (o.gather > 0) {
             // Every vertex of the output but the sky dome's, through the patches' cells (gather_mesh).
             const auto gathered_node = [&](std::size_t n) { return !scene.nodes[n].synthetic; };
             output::WeldedMesh welded = output::weld(scene.nodes.size(), mesh, solution.radiosity);
-            std::size_t vertices = 0;
-            for (std::size_t n = 0; n < welded.nodes.size(); ++n)
-                if (gathered_node(n)) vertices += welded.nodes[n].positions.size();
+            const auto gathered_vertices = [&](const output::WeldedMesh& w) {
+                std::size_t vertices = 0;
+                for (std::size_t n = 0; n < w.nodes.size(); ++n)
+                    if (gathered_node(n)) vertices += w.nodes[n].positions.size();
+                return vertices;
+            };
             // A hemicube per vertex: on real content many times the solve's shots, each costing about
             // as much (a 113k-vertex material ball at draft: the gather ran 15× the solve's time).
             // Beyond kMaxPlannedGather vertices the quality's gather is left out (a warning says
-            // so); --gather N asks for it whatever the size.
-            if (options.gather < 0 && vertices > kMaxPlannedGather) {
+            // so); --gather N asks for it whatever the size. The count is the graded mesh's (below),
+            // so a mesh is graded only to be gathered.
+            const auto too_many = [&](std::size_t vertices, const char* graded) {
+                if (options.gather >= 0 || vertices <= kMaxPlannedGather) return false;
                 const std::string warning = fmt::format(
-                    "final gather left out: {} vertices would each take a hemicube (more than {}); --gather {} "
+                    "final gather left out: {} vertices{} would each take a hemicube (more than {}); --gather {} "
                     "asks for it",
-                    vertices, kMaxPlannedGather, o.gather);
+                    vertices, graded, kMaxPlannedGather, o.gather);
                 if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
                 warnings.push_back(warning);
                 t_gather = seconds_since(t0);
-                return;
-            }
+                return true;
+            };
+            if (too_many(gathered_vertices(welded), "")) return;
             // Elements along contact lines halved once, so that the gather's vertices follow the
-            // light's fall there (mesh/contact.h).
+            // light's fall there (mesh/contact.h): on copies, kept if the gather goes ahead.
             {
                 const mesh::Texturing texturing(scene);
-                contact_split = solve::grade_contacts(mesh, solution.radiosity, solution.irradiance,
-                                                      kContactGrading * mesh_settings.element_size, &texturing);
-                if (contact_split > 0) welded = output::weld(scene.nodes.size(), mesh, solution.radiosity);
+                mesh::Mesh graded = mesh;
+                std::vector<glm::dvec3> radiosity = solution.radiosity, irradiance = solution.irradiance;
+                const std::size_t split = solve::grade_contacts(graded, radiosity, irradiance,
+                                                                kContactGrading * mesh_settings.element_size, &texturing);
+                if (split > 0) {
+                    output::WeldedMesh graded_welded = output::weld(scene.nodes.size(), graded, radiosity);
+                    if (too_many(gathered_vertices(graded_welded), " (once graded along contact lines)")) return;
+                    mesh = std::move(graded);
+                    solution.radiosity = std::move(radiosity);
+                    solution.irradiance = std::move(irradiance);
+                    welded = std::move(graded_welded);
+                    contact_split = split;
+                }
             }
             std::vector<glm::dvec3> direct;  // punctual and directional lights' light, on the solved mesh
             if (solve::has_direct_light(mesh, scene.lights)) {

@@ -99,10 +99,10 @@ double polygon_distance(const Polygon& a, const Polygon& b) {
 
 std::vector<bool> contact_elements(const Mesh& mesh, double min_size) {
     constexpr double kTouch = 0.01;       // touching: within this much of the larger longest edge
-    // Normals within 40° (the welder's crease angle, output/welded_mesh.cpp): one smoothly shaded
-    // surface folding gently (a tessellated bowl), not a junction. Parallel faces that touch (a
-    // book lying on a table) fail the test in front below.
-    const double kSmoothCos = std::cos(40.0 * 3.14159265358979323846 / 180.0);
+    // Normals within the crease angle (the welder's): one smoothly shaded surface folding gently
+    // (a tessellated bowl), not a junction. Parallel faces that touch (a book lying on a table)
+    // fail the test in front below.
+    const double kSmoothCos = std::cos(kCreaseAngle);
     const std::size_t count = mesh.elements.size();
     std::vector<bool> marked(count, false);
     if (count == 0) return marked;

@@ -137,4 +137,10 @@ Shape shape_of(const Polygon& poly);
 // The longest edge of a polygon.
 double longest_edge(const Polygon& poly);
 
+// Surfaces whose normals differ by less than this are one smoothly shaded surface: the welder
+// shares their vertices (output/welded_mesh.cpp), and where they touch it is no contact line
+// (contact.h). Tessellated curved surfaces (a 16-segment cylinder turns 22.5° per facet) then
+// shade smoothly while 45° chamfers and 90° corners stay crisp.
+inline constexpr double kCreaseAngle = 40.0 * 3.14159265358979323846 / 180.0;  // radians
+
 }  // namespace hemirad::mesh

@@ -14,12 +14,9 @@
 namespace hemirad::output {
 namespace {
 
-// Elements whose normals differ by less than this share vertices (smooth shading); at a
-// sharper angle, such as a box edge, each side keeps its own. Tessellated curved surfaces
-// (a 16-segment cylinder turns 22.5° per facet) then shade smoothly while 45° chamfers and
-// 90° corners stay crisp.
-constexpr double kCreaseAngle = 40.0 * 3.14159265358979323846 / 180.0;  // radians
-const double kCreaseCos = std::cos(kCreaseAngle);
+// Elements whose normals differ by less than the crease angle (mesh::kCreaseAngle) share
+// vertices (smooth shading); at a sharper angle, such as a box edge, each side keeps its own.
+const double kCreaseCos = std::cos(mesh::kCreaseAngle);
 
 // Hanging vertices are looked for this many halvings deep into an element edge; refinement
 // never goes near it (each level halves the edge), it only bounds the recursion.
