@@ -204,21 +204,31 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         }
     };
     // A drawn cell close to the point: its elements weighed by their exact unoccluded form factors
-    // from the point (the cell's visible form factor, the hemicube's, shared out by them).
+    // from the point (the cell's visible form factor, the hemicube's, shared out by them). Returns
+    // false for a cell drawn as its mean; else appends the elements' weights (those > 0, in order).
     constexpr double kNearPatches = 2.0;
-    const auto seen_radiosity = [&](const mesh::GatherPoint& point, std::uint32_t c) {
+    struct NearWeight {
+        std::uint32_t element;
+        double f;
+    };
+    const auto near_weights = [&](const mesh::GatherPoint& point, std::uint32_t c, std::vector<NearWeight>& into) {
         const mesh::Patch& fp = mesh.patches[drawn.elements[c].patch];
-        if (fp.cluster() || fp.element_count <= 1) return coarse[c];
+        if (fp.cluster() || fp.element_count <= 1) return false;
         const double reach = kNearPatches * std::sqrt(fp.area);
         const glm::dvec3 to = point.position - fp.centroid;
-        if (glm::dot(to, to) > reach * reach) return coarse[c];
-        glm::dvec3 sum(0.0);
-        double weight = 0.0;
+        if (glm::dot(to, to) > reach * reach) return false;
         for (std::uint32_t k = fp.first_element; k < fp.first_element + fp.element_count; ++k) {
             const double f = formfactor::point_to_polygon(point.position, point.normal, mesh.elements[k].poly);
-            if (!(f > 0.0)) continue;
-            sum += f * fine[k];
-            weight += f;
+            if (f > 0.0) into.push_back({k, f});
+        }
+        return true;
+    };
+    const auto weighed = [&](const NearWeight* w, std::size_t count, std::uint32_t c) {
+        glm::dvec3 sum(0.0);
+        double weight = 0.0;
+        for (std::size_t i = 0; i < count; ++i) {
+            sum += w[i].f * fine[w[i].element];
+            weight += w[i].f;
         }
         return weight > 0.0 ? sum / weight : coarse[c];
     };
@@ -232,20 +242,56 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     std::vector<formfactor::ShotResult> results;
     // The first pass's rows, kept for the later passes: the same point, frame and drawn mesh give
     // the same row, so only the radiosities they weigh change. Rows of points [0, kept) in order
-    // (compressed, start[i] to start[i + 1]), up to settings.kept_entries entries; the points past
-    // those are shot again.
-    std::vector<std::size_t> start{0};
-    std::vector<std::uint32_t> kept_element;
+    // (compressed, start[i] to start[i + 1]), with their near cells' weights (near_row[i] to
+    // near_row[i + 1] index near_at, the entry in the row, and near_start, its weights in
+    // near_weight), up to settings.kept_entries entries and weights together; the points past
+    // those are shot again. The later passes add the same terms in the same order: the light of
+    // shooting again, bit for bit.
+    std::vector<std::size_t> start{0}, near_row{0}, near_start{0};
+    std::vector<std::uint32_t> kept_element, near_at;
     std::vector<double> kept_F;
+    std::vector<NearWeight> near_weight, scratch;
     std::size_t kept = 0;
-    const auto gathered_light = [&](std::size_t i, const std::uint32_t* element, const double* F, std::size_t size) {
-        const mesh::GatherPoint& point = drawn.gather_points[i];
-        glm::dvec3 light(0.0);
-        for (std::size_t k = 0; k < size; ++k) light += F[k] * seen_radiosity(point, element[k]);
+    const auto store = [&](std::size_t i, const glm::dvec3& gathered) {
         const auto [n, v] = where[i];
-        if (!direct.empty()) light += d.nodes[n].radiosity[v];
+        const glm::dvec3 light = direct.empty() ? gathered : gathered + d.nodes[n].radiosity[v];
         out.irradiance[n][v] = light;
         out.radiosity[n][v] = e.nodes[n].radiosity[v] + r.nodes[n].radiosity[v] * light;
+    };
+    // A shot row's light; `keep`: its near weights appended to the kept ones.
+    const auto shot_light = [&](std::size_t i, const formfactor::ShotResult& row, bool keep) {
+        const mesh::GatherPoint& point = drawn.gather_points[i];
+        glm::dvec3 light(0.0);
+        for (std::size_t k = 0; k < row.size(); ++k) {
+            scratch.clear();
+            if (!near_weights(point, row.element[k], scratch)) {
+                light += row.F[k] * coarse[row.element[k]];
+                continue;
+            }
+            light += row.F[k] * weighed(scratch.data(), scratch.size(), row.element[k]);
+            if (keep) {
+                near_at.push_back(static_cast<std::uint32_t>(k));
+                near_weight.insert(near_weight.end(), scratch.begin(), scratch.end());
+                near_start.push_back(near_weight.size());
+            }
+        }
+        return light;
+    };
+    // Kept row i's light.
+    const auto kept_light = [&](std::size_t i) {
+        const std::uint32_t* element = kept_element.data() + start[i];  // (data() + start: a row may be empty)
+        const double* F = kept_F.data() + start[i];
+        std::size_t q = near_row[i];
+        glm::dvec3 light(0.0);
+        for (std::size_t k = 0; k < start[i + 1] - start[i]; ++k) {
+            if (q < near_row[i + 1] && near_at[q] == k) {
+                light += F[k] * weighed(near_weight.data() + near_start[q], near_start[q + 1] - near_start[q], element[k]);
+                ++q;
+            } else {
+                light += F[k] * coarse[element[k]];
+            }
+        }
+        return light;
     };
     long done = 0;
     const long work = static_cast<long>(total) * passes;
@@ -271,8 +317,7 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         draw();
         if (pass > 0) {
             if (settings.cancelled && settings.cancelled()) return false;
-            for (std::size_t i = 0; i < kept; ++i)  // (data() + start: a row may be empty, at the end)
-                gathered_light(i, kept_element.data() + start[i], kept_F.data() + start[i], start[i + 1] - start[i]);
+            for (std::size_t i = 0; i < kept; ++i) store(i, kept_light(i));
             done += static_cast<long>(kept);
             if (settings.progress) settings.progress(done, work);
         }
@@ -286,13 +331,21 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
             for (std::size_t j = 0; j < count; ++j) {
                 const formfactor::ShotResult& row = results[j];
                 const std::size_t i = first + j;
-                gathered_light(i, row.element.data(), row.F.data(), row.size());
+                const bool keep = pass == 0 && passes > 1 && kept == i;
+                const std::size_t near_entries = near_at.size(), near_weights_kept = near_weight.size();
+                store(i, shot_light(i, row, keep));
                 hidden[i] = row.blocked > kHiddenBlocked;
-                if (pass == 0 && passes > 1 && kept == i && kept_F.size() + row.size() <= settings.kept_entries) {
+                if (!keep) continue;
+                if (kept_F.size() + row.size() + near_weight.size() + near_at.size() <= settings.kept_entries) {
                     kept_element.insert(kept_element.end(), row.element.begin(), row.element.end());
                     kept_F.insert(kept_F.end(), row.F.begin(), row.F.end());
                     start.push_back(kept_F.size());
+                    near_row.push_back(near_at.size());
                     ++kept;
+                } else {  // past the budget: this row's near weights go too, and the rest are shot again
+                    near_at.resize(near_entries);
+                    near_start.resize(near_entries + 1);
+                    near_weight.resize(near_weights_kept);
                 }
             }
             done += static_cast<long>(count);

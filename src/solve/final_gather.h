@@ -57,8 +57,8 @@ mesh::Mesh gather_mesh(const mesh::Mesh& mesh);
 std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity, std::vector<glm::dvec3>& irradiance,
                            double min_size, const mesh::Texturing* texturing);
 
-// Entries (element and form factor, 12 bytes each) of the first pass's rows a multi-pass gather
-// keeps for the later passes: 384 MiB.
+// Entries of the first pass's rows a multi-pass gather keeps for the later passes, with their near
+// cells' weights (element and form factor, 12 bytes each; a near cell's entry, 12 more): 384 MiB.
 inline constexpr std::size_t kMaxKeptEntries = std::size_t{32} << 20;
 
 struct GatherSettings {
