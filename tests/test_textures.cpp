@@ -15,6 +15,7 @@
 #include "mesh/refine.h"
 #include "mesh/texturing.h"
 #include "scene/scene.h"
+#include "solve/final_gather.h"
 #include "rect_scenes.h"
 #include "test_scenes.h"
 
@@ -312,6 +313,62 @@ TEST_CASE("elements split by refinement take their own texture averages, which a
         ++checked;
     }
     CHECK(checked == 16);
+}
+
+TEST_CASE("contact grading under an emissive texture: each child's light is E + rho H with its own E and rho",
+          "[textures][contact]") {
+    // A floor glowing through a ramp texture, and a grey wall standing across it along x = 0.5:
+    // the floor's elements along the wall's foot are split in four (solve::grade_contacts). Each
+    // child keeps its parent's irradiance H and takes its own texture averages, so its radiosity
+    // is its own E + ρH, and the node's flux stays the parent's to the texture averages' rounding.
+    TempDir dir;
+    write_png(dir / "ramp.png", 64, 64, [](int x, int y) -> std::array<unsigned char, 4> {
+        return {static_cast<unsigned char>(4 * x), static_cast<unsigned char>(4 * y), 128, 255};
+    });
+    json floor = {{"name", "glowing ramp"},
+                  {"emissiveFactor", {1.0, 1.0, 1.0}},
+                  {"emissiveTexture", {{"index", 0}}},
+                  {"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.5, 0.5, 1.0}}}}};
+    const Quad wall{{dvec3(0.5, 0, 0), dvec3(0.5, 0.5, 0), dvec3(0.5, 0.5, 1), dvec3(0.5, 0, 1)},
+                    {{0, 0}, {1, 0}, {1, 1}, {0, 1}},
+                    "wall",
+                    2};
+    json g = panel_over_floor(dir, kGlow, floor, {wall}, {kGrey});
+    add_textures(g, {"ramp.png"});
+    write_json(dir / "glow.gltf", g);
+    const hemirad::scene::Scene scene = hemirad::scene::load(dir / "glow.gltf");
+    hemirad::mesh::Mesh mesh = hemirad::mesh::build(scene, {0.5, 0.25});
+    const hemirad::mesh::Texturing texturing(scene);
+    const std::size_t before = mesh.elements.size();
+    std::vector<dvec3> radiosity(before), irradiance(before);
+    std::vector<dvec3> flux(scene.nodes.size(), dvec3(0.0));
+    for (std::size_t k = 0; k < before; ++k) {
+        const hemirad::mesh::Element& e = mesh.elements[k];
+        irradiance[k] = dvec3(1.0 + e.centroid.x, 2.0 - e.centroid.z, 1.5);
+        radiosity[k] = e.emission + e.rho * irradiance[k];
+        flux[e.node] += e.area * radiosity[k];
+    }
+    const auto floor_elements = [&] {
+        return std::count_if(mesh.elements.begin(), mesh.elements.end(),
+                             [](const hemirad::mesh::Element& e) { return e.node == 1 || e.node == 2; });
+    };
+    const auto floor_before = floor_elements();
+    const std::size_t split = hemirad::solve::grade_contacts(mesh, radiosity, irradiance, 0.1, &texturing);
+    REQUIRE(split > 0);
+    REQUIRE(mesh.elements.size() == before + 3 * split);
+    std::vector<dvec3> after(scene.nodes.size(), dvec3(0.0));
+    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
+        const hemirad::mesh::Element& e = mesh.elements[k];
+        after[e.node] += e.area * radiosity[k];
+        const dvec3 own = e.emission + e.rho * irradiance[k];
+        INFO("element " << k);
+        for (int c = 0; c < 3; ++c) CHECK(radiosity[k][c] == Approx(own[c]).epsilon(1e-12));
+    }
+    for (std::size_t n = 0; n < scene.nodes.size(); ++n)
+        for (int c = 0; c < 3; ++c) CHECK(after[n][c] == Approx(flux[n][c]).epsilon(0.01));
+    // The floor's elements along the wall's foot were split (their children's emissions differ
+    // along the ramp, so the E + ρH check above tells a child's own light from its parent's).
+    CHECK(floor_elements() - floor_before >= 3 * 4);
 }
 
 TEST_CASE("a primitive without the texture coordinates its material reads uses the texture's mean, with a warning",
