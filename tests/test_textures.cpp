@@ -41,6 +41,13 @@ void write_png(const fs::path& file, int width, int height, Texel texel) {
 }
 
 // The left half of the image (x < width / 2) is `left`, the right half `right`.
+// A 64 x 64 colour ramp: red rising along x, green along y (texel (x, y) = 4x, 4y, 128).
+void write_ramp(const fs::path& file) {
+    write_png(file, 64, 64, [](int x, int y) -> std::array<unsigned char, 4> {
+        return {static_cast<unsigned char>(4 * x), static_cast<unsigned char>(4 * y), 128, 255};
+    });
+}
+
 void write_halves(const fs::path& file, std::array<unsigned char, 4> left, std::array<unsigned char, 4> right) {
     write_png(file, 64, 4, [&](int x, int) { return x < 32 ? left : right; });
 }
@@ -280,9 +287,7 @@ TEST_CASE("a large image is kept box-filtered, each texel the mean of the pixels
 TEST_CASE("elements split by refinement take their own texture averages, which average to their parent's",
           "[textures]") {
     TempDir dir;
-    write_png(dir / "ramp.png", 64, 64, [](int x, int y) -> std::array<unsigned char, 4> {
-        return {static_cast<unsigned char>(4 * x), static_cast<unsigned char>(4 * y), 128, 255};
-    });
+    write_ramp(dir / "ramp.png");
     json floor = {{"name", "ramp"},
                   {"pbrMetallicRoughness", {{"baseColorFactor", {0.9, 0.9, 0.9, 1.0}}, {"baseColorTexture", {{"index", 0}}}}}};
     json g = panel_over_floor(dir, kGlow, floor);
@@ -322,9 +327,7 @@ TEST_CASE("contact grading under an emissive texture: each child's light is E + 
     // child keeps its parent's irradiance H and takes its own texture averages, so its radiosity
     // is its own E + ρH, and the node's flux stays the parent's to the texture averages' rounding.
     TempDir dir;
-    write_png(dir / "ramp.png", 64, 64, [](int x, int y) -> std::array<unsigned char, 4> {
-        return {static_cast<unsigned char>(4 * x), static_cast<unsigned char>(4 * y), 128, 255};
-    });
+    write_ramp(dir / "ramp.png");
     json floor = {{"name", "glowing ramp"},
                   {"emissiveFactor", {1.0, 1.0, 1.0}},
                   {"emissiveTexture", {{"index", 0}}},
