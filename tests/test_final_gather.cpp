@@ -2,10 +2,12 @@
 // light, and the same light on every engine.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 
 #include "cl/runtime.h"
+#include "formfactor/analytic.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
 #include "formfactor/unoccluded.h"
@@ -228,4 +230,265 @@ TEST_CASE("final gather: later passes re-use the first pass's rows and gather wh
             CHECK(some.light.radiosity[n][v] == none.light.radiosity[n][v]);
         }
     }
+}
+
+namespace {
+
+// The floor of the lamp scenes below: 4 × 4 at z = 0 facing up (node 0), reflectance 0.5; the
+// lamp, [1.5, 2.5]² at z = 1 facing down, emitting 1 (node 1); with `occluder`, a black plate
+// [1, 2] × [1, 3] at z = 0.5 facing down (node 2), whose shadow's penumbra on the floor is
+// x ∈ [1.5, 2.5] (for 0.5 < y < 3.5).
+scene::Scene lamp_scene(bool occluder) {
+    scene::Scene s;
+    const std::uint32_t floor = add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    const std::uint32_t lamp = add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
+    add_quad(s, {0, 0, 0}, {4, 0, 0}, {4, 4, 0}, {0, 4, 0}, floor, "floor");
+    add_quad(s, {1.5, 1.5, 1}, {1.5, 2.5, 1}, {2.5, 2.5, 1}, {2.5, 1.5, 1}, lamp, "lamp");
+    if (occluder) {
+        const std::uint32_t black = add_material(s, glm::dvec3(0.0), glm::dvec3(0.0));
+        add_quad(s, {1, 1, 0.5}, {1, 3, 0.5}, {2, 3, 0.5}, {2, 1, 0.5}, black, "plate");
+    }
+    finish(s);
+    return s;
+}
+
+mesh::Polygon rectangle_at(double x0, double x1, double y0, double y1, double z) {
+    mesh::Polygon p;
+    p.n = 4;
+    p.v = {glm::dvec3(x0, y0, z), glm::dvec3(x0, y1, z), glm::dvec3(x1, y1, z), glm::dvec3(x1, y0, z)};
+    return p;
+}
+
+// The irradiance at floor point (x, y) from the lamp of lamp_scene(true), exactly: the unoccluded
+// form factor to the part of the lamp the plate leaves seen. From (x, y, 0) the plate's shadow on
+// the lamp's plane is the plate scaled by 1 / 0.5 about the point; the lamp less that rectangle
+// is four rectangles around it.
+double lamp_irradiance(double x, double y) {
+    const double lx0 = 1.5, lx1 = 2.5, ly0 = 1.5, ly1 = 2.5;
+    const auto clamp_x = [&](double v) { return std::clamp(v, lx0, lx1); };
+    const auto clamp_y = [&](double v) { return std::clamp(v, ly0, ly1); };
+    double cx0 = clamp_x(x + 2.0 * (1.0 - x)), cx1 = clamp_x(x + 2.0 * (2.0 - x));
+    double cy0 = clamp_y(y + 2.0 * (1.0 - y)), cy1 = clamp_y(y + 2.0 * (3.0 - y));
+    if (cx0 >= cx1 || cy0 >= cy1) cx0 = cx1 = cy0 = cy1 = lx0;  // no shadow on the lamp
+    const glm::dvec3 p(x, y, 0), up(0, 0, 1);
+    double f = 0.0;
+    const auto add = [&](double x0, double x1, double y0, double y1) {
+        if (x1 > x0 && y1 > y0) f += formfactor::point_to_polygon(p, up, rectangle_at(x0, x1, y0, y1, 1.0));
+    };
+    add(lx0, cx0, ly0, ly1);
+    add(cx1, lx1, ly0, ly1);
+    add(cx0, cx1, ly0, cy0);
+    add(cx0, cx1, cy1, ly1);
+    return f;
+}
+
+// The value of `values` (per vertex of the welded floor, node 0) interpolated at (x, y) over the
+// triangle that holds it.
+double interpolated(const output::WeldedNode& node, const std::vector<glm::dvec3>& values, double x, double y) {
+    for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+        const glm::dvec3 a = node.positions[node.indices[3 * t]], b = node.positions[node.indices[3 * t + 1]],
+                         c = node.positions[node.indices[3 * t + 2]];
+        const double d = (b.y - c.y) * (a.x - c.x) + (c.x - b.x) * (a.y - c.y);
+        const double wa = ((b.y - c.y) * (x - c.x) + (c.x - b.x) * (y - c.y)) / d;
+        const double wb = ((c.y - a.y) * (x - c.x) + (a.x - c.x) * (y - c.y)) / d;
+        const double wc = 1.0 - wa - wb;
+        if (wa < -1e-12 || wb < -1e-12 || wc < -1e-12) continue;
+        return wa * values[node.indices[3 * t]].x + wb * values[node.indices[3 * t + 1]].x +
+               wc * values[node.indices[3 * t + 2]].x;
+    }
+    FAIL("no triangle holds the point");
+    return 0.0;
+}
+
+}  // namespace
+
+TEST_CASE("final gather: the analytic lamp irradiance of the penumbra test is the lamp's form factor where nothing shades",
+          "[gather]") {
+    // The check on the check: with the plate's shadow off the lamp, lamp_irradiance is the
+    // whole lamp's form factor, and under the lamp's centre REFERENCES.md's 0.2394564705.
+    CHECK(lamp_irradiance(3.9, 2.0) ==
+          Approx(formfactor::point_to_polygon({3.9, 2.0, 0.0}, {0, 0, 1}, rectangle_at(1.5, 2.5, 1.5, 2.5, 1.0)))
+              .epsilon(1e-12));
+    CHECK(formfactor::point_to_polygon({2.0, 2.0, 0.0}, {0, 0, 1}, rectangle_at(1.5, 2.5, 1.5, 2.5, 1.0)) ==
+          Approx(0.2394564705).epsilon(1e-9));
+    CHECK(lamp_irradiance(1.0, 2.0) == 0.0);                            // the umbra
+    CHECK(lamp_irradiance(2.0, 2.0) == Approx(0.5 * 0.2394564705).epsilon(1e-9));  // half the lamp, by symmetry
+}
+
+TEST_CASE("final gather: gather refinement follows a penumbra, against the analytic visible form factor", "[gather]") {
+    // A plate's shadow on the floor under a lamp: the irradiance falls from the lamp's full form
+    // factor to 0 across x ∈ [1.5, 2.5], over two elements of 0.5. Linear interpolation between
+    // vertices an element apart misses the curve of the fall; refinement splits the elements the
+    // fall crosses and gathers their new vertices, and the floor's light, interpolated as the
+    // outputs draw it, comes closer to the exact value at every level.
+    const scene::Scene s = lamp_scene(true);
+    mesh::Settings ms;
+    ms.patch_size = 0.5;
+    ms.element_size = 0.5;
+    const auto all = [](std::size_t) { return true; };
+    const auto engine_for = [](const mesh::Mesh& d) {
+        return std::make_unique<formfactor::ReferenceEngine>(d, formfactor::Settings{192, 1});
+    };
+    // The RMS error of the floor's interpolated irradiance over the penumbra, on a grid of points
+    // away from the element edges' own vertices.
+    const auto error = [&](int levels, std::size_t& elements, long& points) {
+        mesh::Mesh m = mesh::build(s, ms);
+        std::vector<glm::dvec3> radiosity(m.elements.size()), irradiance(m.elements.size(), glm::dvec3(0.0)), direct;
+        for (std::size_t k = 0; k < m.elements.size(); ++k) radiosity[k] = m.elements[k].emission;
+        output::WeldedMesh welded = output::weld(s.nodes.size(), m, radiosity);
+        mesh::Mesh drawn = solve::gather_mesh(m);
+        drawn.gather_points = solve::gather_points(welded, all);
+        auto engine = engine_for(drawn);
+        solve::GatherSettings settings;
+        output::VertexLight light;
+        REQUIRE(solve::final_gather(m, welded, all, radiosity, irradiance, direct, drawn, *engine, settings, light));
+        points = static_cast<long>(drawn.gather_points.size());
+        solve::GatherRefinement r;
+        r.levels = levels;
+        r.contrast = 0.2;
+        r.min_size = 0.05;
+        r.make_engine = engine_for;
+        const solve::GatherRefined refined =
+            solve::refine_gather({m, radiosity, irradiance, direct, welded, light}, all, settings, r);
+        CHECK(refined.levels == levels);
+        points += refined.points;
+        elements = m.elements.size();
+        double sum = 0.0;
+        int count = 0;
+        for (double x = 1.53; x < 2.5; x += 0.0625)
+            for (double y = 1.03; y < 3.0; y += 0.125) {
+                const double exact = lamp_irradiance(x, y);
+                const double e = interpolated(welded.nodes[0], light.irradiance[0], x, y) - exact;
+                sum += e * e;
+                ++count;
+            }
+        return std::sqrt(sum / count) / 0.2394564705;  // relative to the lamp's full light
+    };
+    std::size_t elements0 = 0, elements1 = 0, elements3 = 0;
+    long points0 = 0, points1 = 0, points3 = 0;
+    const double e0 = error(0, elements0, points0);
+    const double e1 = error(1, elements1, points1);
+    const double e3 = error(3, elements3, points3);
+    CAPTURE(e0, e1, e3, elements0, elements1, elements3, points0, points1, points3);
+    CHECK(elements1 > elements0);
+    CHECK(elements3 > elements1);
+    CHECK(e1 < 0.7 * e0);
+    CHECK(e3 < 0.4 * e0);
+    CHECK(e3 < 0.01);
+}
+
+TEST_CASE("final gather: refinement carries the light of the vertices that stay and shoots only the new ones",
+          "[gather]") {
+    // Split some elements of the lamp scene: every vertex of the coarse weld is still a vertex of
+    // the fine one, at the same place, and carry_light marks exactly those, with their light.
+    // A gather on the fine mesh that knows them must shoot only the others and give every vertex,
+    // bit for bit, what gathering all of them gives.
+    const scene::Scene s = lamp_scene(true);
+    mesh::Settings ms;
+    ms.patch_size = 0.5;
+    ms.element_size = 0.25;
+    const auto all = [](std::size_t) { return true; };
+    mesh::Mesh coarse = mesh::build(s, ms);
+    std::vector<glm::dvec3> radiosity(coarse.elements.size()), irradiance(coarse.elements.size(), glm::dvec3(0.0));
+    for (std::size_t k = 0; k < coarse.elements.size(); ++k) radiosity[k] = coarse.elements[k].emission;
+    const auto reference = [](const mesh::Mesh& d) {
+        return std::make_unique<formfactor::ReferenceEngine>(d, formfactor::Settings{32, 3});
+    };
+    const Gathered before = gather(s, coarse, radiosity, reference);
+
+    mesh::Mesh fine = coarse;
+    std::vector<bool> split(fine.elements.size(), false);
+    for (std::size_t k = 0; k < split.size(); k += 3) split[k] = true;
+    solve::split_solved(fine, split, nullptr, {&radiosity}, irradiance);
+    REQUIRE(fine.elements.size() == coarse.elements.size() + 3 * ((split.size() + 2) / 3));
+    const Gathered full = gather(s, fine, radiosity, reference);
+
+    output::VertexLight prior;
+    std::vector<std::vector<char>> known;
+    solve::carry_light(before.welded, before.light, full.welded, prior, known);
+    long carried = 0, fine_vertices = 0, coarse_vertices = 0;
+    for (std::size_t n = 0; n < full.welded.nodes.size(); ++n) {
+        coarse_vertices += static_cast<long>(before.welded.nodes[n].positions.size());
+        fine_vertices += static_cast<long>(full.welded.nodes[n].positions.size());
+        for (std::size_t v = 0; v < known[n].size(); ++v) {
+            if (!known[n][v]) continue;
+            ++carried;
+            // The coarse vertex at this place gave its light.
+            bool found = false;
+            for (std::size_t o = 0; o < before.welded.nodes[n].positions.size(); ++o) {
+                if (before.welded.nodes[n].positions[o] != full.welded.nodes[n].positions[v]) continue;
+                found = true;
+                CHECK(prior.irradiance[n][v] == before.light.irradiance[n][o]);
+                CHECK(prior.radiosity[n][v] == before.light.radiosity[n][o]);
+            }
+            CHECK(found);
+        }
+    }
+    CHECK(carried == coarse_vertices);
+    REQUIRE(fine_vertices > coarse_vertices);
+
+    long shots = 0;
+    mesh::Mesh drawn = solve::gather_mesh(fine);
+    drawn.gather_points = solve::gather_points(full.welded, all);
+    CountingEngine engine(reference(drawn), shots);
+    solve::GatherSettings settings;
+    settings.known = &known;
+    settings.prior = &full.light;  // what gathering everything gave
+    output::VertexLight light;
+    REQUIRE(solve::final_gather(fine, full.welded, all, radiosity, irradiance, {}, drawn, engine, settings, light));
+    CHECK(shots == fine_vertices - coarse_vertices);
+    for (std::size_t n = 0; n < full.welded.nodes.size(); ++n) {
+        for (std::size_t v = 0; v < full.light.irradiance[n].size(); ++v) {
+            CHECK(light.irradiance[n][v] == full.light.irradiance[n][v]);
+            CHECK(light.radiosity[n][v] == full.light.radiosity[n][v]);
+        }
+    }
+    settings.passes = 2;  // known vertices come with one pass only
+    CHECK_THROWS_AS(solve::final_gather(fine, full.welded, all, radiosity, irradiance, {}, drawn, engine, settings, light),
+                    InternalError);
+}
+
+TEST_CASE("final gather: gather refinement marks the elements a step in the light crosses", "[gather]") {
+    // Irradiance 1 left of x = 2 and 0.1 from it on (on the floor of the lamp scene, elements of
+    // 0.25): exactly the column of elements between x = 1.75 and 2 spans the step. It spans 0.9 of
+    // the brightest: marked at contrast 0.5, not at 0.95; not marked where the step is below the
+    // noise floor's share of the mean, nor where elements are no longer than min_size. The lamp
+    // (black, emitting 1), which the step crosses too, shows none of it: never marked.
+    const scene::Scene s = lamp_scene(false);
+    mesh::Settings ms;
+    ms.patch_size = 0.5;
+    ms.element_size = 0.25;
+    const mesh::Mesh m = mesh::build(s, ms);
+    const std::vector<glm::dvec3> radiosity(m.elements.size(), glm::dvec3(0.0));
+    const output::WeldedMesh welded = output::weld(s.nodes.size(), m, radiosity);
+    const auto all = [](std::size_t) { return true; };
+    output::VertexLight light;
+    light.radiosity.resize(welded.nodes.size());
+    light.irradiance.resize(welded.nodes.size());
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        for (const glm::dvec3& p : welded.nodes[n].positions) {
+            const double h = p.x < 2.0 ? 1.0 : 0.1;
+            light.irradiance[n].push_back(glm::dvec3(h));
+            light.radiosity[n].push_back(glm::dvec3(0.5 * h));
+        }
+    }
+    std::size_t expected = 0;
+    for (const mesh::Element& e : m.elements)
+        if (e.node == 0 && std::abs(e.centroid.x - 1.875) < 1e-9) ++expected;
+    REQUIRE(expected == 16);
+    const auto marked_count = [&](double contrast, double floor, double min_size) {
+        const std::vector<bool> marked = solve::gather_contrasts(m, welded, all, light, contrast, floor, min_size);
+        std::size_t count = 0;
+        for (std::size_t k = 0; k < marked.size(); ++k) {
+            if (!marked[k]) continue;
+            ++count;
+            CHECK(m.elements[k].node == 0);
+            CHECK(std::abs(m.elements[k].centroid.x - 1.875) < 1e-9);
+        }
+        return count;
+    };
+    CHECK(marked_count(0.5, 0.02, 0.0) == expected);
+    CHECK(marked_count(0.95, 0.02, 0.0) == 0);
+    CHECK(marked_count(0.5, 2.0, 0.0) == 0);   // the step, 0.9, is below 2 × the mean (about 0.55)
+    CHECK(marked_count(0.5, 0.02, 0.25) == 0);  // elements of 0.25 are not longer than that
 }

@@ -3,6 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
+#include <unordered_map>
 #include <utility>
 
 #include "core/error.h"
@@ -97,25 +100,35 @@ std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
     return points;
 }
 
+void split_solved(mesh::Mesh& mesh, const std::vector<bool>& split, const mesh::Texturing* texturing,
+                  std::initializer_list<std::vector<glm::dvec3>*> radiosities, std::vector<glm::dvec3>& irradiance) {
+    for (const std::vector<glm::dvec3>* b : radiosities)
+        if (b->size() != mesh.elements.size()) throw InternalError("splitting: the solution does not match the mesh");
+    if (irradiance.size() != mesh.elements.size()) throw InternalError("splitting: the solution does not match the mesh");
+    mesh::Refined refined = mesh::split_elements(mesh, split, texturing);
+    std::vector<glm::dvec3> h(refined.mesh.elements.size());
+    for (std::size_t k = 0; k < h.size(); ++k) h[k] = irradiance[refined.origin[k]];
+    for (std::vector<glm::dvec3>* radiosity : radiosities) {
+        std::vector<glm::dvec3> b(refined.mesh.elements.size());
+        for (std::size_t k = 0; k < b.size(); ++k) {
+            const std::uint32_t parent = refined.origin[k];
+            const mesh::Element& child = refined.mesh.elements[k];
+            const mesh::Element& from = mesh.elements[parent];  // E + ρH with the child's own E and ρ
+            b[k] = (*radiosity)[parent] + (child.emission - from.emission) + (child.rho - from.rho) * h[k];
+        }
+        *radiosity = std::move(b);
+    }
+    mesh = std::move(refined.mesh);
+    irradiance = std::move(h);
+}
+
 std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity, std::vector<glm::dvec3>& irradiance,
                            double min_size, const mesh::Texturing* texturing) {
     if (radiosity.size() != mesh.elements.size() || irradiance.size() != mesh.elements.size())
         throw InternalError("contact grading: the solution does not match the mesh");
     const std::vector<bool> marked = mesh::contact_elements(mesh, min_size);
     const std::size_t split = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
-    if (split == 0) return 0;
-    mesh::Refined refined = mesh::split_elements(mesh, marked, texturing);
-    std::vector<glm::dvec3> b(refined.mesh.elements.size()), h(refined.mesh.elements.size());
-    for (std::size_t k = 0; k < b.size(); ++k) {
-        const std::uint32_t parent = refined.origin[k];
-        h[k] = irradiance[parent];
-        const mesh::Element& child = refined.mesh.elements[k];
-        const mesh::Element& from = mesh.elements[parent];  // E + ρH with the child's own E and ρ
-        b[k] = radiosity[parent] + (child.emission - from.emission) + (child.rho - from.rho) * h[k];
-    }
-    mesh = std::move(refined.mesh);
-    radiosity = std::move(b);
-    irradiance = std::move(h);
+    if (split > 0) split_solved(mesh, marked, texturing, {&radiosity}, irradiance);
     return split;
 }
 
@@ -293,27 +306,27 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         }
         return light;
     };
-    long done = 0;
-    const long work = static_cast<long>(total) * passes;
-    for (int pass = 0; pass < passes; ++pass) {
-        if (pass > 0) {  // the elements' radiosity from the last pass's vertices
-            std::vector<glm::dvec3> sum(mesh.elements.size(), glm::dvec3(0.0));
-            std::vector<double> area(mesh.elements.size(), 0.0);
-            for (std::size_t n = 0; n < node_count; ++n) {
-                if (!gathered(n)) continue;
-                const output::WeldedNode& node = welded.nodes[n];
-                for (std::size_t t = 0; t < node.triangle_count(); ++t) {
-                    const std::uint32_t* v = &node.indices[3 * t];
-                    const glm::dvec3 a = node.positions[v[0]], b = node.positions[v[1]], c = node.positions[v[2]];
-                    const double at = 0.5 * glm::length(glm::cross(b - a, c - a));
-                    sum[node.element[t]] +=
-                        at * (out.radiosity[n][v[0]] + out.radiosity[n][v[1]] + out.radiosity[n][v[2]]) / 3.0;
-                    area[node.element[t]] += at;
-                }
+    // Known points keep their light and are not shot (settings.known); the rest, in order.
+    std::vector<std::uint32_t> todo;
+    if (settings.known) {
+        if (passes != 1 || !settings.prior) throw InternalError("final gather: known vertices need their light and one pass");
+        for (std::size_t i = 0; i < total; ++i) {
+            const auto [n, v] = where[i];
+            if ((*settings.known)[n][v]) {
+                out.radiosity[n][v] = settings.prior->radiosity[n][v];
+                out.irradiance[n][v] = settings.prior->irradiance[n][v];
+            } else {
+                todo.push_back(static_cast<std::uint32_t>(i));
             }
-            for (std::size_t k = 0; k < fine.size(); ++k)
-                if (area[k] > 0.0) fine[k] = sum[k] / area[k];
         }
+    } else {
+        todo.resize(total);
+        for (std::size_t i = 0; i < total; ++i) todo[i] = static_cast<std::uint32_t>(i);
+    }
+    long done = 0;
+    const long work = static_cast<long>(todo.size()) * passes;
+    for (int pass = 0; pass < passes; ++pass) {
+        if (pass > 0) fine = vertex_means(mesh, welded, gathered, out.radiosity, fine);  // from the last pass's vertices
         draw();
         if (pass > 0) {
             if (settings.cancelled && settings.cancelled()) return false;
@@ -321,16 +334,18 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
             done += static_cast<long>(kept);
             if (settings.progress) settings.progress(done, work);
         }
-        for (std::size_t first = pass > 0 ? kept : 0; first < total; first += batch) {
+        // Pass 0 shoots every point to do; the later ones those past the kept rows.
+        const std::size_t from = pass > 0 ? kept : 0;
+        for (std::size_t first = from; first < todo.size(); first += batch) {
             if (settings.cancelled && settings.cancelled()) return false;
-            const std::size_t count = std::min(batch, total - first);
+            const std::size_t count = std::min(batch, todo.size() - first);
             requests.clear();
-            for (std::size_t i = first; i < first + count; ++i)
-                requests.push_back(formfactor::ShotRequest::of_point(static_cast<std::uint32_t>(i), kGatherShots + i));
+            for (std::size_t j = first; j < first + count; ++j)
+                requests.push_back(formfactor::ShotRequest::of_point(todo[j], kGatherShots + todo[j]));
             engine.shoot_batch(requests, results);
             for (std::size_t j = 0; j < count; ++j) {
                 const formfactor::ShotResult& row = results[j];
-                const std::size_t i = first + j;
+                const std::size_t i = todo[first + j];
                 const bool keep = pass == 0 && passes > 1 && kept == i;
                 const std::size_t near_entries = near_at.size(), near_weights_kept = near_weight.size();
                 store(i, shot_light(i, row, keep));
@@ -354,6 +369,168 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         fill_hidden(welded, where, hidden, out);
     }
     return true;
+}
+
+std::vector<glm::dvec3> vertex_means(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
+                                     const std::function<bool(std::size_t node)>& gathered,
+                                     const output::VertexValues& values, const std::vector<glm::dvec3>& fallback) {
+    std::vector<glm::dvec3> sum(mesh.elements.size(), glm::dvec3(0.0));
+    std::vector<double> area(mesh.elements.size(), 0.0);
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (!gathered(n)) continue;
+        const output::WeldedNode& node = welded.nodes[n];
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+            const std::uint32_t* v = &node.indices[3 * t];
+            const glm::dvec3 a = node.positions[v[0]], b = node.positions[v[1]], c = node.positions[v[2]];
+            const double at = 0.5 * glm::length(glm::cross(b - a, c - a));
+            sum[node.element[t]] += at * (values[n][v[0]] + values[n][v[1]] + values[n][v[2]]) / 3.0;
+            area[node.element[t]] += at;
+        }
+    }
+    std::vector<glm::dvec3> out = fallback;
+    for (std::size_t k = 0; k < out.size(); ++k)
+        if (area[k] > 0.0) out[k] = sum[k] / area[k];
+    return out;
+}
+
+std::vector<bool> gather_contrasts(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
+                                   const std::function<bool(std::size_t node)>& gathered,
+                                   const output::VertexLight& light, double contrast, double noise_floor,
+                                   double min_size) {
+    const auto luminance = [](const glm::dvec3& c) { return 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b; };
+    double mean = 0.0;
+    std::size_t count = 0;
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (!gathered(n)) continue;
+        for (const glm::dvec3& h : light.irradiance[n]) mean += luminance(h);
+        count += light.irradiance[n].size();
+    }
+    if (count == 0) return std::vector<bool>(mesh.elements.size(), false);
+    const double floor = noise_floor * mean / double(count);
+    // Per element, the least and the most of its vertices' light.
+    std::vector<double> least(mesh.elements.size(), std::numeric_limits<double>::infinity());
+    std::vector<double> most(mesh.elements.size(), -std::numeric_limits<double>::infinity());
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (!gathered(n)) continue;
+        const output::WeldedNode& node = welded.nodes[n];
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+            const std::uint32_t k = node.element[t];
+            for (int a = 0; a < 3; ++a) {
+                const double l = luminance(light.irradiance[n][node.indices[3 * t + a]]);
+                least[k] = std::min(least[k], l);
+                most[k] = std::max(most[k], l);
+            }
+        }
+    }
+    std::vector<bool> marked(mesh.elements.size(), false);
+    for (std::size_t k = 0; k < marked.size(); ++k) {
+        const mesh::Element& e = mesh.elements[k];
+        const double span = most[k] - least[k], rho = luminance(e.rho);
+        // What the light changes is ρH against the element's brightest E + ρH: an emitter's own
+        // light (a lamp lit unevenly by the room) or a black surface shows no difference.
+        marked[k] = rho * span > contrast * (luminance(e.emission) + rho * most[k]) && span > floor &&
+                    mesh::longest_edge(e.poly) > min_size;
+    }
+    return marked;
+}
+
+void carry_light(const output::WeldedMesh& old_welded, const output::VertexLight& old_light,
+                 const output::WeldedMesh& welded, output::VertexLight& prior,
+                 std::vector<std::vector<char>>& known) {
+    const double crease_cos = std::cos(mesh::kCreaseAngle);
+    const std::size_t node_count = welded.nodes.size();
+    prior.radiosity.assign(node_count, {});
+    prior.irradiance.assign(node_count, {});
+    known.assign(node_count, {});
+    for (std::size_t n = 0; n < node_count; ++n) {
+        const output::WeldedNode& node = welded.nodes[n];
+        prior.radiosity[n].assign(node.positions.size(), glm::dvec3(0.0));
+        prior.irradiance[n].assign(node.positions.size(), glm::dvec3(0.0));
+        known[n].assign(node.positions.size(), 0);
+        if (n >= old_welded.nodes.size() || old_light.radiosity[n].empty()) continue;
+        const output::WeldedNode& old = old_welded.nodes[n];
+        // Old vertices by position (bit for bit: splitting keeps every corner where it was).
+        std::unordered_multimap<std::uint64_t, std::uint32_t> at;
+        const auto key = [](const glm::dvec3& p) {
+            std::uint64_t h = 0;
+            for (int c = 0; c < 3; ++c) {
+                const double v = p[c] + 0.0;  // −0 and +0 alike
+                std::uint64_t b = 0;
+                std::memcpy(&b, &v, sizeof b);
+                h = (h ^ b) * 0x9E3779B97F4A7C15ull + (h >> 29);
+            }
+            return h;
+        };
+        for (std::uint32_t v = 0; v < old.positions.size(); ++v) at.emplace(key(old.positions[v]), v);
+        for (std::uint32_t v = 0; v < node.positions.size(); ++v) {
+            const auto [first, last] = at.equal_range(key(node.positions[v]));
+            for (auto it = first; it != last; ++it) {
+                const std::uint32_t o = it->second;
+                if (old.positions[o] != node.positions[v] || glm::dot(old.normals[o], node.normals[v]) < crease_cos)
+                    continue;
+                // The same side: a double-sided surface's back has its own vertices, facing away.
+                prior.radiosity[n][v] = old_light.radiosity[n][o];
+                prior.irradiance[n][v] = old_light.irradiance[n][o];
+                known[n][v] = 1;
+                break;
+            }
+        }
+    }
+}
+
+GatherRefined refine_gather(const GatheredMesh& g, const std::function<bool(std::size_t node)>& gathered,
+                            const GatherSettings& settings, const GatherRefinement& r) {
+    GatherRefined result;
+    if (!g.direct.empty() && !r.direct_light) throw InternalError("gather refinement: no way to light a refined mesh");
+    const std::size_t node_count = g.welded.nodes.size();
+    for (int level = 0; level < r.levels; ++level) {
+        const std::vector<bool> marked =
+            gather_contrasts(g.mesh, g.welded, gathered, g.light, r.contrast, r.noise_floor, r.min_size);
+        const std::size_t split = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
+        if (split == 0) break;
+        mesh::Mesh finer = g.mesh;
+        std::vector<glm::dvec3> radiosity = g.radiosity, irradiance = g.irradiance;
+        std::vector<glm::dvec3> drawn_light = vertex_means(g.mesh, g.welded, gathered, g.light.radiosity, g.radiosity);
+        split_solved(finer, marked, r.texturing, {&radiosity, &drawn_light}, irradiance);
+        output::WeldedMesh finer_welded = output::weld(node_count, finer, radiosity);
+        std::size_t vertices = 0;
+        for (std::size_t n = 0; n < node_count; ++n)
+            if (gathered(n)) vertices += finer_welded.nodes[n].positions.size();
+        if (vertices > r.max_vertices) {
+            result.capped = true;
+            break;
+        }
+        output::VertexLight prior;
+        std::vector<std::vector<char>> known;
+        carry_light(g.welded, g.light, finer_welded, prior, known);
+        std::vector<glm::dvec3> direct;
+        if (!g.direct.empty()) direct = r.direct_light(finer);
+        mesh::Mesh drawn = gather_mesh(finer);
+        drawn.gather_points = gather_points(finer_welded, gathered);
+        std::unique_ptr<formfactor::Engine> engine = r.make_engine(drawn);
+        GatherSettings one = settings;
+        one.passes = 1;
+        one.known = &known;
+        one.prior = &prior;
+        output::VertexLight light;
+        if (!final_gather(finer, finer_welded, gathered, drawn_light, irradiance, direct, drawn, *engine, one, light)) {
+            result.cancelled = true;
+            break;
+        }
+        std::size_t carried = 0;
+        for (std::size_t n = 0; n < node_count; ++n)
+            if (gathered(n)) carried += static_cast<std::size_t>(std::count(known[n].begin(), known[n].end(), 1));
+        result.points += static_cast<long>(drawn.gather_points.size() - carried);
+        result.split += split;
+        ++result.levels;
+        g.mesh = std::move(finer);
+        g.radiosity = std::move(radiosity);
+        g.irradiance = std::move(irradiance);
+        g.direct = std::move(direct);
+        g.welded = std::move(finer_welded);
+        g.light = std::move(light);
+    }
+    return result;
 }
 
 }  // namespace hemirad::solve

@@ -14,6 +14,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <initializer_list>
+#include <memory>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -49,6 +51,13 @@ std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
 // (the Cornell box at the default quality: 742 drawn elements for 15,354).
 mesh::Mesh gather_mesh(const mesh::Mesh& mesh);
 
+// Splits the elements of `mesh` marked in `split` in four (mesh::split_elements, with `texturing`),
+// and carries a solution over: children take their parent's irradiance, and each of `radiosities`
+// E + ρH by their own emission and reflectance (the parent's exactly where it is untextured), so
+// every element average, and the light a gather draws, is unchanged.
+void split_solved(mesh::Mesh& mesh, const std::vector<bool>& split, const mesh::Texturing* texturing,
+                  std::initializer_list<std::vector<glm::dvec3>*> radiosities, std::vector<glm::dvec3>& irradiance);
+
 // Grades `mesh` toward its contact lines (mesh/contact.h) for a gather: every element along one
 // that is longer than `min_size` is split in four (mesh::split_elements, with `texturing`). Children
 // take their parent's irradiance, and radiosity E + ρH by their own emission and reflectance (the
@@ -65,6 +74,11 @@ struct GatherSettings {
     std::size_t kept_entries = kMaxKeptEntries;  // of the first pass's rows, kept for the later passes
     int batch = 64;   // shots per engine call
     int passes = 1;   // gathers; each after the first draws the last one's light (see final_gather)
+    // Vertices whose light is already known (a gather of the same surfaces cut coarser, see
+    // refine_gather): per node and vertex of the welded mesh, known[n][v] != 0 marks one, whose
+    // light `prior` holds; only the others are shot. One pass only.
+    const std::vector<std::vector<char>>* known = nullptr;
+    const output::VertexLight* prior = nullptr;
     std::function<bool()> cancelled;                       // checked between engine calls
     std::function<void(long done, long total)> progress;   // after each engine call (all passes)
 };
@@ -88,5 +102,72 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
                   const std::vector<glm::dvec3>& irradiance, const std::vector<glm::dvec3>& direct,
                   const mesh::Mesh& drawn, formfactor::Engine& engine, const GatherSettings& settings,
                   output::VertexLight& out);
+
+// Per element of `mesh`: the area-weighted mean over its triangles in `welded` (weld(…, mesh, …)) of
+// `values` at their vertices, for the nodes `gathered` selects; `fallback`'s value elsewhere.
+std::vector<glm::dvec3> vertex_means(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
+                                     const std::function<bool(std::size_t node)>& gathered,
+                                     const output::VertexValues& values, const std::vector<glm::dvec3>& fallback);
+
+// Adaptive refinement of a gather, where its light changes faster than its vertices can follow (a
+// penumbra's edge, a contact line's dark band): every element of a gathered node whose vertices'
+// gathered irradiance H spans, in luminance, so much that ρ times the span is more than `contrast`
+// of the element's brightest radiosity E + ρH (its own E and ρ: a lamp's uneven lighting by the room
+// hardly shows), the span is more than `noise_floor` of the mean H over all gathered vertices, and
+// whose longest edge is above `min_size`.
+std::vector<bool> gather_contrasts(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
+                                   const std::function<bool(std::size_t node)>& gathered,
+                                   const output::VertexLight& light, double contrast, double noise_floor,
+                                   double min_size);
+
+// A gathered mesh, refined in place by refine_gather: the solved mesh, its solution (per element),
+// the punctual lights' light on it (per element; empty for none), its weld and the gather's light
+// at the weld's vertices.
+struct GatheredMesh {
+    mesh::Mesh& mesh;
+    std::vector<glm::dvec3>& radiosity;
+    std::vector<glm::dvec3>& irradiance;
+    std::vector<glm::dvec3>& direct;
+    output::WeldedMesh& welded;
+    output::VertexLight& light;
+};
+
+struct GatherRefinement {
+    int levels = 0;            // rounds of splitting and gathering at most
+    double contrast = 0.5;     // see gather_contrasts
+    double noise_floor = 0.02;
+    double min_size = 0.0;
+    std::size_t max_vertices = ~std::size_t{0};  // gathered vertices at most: a level past it is not taken
+    const mesh::Texturing* texturing = nullptr;  // split elements' own textures (see split_solved)
+    // An engine for a drawn mesh (gather_mesh of the refined mesh, with its gather points).
+    std::function<std::unique_ptr<formfactor::Engine>(const mesh::Mesh& drawn)> make_engine;
+    // The punctual lights' light on a refined mesh; needed when `direct` is not empty.
+    std::function<std::vector<glm::dvec3>(const mesh::Mesh& mesh)> direct_light;
+};
+
+struct GatherRefined {
+    int levels = 0;          // levels taken
+    std::size_t split = 0;   // elements split, all levels
+    long points = 0;         // vertices gathered, all levels
+    bool capped = false;     // a level was not taken for max_vertices
+    bool cancelled = false;  // settings.cancelled said so (`g` is then the last whole level's)
+};
+
+// Gather refinement: up to `r.levels` times, the elements gather_contrasts marks are split in four
+// (split_solved; what the gather draws is each element's mean of the last light at its vertices),
+// the mesh welded again, the light of the vertices that were there carried over (carry_light),
+// and only the new vertices gathered, one pass each (`settings`' batch, progress and cancel). An
+// element's light then follows a penumbra or a contact line's dark band down to r.min_size, where
+// linear interpolation between vertices a whole element apart could not, at the cost of the
+// vertices where the light changes.
+GatherRefined refine_gather(const GatheredMesh& g, const std::function<bool(std::size_t node)>& gathered,
+                            const GatherSettings& settings, const GatherRefinement& r);
+
+// The light a gather found at the vertices of `old_welded`, carried to the vertices of `welded`
+// (the same nodes cut finer): a vertex at the same position, side and crease as an old one takes
+// its light and is marked known; the others (the new ones) are left to be gathered.
+void carry_light(const output::WeldedMesh& old_welded, const output::VertexLight& old_light,
+                 const output::WeldedMesh& welded, output::VertexLight& prior,
+                 std::vector<std::vector<char>>& known);
 
 }  // namespace hemirad::solve
