@@ -108,9 +108,10 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     std::vector<std::string> names;
     for (const QualityPreset& p : kQualityPresets) {
         presets += fmt::format("{}{} (N {}, patches diagonal/{:g}, {:g} elements a side, threshold {:g}, contrast "
-                               "{:g}, gather N {} × {})",
+                               "{:g}, gather N {} × {}, refined {} levels at contrast {:g})",
                                presets.empty() ? "" : ", ", p.name, p.hemicube, 1.0 / p.patch_fraction,
-                               p.elements_per_patch_edge, p.threshold, p.contrast, p.gather, p.gather_passes);
+                               p.elements_per_patch_edge, p.threshold, p.contrast, p.gather, p.gather_passes,
+                               p.gather_refine, p.gather_contrast);
         names.emplace_back(p.name);
     }
     bake.add_option("--quality", o.quality,
@@ -128,6 +129,15 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--gather-passes", o.gather_passes,
                     "final gathers, each drawing the last one's light (default: the quality's)")
         ->transform(integer_in(1, 8));
+    bake.add_option("--gather-refine", o.gather_refine,
+                    "gather refinement: after the gather, split the elements whose vertices' light differs by more "
+                    "than --gather-contrast and gather their new vertices, this many times (0: none; default: the "
+                    "quality's)")
+        ->transform(integer_in(0, 8));
+    bake.add_option("--gather-contrast", o.gather_contrast,
+                    "gather refinement splits an element when its vertices' gathered light (luminance) spans more "
+                    "than this share of the brightest (default: the quality's)")
+        ->transform(real_in(0.0, 1.0, true));
     bake.add_option("--patch-size", o.patch_size,
                     "maximum patch edge, scene units (default: scene diagonal × the quality's fraction)")
         ->transform(real_in(0.0, kLargestSize, true));

@@ -34,6 +34,8 @@ struct BakeOptions {
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
     int gather = -1;              // final gather hemicube N (0: none); < 0: from the quality
     int gather_passes = 0;        // final gathers, each from the last one's light; 0: from the quality
+    int gather_refine = -1;       // gather refinement levels (solve::gather_contrasts); < 0: from the quality
+    double gather_contrast = -1.0;  // … splitting elements whose vertices' light spans more than this share; < 0: the quality's
     std::string solver = "auto";  // auto | matrix | progressive
     std::string effects;          // overrides: "occlusion=off,colour=on,…" (scene::parse_effect_overrides)
     std::string output_mode = "scene";  // --output-mode scene|radiosity (output.h)

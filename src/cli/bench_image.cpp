@@ -66,6 +66,8 @@ struct Run {
     double element_size = 0.0;
     int gather = -1;
     int gather_passes = 0;
+    int gather_refine = -1;
+    double gather_contrast = -1.0;
 };
 
 }  // namespace
@@ -117,6 +119,9 @@ PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height,
     const int tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
     std::vector<double> tile_sum(std::size_t(tiles_x) * tiles_y, 0.0);
     std::vector<long> tile_count(tile_sum.size(), 0);
+    // Per tile, the luminance of the image and the reference, and the reference's variance, summed.
+    std::vector<double> tile_image(tile_sum.size(), 0.0), tile_reference(tile_sum.size(), 0.0),
+        tile_variance(tile_sum.size(), 0.0);
     for (int y = 0; y < height; ++y) {
         for (int x = 0; x < width; ++x) {
             const std::size_t p = std::size_t(y) * width + x;
@@ -133,6 +138,9 @@ PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height,
             const std::size_t t = std::size_t(y / kTile) * tiles_x + x / kTile;
             tile_sum[t] += e;
             ++tile_count[t];
+            tile_image[t] += h;
+            tile_reference[t] += r;
+            tile_variance[t] += double(ref.noise_y[p]) * ref.noise_y[p];
         }
     }
     if (out.pixels == 0) return out;
@@ -148,6 +156,13 @@ PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height,
             out.worst_tile = m;
             out.worst_tile_x = int(t % tiles_x) * kTile;
             out.worst_tile_y = int(t / tiles_x) * kTile;
+        }
+        const double light = tile_image[t] / tile_reference[t] - 1.0;
+        if (std::abs(light) > std::abs(out.worst_tile_light)) {
+            out.worst_tile_light = light;
+            out.worst_tile_light_noise = std::sqrt(tile_variance[t]) / tile_reference[t];
+            out.worst_tile_light_x = int(t % tiles_x) * kTile;
+            out.worst_tile_light_y = int(t / tiles_x) * kTile;
         }
     }
     return out;
@@ -188,7 +203,8 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
             throw InputError(fmt::format("{}: not found (run bench --accuracy from the repository root)", o.scene));
     }
     // The presets, then sweeps of one setting at a time from the default preset: the final gather's
-    // resolution and passes, the solve's hemicube resolution, the element size.
+    // resolution, passes and refinement (levels, contrast), the solve's hemicube resolution, the
+    // element size.
     std::vector<Run> runs = {{"draft", "preset", "draft"}, {"default", "preset", "default"}};
     if (!o.quick) {
         runs.push_back({"high", "preset", "high"});
@@ -196,6 +212,12 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
             runs.push_back({fmt::format("default, gather {}", g), "gather", "default", 0, 0.0, g});
         for (const int p : {1, 2, 3})
             runs.push_back({fmt::format("default, gather passes {}", p), "gather passes", "default", 0, 0.0, -1, p});
+        for (const int l : {0, 1, 2})
+            runs.push_back(
+                {fmt::format("default, gather refine {}", l), "gather refine", "default", 0, 0.0, -1, 0, l});
+        for (const double c : {0.3, 0.2})
+            runs.push_back({fmt::format("default, gather contrast {:g}", c), "gather contrast", "default", 0, 0.0, -1,
+                            0, -1, c});
         for (const int n : {64, 128, 512})
             runs.push_back({fmt::format("default, N {}", n), "hemicube", "default", n});
         for (const double e : {0.03, 0.015})
@@ -205,8 +227,9 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
     log << fmt::format("\nCornell box against the path-traced reference ({}: {}x{}, {} paths a pixel), --device {}\n",
                        o.reference_dir, ref.width, ref.height,
                        ref.json.at("settings").value("samples_per_pixel", 0), o.device);
-    log << "| run | bake | elements | gather | pixel RMSE | worst 16x16 tile | worst block face | worst face |\n"
-           "|---|---|---|---|---|---|---|---|\n";
+    log << "| run | bake | elements | gather points | pixel RMSE | worst 16x16 tile, light | worst 16x16 tile, mean pixel "
+           "error | worst block face | worst face |\n"
+           "|---|---|---|---|---|---|---|---|---|\n";
     ordered_json out_runs = ordered_json::array();
     // A device's first bake builds its kernels: a draft bake first, untimed, so that no run pays for it.
     for (std::size_t k = o.device == "ref" ? 1 : 0; k <= runs.size(); ++k) {
@@ -221,6 +244,8 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
         b.element_size = r.element_size;
         b.gather = r.gather;
         b.gather_passes = r.gather_passes;
+        b.gather_refine = r.gather_refine;
+        b.gather_contrast = r.gather_contrast;
         b.image_width = ref.width;
         b.quiet = true;
         run_bake(b);
@@ -250,14 +275,18 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
         const long elements = report.at("counts").at("elements").get<long>();
         const std::string solver = report.at("settings").value("solver", std::string());
         const ordered_json& settings = report.at("settings");
-        const std::string gather = settings.at("gather").get<int>() > 0
-                                       ? fmt::format("N {} × {}", settings.at("gather").get<int>(),
-                                                     settings.at("gather_passes").get<int>())
-                                       : std::string("none");
-        log << fmt::format("| {} | {:.2f} s | {} | {} | {:.2f}% | {:+.1f}% at ({}, {}) | {:+.2f}% {} | {:+.2f}% {} |\n",
-                           r.label, seconds, elements, gather, 100.0 * px.rms, 100.0 * px.worst_tile,
-                           px.worst_tile_x, px.worst_tile_y, 100.0 * worst_block, worst_block_name,
-                           100.0 * worst_face, worst_face_name);
+        const std::string gather =
+            settings.at("gather").get<int>() > 0
+                ? fmt::format("{} (N {} × {}, refined {} at {:g})", report.at("counts").at("gather_points").get<long>(),
+                              settings.at("gather").get<int>(), settings.at("gather_passes").get<int>(),
+                              settings.at("gather_refine").get<int>(), settings.at("gather_contrast").get<double>())
+                : std::string("none");
+        log << fmt::format(
+            "| {} | {:.2f} s | {} | {} | {:.2f}% | {:+.1f}% ±{:.1f}% at ({}, {}) | {:+.1f}% at ({}, {}) | {:+.2f}% {} | "
+            "{:+.2f}% {} |\n",
+            r.label, seconds, elements, gather, 100.0 * px.rms, 100.0 * px.worst_tile_light,
+            100.0 * px.worst_tile_light_noise, px.worst_tile_light_x, px.worst_tile_light_y, 100.0 * px.worst_tile,
+            px.worst_tile_x, px.worst_tile_y, 100.0 * worst_block, worst_block_name, 100.0 * worst_face, worst_face_name);
         log.flush();
         out_runs.push_back({{"label", r.label},
                             {"sweep", r.sweep},
@@ -267,7 +296,9 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
                                          {"patch_size", report.at("settings").at("patch_size")},
                                          {"contrast", report.at("settings").at("contrast")},
                                          {"gather", report.at("settings").at("gather")},
-                                         {"gather_passes", report.at("settings").at("gather_passes")}}},
+                                         {"gather_passes", report.at("settings").at("gather_passes")},
+                                         {"gather_refine", report.at("settings").at("gather_refine")},
+                                         {"gather_contrast", report.at("settings").at("gather_contrast")}}},
                             {"gather_points", report.at("counts").at("gather_points")},
                             {"seconds", seconds},
                             {"timings_s", report.at("timings_s")},
@@ -279,7 +310,12 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
                               {"reference_noise_rms", px.noise_rms},
                               {"mean", px.mean},
                               {"count", px.pixels},
-                              {"worst_tile", {{"error", px.worst_tile}, {"x", px.worst_tile_x}, {"y", px.worst_tile_y}}}}},
+                              {"worst_tile", {{"error", px.worst_tile}, {"x", px.worst_tile_x}, {"y", px.worst_tile_y}}},
+                              {"worst_tile_light",
+                               {{"error", px.worst_tile_light},
+                                {"reference_noise", px.worst_tile_light_noise},
+                                {"x", px.worst_tile_light_x},
+                                {"y", px.worst_tile_light_y}}}}},
                             {"worst_block_face", {{"error", worst_block}, {"face", worst_block_name}}},
                             {"worst_face", {{"error", worst_face}, {"face", worst_face_name}}},
                             {"faces", faces}});

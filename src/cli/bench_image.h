@@ -32,11 +32,18 @@ ImageReference load_image_reference(const std::string& dir);
 // the luminance, (hemirad − reference) / reference. rms: the RMS relative error with the
 // reference's own noise removed (sqrt(max(0, mean e² − mean σ²)), σ its relative standard error);
 // raw_rms without that; noise_rms the reference's; worst_tile the largest |mean e| over 16 × 16
-// tiles with at least a quarter of their pixels interior, and where it lies.
+// tiles with at least a quarter of their pixels interior, and where it lies; worst_tile_light the
+// largest |relative error of a tile's light| (its interior pixels' luminance summed, against the
+// reference's), with that sum's relative standard error from the reference's noise. The first is
+// ruled by a tile's darkest pixels and grows with the reference's noise there (the mean of
+// (h − r)/r over noisy r is biased upward by about the relative variance: +1% and more on the
+// short block's dark front); the second says how far off a region looks as a whole.
 struct PixelErrors {
     double rms = 0.0, raw_rms = 0.0, noise_rms = 0.0, mean = 0.0;
     double worst_tile = 0.0;
     int worst_tile_x = 0, worst_tile_y = 0;  // pixel coordinates of its top-left corner
+    double worst_tile_light = 0.0, worst_tile_light_noise = 0.0;
+    int worst_tile_light_x = 0, worst_tile_light_y = 0;
     long pixels = 0;
 };
 PixelErrors compare_pixels(const std::vector<float>& rgb, int width, int height, const ImageReference& reference);
