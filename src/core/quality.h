@@ -32,7 +32,7 @@ inline constexpr QualityPreset kQualityPresets[] = {
     // RMS error and time. Before the final gather the defaults were 6.5% (draft 21%). A gather's
     // passes after the first re-use its rows (about 0.1 s each on the default): 2.16% with one,
     // 1.88% with two, 1.76% with three and four, where the fourth takes the worst face of the
-    // blocks from -1.04% to -0.84%. Draft keeps one, for time: 5.58% in 1.2 s, 5.25% with two.
+    // blocks from -1.04% to -0.84%. Draft keeps one, for time: 5.58% in 1.2–1.3 s, 5.25% with two.
     // Gather refinement: draft 5.30% with two levels, 0.2 s more (over its 1.5 s on a busy machine).
     {"draft", 64, 1.0 / 8.0, 3.0, 1e-2, 0.5, 32, 1, 0, 0.5},
     // The default keeps N 256 for the solve: 1.76% against 1.84% at N 128 in about 1 s less, which
