@@ -331,7 +331,7 @@ TEST_CASE("final gather: gather refinement follows a penumbra, against the analy
     };
     // The RMS error of the floor's interpolated irradiance over the penumbra, on a grid of points
     // away from the element edges' own vertices.
-    const auto error = [&](int levels, std::size_t& elements, long& points) {
+    const auto error = [&](int levels, std::size_t& elements, long& points, std::size_t max_vertices = ~std::size_t{0}) {
         mesh::Mesh m = mesh::build(s, ms);
         std::vector<glm::dvec3> radiosity(m.elements.size()), irradiance(m.elements.size(), glm::dvec3(0.0)), direct;
         for (std::size_t k = 0; k < m.elements.size(); ++k) radiosity[k] = m.elements[k].emission;
@@ -348,9 +348,20 @@ TEST_CASE("final gather: gather refinement follows a penumbra, against the analy
         r.contrast = 0.2;
         r.min_size = 0.05;
         r.make_engine = engine_for;
+        r.max_vertices = max_vertices;
         const solve::GatherRefined refined =
             solve::refine_gather({m, radiosity, irradiance, direct, welded, light}, all, settings, r);
-        CHECK(refined.levels == levels);
+        if (max_vertices == ~std::size_t{0}) {
+            CHECK(refined.levels == levels);
+            CHECK_FALSE(refined.capped);
+        } else {  // one level, cut to the elements of the highest contrast that fit
+            CHECK(refined.capped);
+            CHECK(refined.levels == 1);
+            std::size_t vertices = 0;
+            for (const output::WeldedNode& node : welded.nodes) vertices += node.positions.size();
+            CHECK(vertices <= max_vertices);
+            CHECK(static_cast<long>(vertices) == points + refined.points);
+        }
         points += refined.points;
         elements = m.elements.size();
         double sum = 0.0;
@@ -375,6 +386,15 @@ TEST_CASE("final gather: gather refinement follows a penumbra, against the analy
     CHECK(e1 < 0.7 * e0);
     CHECK(e3 < 0.4 * e0);
     CHECK(e3 < 0.01);
+    // Capped at 100 vertices more than the gather's: the first level splits only what fits, and
+    // already helps.
+    std::size_t elements_capped = 0;
+    long points_capped = 0;
+    const double capped = error(3, elements_capped, points_capped, static_cast<std::size_t>(points0) + 100);
+    CAPTURE(capped, elements_capped, points_capped);
+    CHECK(points_capped > points0);
+    CHECK(points_capped <= points0 + 100);
+    CHECK(capped < e0);
 }
 
 TEST_CASE("final gather: refinement carries the light of the vertices that stay and shoots only the new ones",

@@ -135,8 +135,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "quality's)")
         ->transform(integer_in(0, 8));
     bake.add_option("--gather-contrast", o.gather_contrast,
-                    "gather refinement splits an element when its vertices' gathered light (luminance) spans more "
-                    "than this share of the brightest (default: the quality's)")
+                    "gather refinement splits an element when its reflectance times the span of its vertices' "
+                    "gathered irradiance (luminance) is more than this share of its brightest radiosity (default: "
+                    "the quality's)")
         ->transform(real_in(0.0, 1.0, true));
     bake.add_option("--patch-size", o.patch_size,
                     "maximum patch edge, scene units (default: scene diagonal × the quality's fraction)")

@@ -334,10 +334,11 @@ constexpr double kContactGrading = 0.6;
 // Gather refinement (--gather-refine, --gather-contrast; solve::gather_contrasts): elements whose
 // vertices' gathered light spans more than the contrast and kGatherNoiseFloor of the mean are
 // split, down to kGatherMinSize of the element size, and only their new vertices gathered. On the
-// Cornell box (per-pixel error, gather points; four levels): at the default 1.76% (12,660) →
-// contrast 0.5 1.48% (14,570), 0.4 1.43% (15,903), 0.2 1.42% (19,935, down to 0.12 of the
-// element: the last levels pay); at high 1.46% → 0.4 1.14% (18,880), 0.3 1.10% (20,877), 0.2
-// 1.07% (26,487). A uniformly finer element (0.01 for 0.02) gives 1.30% with 3× the gather.
+// Cornell box (per-pixel error, gather points; four levels; bench --accuracy): at the default
+// 1.76% (12,660) → contrast 0.5 1.48% (14,570), 0.3 1.36% (18,478), 0.2 1.31% (26,398); one
+// level 1.61%, two 1.53%; down to 0.12 of the element instead of 0.06, contrast 0.2 gave 1.42%
+// (19,935). At high (gather N 192) 1.46% → 0.4 1.14% (18,880), 0.3 1.10% (20,877), 0.2 1.07%
+// (26,487). A uniformly finer element (0.01 for 0.02) gives 1.30% with 3× the gather.
 constexpr double kGatherNoiseFloor = 0.02;
 constexpr double kGatherMinSize = 0.06;
 
@@ -942,7 +943,10 @@ void run_bake(const BakeOptions& options) {
             }
             const bool done = solve::final_gather(mesh, welded, gathered_node, direct_only ? emitted : solution.radiosity,
                                                   solution.irradiance, direct, drawn, *gather_engine, gs, gathered);
-            if (!done) throw Interrupted();
+            if (!done) {
+                gathering.finish();
+                throw Interrupted();
+            }
             gather_points = static_cast<long>(drawn.gather_points.size());
             // Where the gathered light changes faster than the vertices follow, the elements are
             // split and only their new vertices gathered, drawing the last pass's light.
@@ -953,7 +957,12 @@ void run_bake(const BakeOptions& options) {
                 r.contrast = o.gather_contrast;
                 r.noise_floor = kGatherNoiseFloor;
                 r.min_size = kGatherMinSize * mesh_settings.element_size;
-                r.max_vertices = options.gather < 0 ? kMaxPlannedGather : std::numeric_limits<std::size_t>::max();
+                // At most half as many vertices again as the gather's (the jungle at draft with --gather 32:
+                // 82,724 vertices in 161 s, and four levels went on past 500 s), and the quality's
+                // within kMaxPlannedGather.
+                const std::size_t base = static_cast<std::size_t>(gather_points);
+                r.max_vertices = base + base / 2;
+                if (options.gather < 0) r.max_vertices = std::min(r.max_vertices, kMaxPlannedGather);
                 r.texturing = &texturing;
                 r.make_engine = [&](const mesh::Mesh& finer_drawn) {
                     return plan.occlusion.on ? observed(engine_like(choice, finer_drawn, s), o.on_shot)
@@ -967,13 +976,18 @@ void run_bake(const BakeOptions& options) {
                 }
                 solve::GatheredMesh g{mesh, solution.radiosity, solution.irradiance, direct, welded, gathered};
                 const solve::GatherRefined refined = solve::refine_gather(g, gathered_node, gs, r);
-                if (refined.cancelled) throw Interrupted();
+                if (refined.cancelled) {
+                    gathering.finish();
+                    throw Interrupted();
+                }
                 gather_points += refined.points;
                 gather_split = refined.split;
                 if (refined.capped) {
                     const std::string warning = fmt::format(
-                        "gather refinement stopped after {} of {} levels: the next would give more than {} vertices",
-                        refined.levels, o.gather_refine, kMaxPlannedGather);
+                        "gather refinement stopped at level {} of {}: more would gather at more than {} vertices "
+                        "(half again the gather's {}, and {} at most unless --gather is given); that level split "
+                        "only its elements of the highest contrast",
+                        refined.levels, o.gather_refine, r.max_vertices, base, kMaxPlannedGather);
                     if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
                     warnings.push_back(warning);
                 }

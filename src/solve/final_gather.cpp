@@ -396,7 +396,7 @@ std::vector<glm::dvec3> vertex_means(const mesh::Mesh& mesh, const output::Welde
 std::vector<bool> gather_contrasts(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
                                    const std::function<bool(std::size_t node)>& gathered,
                                    const output::VertexLight& light, double contrast, double noise_floor,
-                                   double min_size) {
+                                   double min_size, std::vector<double>* scores) {
     const auto luminance = [](const glm::dvec3& c) { return 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b; };
     double mean = 0.0;
     std::size_t count = 0;
@@ -405,6 +405,7 @@ std::vector<bool> gather_contrasts(const mesh::Mesh& mesh, const output::WeldedM
         for (const glm::dvec3& h : light.irradiance[n]) mean += luminance(h);
         count += light.irradiance[n].size();
     }
+    if (scores) scores->assign(mesh.elements.size(), 0.0);
     if (count == 0) return std::vector<bool>(mesh.elements.size(), false);
     const double floor = noise_floor * mean / double(count);
     // Per element, the least and the most of its vertices' light.
@@ -428,8 +429,10 @@ std::vector<bool> gather_contrasts(const mesh::Mesh& mesh, const output::WeldedM
         const double span = most[k] - least[k], rho = luminance(e.rho);
         // What the light changes is ρH against the element's brightest E + ρH: an emitter's own
         // light (a lamp lit unevenly by the room) or a black surface shows no difference.
-        marked[k] = rho * span > contrast * (luminance(e.emission) + rho * most[k]) && span > floor &&
-                    mesh::longest_edge(e.poly) > min_size;
+        if (!(most[k] >= least[k])) continue;  // no gathered vertex
+        const double brightest = luminance(e.emission) + rho * most[k];
+        marked[k] = rho * span > contrast * brightest && span > floor && mesh::longest_edge(e.poly) > min_size;
+        if (scores) (*scores)[k] = brightest > 0.0 ? rho * span / brightest : 0.0;
     }
     return marked;
 }
@@ -484,22 +487,49 @@ GatherRefined refine_gather(const GatheredMesh& g, const std::function<bool(std:
     if (!g.direct.empty() && !r.direct_light) throw InternalError("gather refinement: no way to light a refined mesh");
     const std::size_t node_count = g.welded.nodes.size();
     for (int level = 0; level < r.levels; ++level) {
-        const std::vector<bool> marked =
-            gather_contrasts(g.mesh, g.welded, gathered, g.light, r.contrast, r.noise_floor, r.min_size);
-        const std::size_t split = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
+        std::vector<double> scores;
+        std::vector<bool> marked =
+            gather_contrasts(g.mesh, g.welded, gathered, g.light, r.contrast, r.noise_floor, r.min_size, &scores);
+        std::size_t split = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
         if (split == 0) break;
-        mesh::Mesh finer = g.mesh;
-        std::vector<glm::dvec3> radiosity = g.radiosity, irradiance = g.irradiance;
-        std::vector<glm::dvec3> drawn_light = vertex_means(g.mesh, g.welded, gathered, g.light.radiosity, g.radiosity);
-        split_solved(finer, marked, r.texturing, {&radiosity, &drawn_light}, irradiance);
-        output::WeldedMesh finer_welded = output::weld(node_count, finer, radiosity);
-        std::size_t vertices = 0;
-        for (std::size_t n = 0; n < node_count; ++n)
-            if (gathered(n)) vertices += finer_welded.nodes[n].positions.size();
-        if (vertices > r.max_vertices) {
+        const auto gathered_vertices = [&](const output::WeldedMesh& w) {
+            std::size_t vertices = 0;
+            for (std::size_t n = 0; n < node_count; ++n)
+                if (gathered(n)) vertices += w.nodes[n].positions.size();
+            return vertices;
+        };
+        const std::size_t before = gathered_vertices(g.welded);
+        mesh::Mesh finer;
+        std::vector<glm::dvec3> radiosity, irradiance, drawn_light;
+        output::WeldedMesh finer_welded;
+        // Past max_vertices, only the elements of the highest contrast, as many as fit (the count
+        // scaled down by the vertices over, until it fits); then no further level.
+        for (;;) {
+            finer = g.mesh;
+            radiosity = g.radiosity;
+            irradiance = g.irradiance;
+            drawn_light = vertex_means(g.mesh, g.welded, gathered, g.light.radiosity, g.radiosity);
+            split_solved(finer, marked, r.texturing, {&radiosity, &drawn_light}, irradiance);
+            finer_welded = output::weld(node_count, finer, radiosity);
+            const std::size_t vertices = gathered_vertices(finer_welded);
+            if (vertices <= r.max_vertices) break;
             result.capped = true;
-            break;
+            const double room = r.max_vertices > before ? double(r.max_vertices - before) : 0.0;
+            const std::size_t keep =
+                static_cast<std::size_t>(double(split) * room / double(vertices - before) * 0.9);
+            if (keep == 0) {
+                split = 0;
+                break;
+            }
+            std::vector<std::uint32_t> order;
+            for (std::uint32_t k = 0; k < marked.size(); ++k)
+                if (marked[k]) order.push_back(k);
+            std::stable_sort(order.begin(), order.end(),
+                             [&](std::uint32_t a, std::uint32_t b) { return scores[a] > scores[b]; });
+            for (std::size_t i = keep; i < order.size(); ++i) marked[order[i]] = false;
+            split = keep;
         }
+        if (split == 0) break;
         output::VertexLight prior;
         std::vector<std::vector<char>> known;
         carry_light(g.welded, g.light, finer_welded, prior, known);
@@ -529,6 +559,7 @@ GatherRefined refine_gather(const GatheredMesh& g, const std::function<bool(std:
         g.direct = std::move(direct);
         g.welded = std::move(finer_welded);
         g.light = std::move(light);
+        if (result.capped) break;
     }
     return result;
 }

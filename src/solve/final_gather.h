@@ -114,11 +114,12 @@ std::vector<glm::dvec3> vertex_means(const mesh::Mesh& mesh, const output::Welde
 // gathered irradiance H spans, in luminance, so much that ρ times the span is more than `contrast`
 // of the element's brightest radiosity E + ρH (its own E and ρ: a lamp's uneven lighting by the room
 // hardly shows), the span is more than `noise_floor` of the mean H over all gathered vertices, and
-// whose longest edge is above `min_size`.
+// whose longest edge is above `min_size`. `scores`, when given, gets each element's ρ·span / (E + ρH)
+// (0 where the element has no gathered vertex).
 std::vector<bool> gather_contrasts(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
                                    const std::function<bool(std::size_t node)>& gathered,
                                    const output::VertexLight& light, double contrast, double noise_floor,
-                                   double min_size);
+                                   double min_size, std::vector<double>* scores = nullptr);
 
 // A gathered mesh, refined in place by refine_gather: the solved mesh, its solution (per element),
 // the punctual lights' light on it (per element; empty for none), its weld and the gather's light
@@ -137,7 +138,9 @@ struct GatherRefinement {
     double contrast = 0.5;     // see gather_contrasts
     double noise_floor = 0.02;
     double min_size = 0.0;
-    std::size_t max_vertices = ~std::size_t{0};  // gathered vertices at most: a level past it is not taken
+    // Gathered vertices at most: a level that would pass it splits only its elements of the highest
+    // contrast, as many as fit, and is the last.
+    std::size_t max_vertices = ~std::size_t{0};
     const mesh::Texturing* texturing = nullptr;  // split elements' own textures (see split_solved)
     // An engine for a drawn mesh (gather_mesh of the refined mesh, with its gather points).
     std::function<std::unique_ptr<formfactor::Engine>(const mesh::Mesh& drawn)> make_engine;
@@ -149,7 +152,7 @@ struct GatherRefined {
     int levels = 0;          // levels taken
     std::size_t split = 0;   // elements split, all levels
     long points = 0;         // vertices gathered, all levels
-    bool capped = false;     // a level was not taken for max_vertices
+    bool capped = false;     // a level was cut short (or left out) for max_vertices
     bool cancelled = false;  // settings.cancelled said so (`g` is then the last whole level's)
 };
 
