@@ -89,10 +89,25 @@ std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
                 ++count[v[k]];
             }
         }
+        // Vertices on an edge of one triangle only: where the surface ends, folds at a crease or
+        // meets another node (each side of a crease has its own vertices).
+        std::vector<char> rim(node.positions.size(), 0);
+        {
+            std::unordered_map<std::uint64_t, int> uses;
+            for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+                for (int k = 0; k < 3; ++k) {
+                    std::uint32_t a = node.indices[3 * t + k], b = node.indices[3 * t + (k + 1) % 3];
+                    if (a > b) std::swap(a, b);
+                    ++uses[(std::uint64_t(a) << 32) | b];
+                }
+            }
+            for (const auto& [edge, count_of] : uses)
+                if (count_of == 1) rim[edge >> 32] = rim[edge & 0xffffffffu] = 1;
+        }
         for (std::size_t v = 0; v < node.positions.size(); ++v) {
             mesh::GatherPoint p;
             p.position = node.positions[v];
-            if (count[v] > 0) p.position += kGatherInset * (around[v] / double(count[v]) - node.positions[v]);
+            if (count[v] > 0) p.position += (rim[v] ? kGatherRimInset : kGatherInset) * (around[v] / double(count[v]) - node.positions[v]);
             p.normal = node.normals[v];
             points.push_back(p);
         }
