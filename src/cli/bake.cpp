@@ -871,6 +871,12 @@ void run_bake(const BakeOptions& options) {
             // Every vertex of the output but the sky dome's, through the patches' cells (gather_mesh).
             const auto gathered_node = [&](std::size_t n) { return !scene.nodes[n].synthetic; };
             output::WeldedMesh welded = output::weld(scene.nodes.size(), mesh, solution.radiosity);
+            const auto gathered_vertices = [&](const output::WeldedMesh& w) {
+                std::size_t vertices = 0;
+                for (std::size_t n = 0; n < w.nodes.size(); ++n)
+                    if (gathered_node(n)) vertices += w.nodes[n].positions.size();
+                return vertices;
+            };
             // A hemicube per vertex: on real content many times the solve's shots, each costing about
             // as much (a 113k-vertex material ball at draft: the gather ran 15× the solve's time).
             // Beyond kMaxPlannedGather vertices the quality's gather is left out (a warning says
@@ -887,7 +893,7 @@ void run_bake(const BakeOptions& options) {
                 t_gather = seconds_since(t0);
                 return true;
             };
-            if (too_many(solve::gathered_vertices(welded, gathered_node), "")) return;
+            if (too_many(gathered_vertices(welded), "")) return;
             // Elements along contact lines halved once, so that the gather's vertices follow the
             // light's fall there (mesh/contact.h): on copies, kept if the gather goes ahead.
             {
@@ -898,7 +904,7 @@ void run_bake(const BakeOptions& options) {
                                                                 kContactGrading * mesh_settings.element_size, &texturing);
                 if (split > 0) {
                     output::WeldedMesh graded_welded = output::weld(scene.nodes.size(), graded, radiosity);
-                    if (too_many(solve::gathered_vertices(graded_welded, gathered_node), " (once graded along contact lines)")) return;
+                    if (too_many(gathered_vertices(graded_welded), " (once graded along contact lines)")) return;
                     mesh = std::move(graded);
                     solution.radiosity = std::move(radiosity);
                     solution.irradiance = std::move(irradiance);

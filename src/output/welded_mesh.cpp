@@ -373,8 +373,4 @@ WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vecto
     return welded;
 }
 
-std::uint64_t exact_position_hash(const glm::dvec3& p) {
-    return position_hash(PositionKey{bits_of(p.x), bits_of(p.y), bits_of(p.z), false});
-}
-
 }  // namespace hemirad::output

@@ -39,9 +39,6 @@ struct VertexLight {
     VertexValues radiosity, irradiance;
 };
 
-// A hash of a position's exact bits (−0 and +0 alike), the one the welder keys its vertices by.
-std::uint64_t exact_position_hash(const glm::dvec3& p);
-
 // Welds within one node and one side: vertices at bit-identical positions whose element
 // normals are within a crease angle (40°) become one vertex, so tessellated curves shade
 // smoothly but nothing blurs across a crease such as a box edge. Quads become two triangles.

@@ -3,11 +3,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <unordered_map>
 #include <utility>
 
-#include "core/colour.h"
 #include "core/error.h"
 #include "formfactor/analytic.h"
 #include "mesh/contact.h"
@@ -386,13 +386,6 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     return true;
 }
 
-std::size_t gathered_vertices(const output::WeldedMesh& welded, const std::function<bool(std::size_t node)>& gathered) {
-    std::size_t vertices = 0;
-    for (std::size_t n = 0; n < welded.nodes.size(); ++n)
-        if (gathered(n)) vertices += welded.nodes[n].positions.size();
-    return vertices;
-}
-
 std::vector<glm::dvec3> vertex_means(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
                                      const std::function<bool(std::size_t node)>& gathered,
                                      const output::VertexValues& values, const std::vector<glm::dvec3>& fallback) {
@@ -419,6 +412,7 @@ std::vector<bool> gather_contrasts(const mesh::Mesh& mesh, const output::WeldedM
                                    const std::function<bool(std::size_t node)>& gathered,
                                    const output::VertexLight& light, double contrast, double noise_floor,
                                    double min_size, std::vector<double>* scores) {
+    const auto luminance = [](const glm::dvec3& c) { return 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b; };
     double mean = 0.0;
     std::size_t count = 0;
     for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
@@ -475,10 +469,19 @@ void carry_light(const output::WeldedMesh& old_welded, const output::VertexLight
         const output::WeldedNode& old = old_welded.nodes[n];
         // Old vertices by position (bit for bit: splitting keeps every corner where it was).
         std::unordered_multimap<std::uint64_t, std::uint32_t> at;
-        for (std::uint32_t v = 0; v < old.positions.size(); ++v)
-            at.emplace(output::exact_position_hash(old.positions[v]), v);
+        const auto key = [](const glm::dvec3& p) {
+            std::uint64_t h = 0;
+            for (int c = 0; c < 3; ++c) {
+                const double v = p[c] + 0.0;  // −0 and +0 alike
+                std::uint64_t b = 0;
+                std::memcpy(&b, &v, sizeof b);
+                h = (h ^ b) * 0x9E3779B97F4A7C15ull + (h >> 29);
+            }
+            return h;
+        };
+        for (std::uint32_t v = 0; v < old.positions.size(); ++v) at.emplace(key(old.positions[v]), v);
         for (std::uint32_t v = 0; v < node.positions.size(); ++v) {
-            const auto [first, last] = at.equal_range(output::exact_position_hash(node.positions[v]));
+            const auto [first, last] = at.equal_range(key(node.positions[v]));
             for (auto it = first; it != last; ++it) {
                 const std::uint32_t o = it->second;
                 if (old.positions[o] != node.positions[v] || glm::dot(old.normals[o], node.normals[v]) < crease_cos)
@@ -504,9 +507,13 @@ GatherRefined refine_gather(const GatheredMesh& g, const std::function<bool(std:
             gather_contrasts(g.mesh, g.welded, gathered, g.light, r.contrast, r.noise_floor, r.min_size, &scores);
         std::size_t split = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
         if (split == 0) break;
-        const std::size_t before = gathered_vertices(g.welded, gathered);
-        // What the gather draws: each element's mean of the last light at its vertices.
-        const std::vector<glm::dvec3> last_light = vertex_means(g.mesh, g.welded, gathered, g.light.radiosity, g.radiosity);
+        const auto gathered_vertices = [&](const output::WeldedMesh& w) {
+            std::size_t vertices = 0;
+            for (std::size_t n = 0; n < node_count; ++n)
+                if (gathered(n)) vertices += w.nodes[n].positions.size();
+            return vertices;
+        };
+        const std::size_t before = gathered_vertices(g.welded);
         mesh::Mesh finer;
         std::vector<glm::dvec3> radiosity, irradiance, drawn_light;
         output::WeldedMesh finer_welded;
@@ -516,10 +523,10 @@ GatherRefined refine_gather(const GatheredMesh& g, const std::function<bool(std:
             finer = g.mesh;
             radiosity = g.radiosity;
             irradiance = g.irradiance;
-            drawn_light = last_light;
+            drawn_light = vertex_means(g.mesh, g.welded, gathered, g.light.radiosity, g.radiosity);
             split_solved(finer, marked, r.texturing, {&radiosity, &drawn_light}, irradiance);
             finer_welded = output::weld(node_count, finer, radiosity);
-            const std::size_t vertices = gathered_vertices(finer_welded, gathered);
+            const std::size_t vertices = gathered_vertices(finer_welded);
             if (vertices <= r.max_vertices) break;
             result.capped = true;
             const double room = r.max_vertices > before ? double(r.max_vertices - before) : 0.0;

@@ -111,9 +111,6 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
                   const mesh::Mesh& drawn, formfactor::Engine& engine, const GatherSettings& settings,
                   output::VertexLight& out);
 
-// The vertices of `welded` in the nodes `gathered` selects: the points a gather shoots from.
-std::size_t gathered_vertices(const output::WeldedMesh& welded, const std::function<bool(std::size_t node)>& gathered);
-
 // Per element of `mesh`: the area-weighted mean over its triangles in `welded` (weld(…, mesh, …)) of
 // `values` at their vertices, for the nodes `gathered` selects; `fallback`'s value elsewhere.
 std::vector<glm::dvec3> vertex_means(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
