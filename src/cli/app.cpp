@@ -29,6 +29,7 @@
 #include "cli/bench.h"
 #include "cli/engine_select.h"
 #include "core/error.h"
+#include "dist/dist.h"
 #include "formfactor/verify.h"
 #include "scene/content_scenes.h"
 #include "scene/writer.h"
@@ -102,7 +103,9 @@ constexpr double kLargestSize = 1e30;  // patch and element sizes, in scene unit
 void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("scene", o.scene, "glTF 2.0 scene (.gltf or .glb)")->required();
     bake.add_option("-o,--output", o.output, "output directory (created if missing)")->capture_default_str();
-    bake.add_option("--device", o.device, "form-factor engine: auto|ref|opencl|opencl:P.D (see hemirad devices)")
+    bake.add_option("--device", o.device,
+                    "form-factor engine: auto|all|ref|opencl|opencl:P.D, or a list (opencl:0.0,opencl:0.1,ref) "
+                    "whose devices share every batch (see hemirad devices; under mpirun, each rank's own)")
         ->capture_default_str();
     std::string presets;
     std::vector<std::string> names;
@@ -290,9 +293,26 @@ void write_generated_scene(const SceneWriteCommand& c, std::ostream& out) {
                        s->nodes.size(), s->materials.size(), c.output);
 }
 
+// A worker rank's loop: its engines are made as a bake on rank 0 would make them on one device
+// (choose_engine, then engine_like for the next meshes), never verifying.
+int serve_rank(const std::string& device) {
+    std::shared_ptr<EngineChoice> choice;
+    const auto factory = [&](const mesh::Mesh& mesh, const formfactor::Settings& settings) {
+        if (!choice) {
+            choice = std::make_shared<EngineChoice>(choose_engine(device, false, 1, mesh, settings));
+            if (!choice->warning.empty())
+                std::cerr << "hemirad: rank " << dist::rank() << ": warning: " << choice->warning << "\n";
+            return std::move(choice->engine);
+        }
+        return engine_like(*choice, mesh, settings);
+    };
+    return dist::serve(factory, [](const std::exception& e) { return device_failure(e); });
+}
+
 }  // namespace
 
 int run(int argc, char** argv) {
+    const dist::Session mpi(argc, argv);
     CLI::App app{"hemirad: radiosity baker with a hemicube form-factor engine"};
     app.set_version_flag("--version", HEMIRAD_VERSION);
     app.require_subcommand(1);
@@ -329,6 +349,11 @@ int run(int argc, char** argv) {
         std::cerr << "hemirad: " << printable(e.what()) << " (see hemirad --help)\n";
         return 2;
     }
+
+    bake_options.batch_given = bake->get_option("--batch")->count() > 0;
+    // Under mpirun, every rank but 0 serves rank 0's shots (dist.h) with its own --device; rank 0
+    // runs the command alone.
+    if (dist::rank() > 0) return *bake || *bench_app ? serve_rank(bake_options.device) : 0;
 
     try {
         if (*devices) {

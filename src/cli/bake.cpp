@@ -27,6 +27,7 @@
 #include "cli/budget.h"
 #include "cli/checkpoint.h"
 #include "cli/engine_select.h"
+#include "dist/dist.h"
 #include "core/durable.h"
 #include "core/error.h"
 #include "core/memory.h"
@@ -544,6 +545,10 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
 
 // A fixed cap stopped scenes of many patches before one round: city:1M at draft (364,391 patches)
 // converges after 150,795 passes, foliage:100k (95,553) after more than 100,000.
+int planned_batch(std::size_t members) {
+    return members <= 1 ? 1 : static_cast<int>(std::min<std::size_t>(256, kShotsPerMember * members));
+}
+
 long max_passes_for(const BakeOptions& o, std::size_t patches) {
     return o.max_passes >= 0 ? o.max_passes : std::max<long>(100000, 2 * static_cast<long>(patches));
 }
@@ -555,6 +560,8 @@ void run_bake(const BakeOptions& options) {
     if (o.hemicube == 0) o.hemicube = quality.hemicube;
     if (o.threshold < 0.0) o.threshold = quality.threshold;
     if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
+    // Several devices or ranks share each batch: the top-K shooters grow with them.
+    if (!o.batch_given) o.batch = planned_batch(device_count(o.device) + EngineChoice::remote_ranks());
     if (o.contrast < 0.0) o.contrast = quality.contrast;
     if (o.gather < 0) o.gather = quality.gather;
     if (o.gather_passes <= 0) o.gather_passes = quality.gather_passes;
@@ -785,7 +792,12 @@ void run_bake(const BakeOptions& options) {
 
     // The solve, then adaptive refinement, on the engines `choice` makes.
     const auto solve_and_refine = [&] {
-        if (!o.quiet) std::cerr << fmt::format("hemirad: form factors on {} ({}), {} solver\n", choice.id, choice.name, solver_name);
+        if (!o.quiet)
+            std::cerr << fmt::format("hemirad: form factors on {} ({}){}, {} solver\n", choice.id, choice.name,
+                                     EngineChoice::remote_ranks() > 0
+                                         ? fmt::format(" and {} more MPI ranks", EngineChoice::remote_ranks())
+                                         : std::string(),
+                                     solver_name);
         std::unique_ptr<formfactor::Engine> base_engine =
             plan.occlusion.on
                 ? observed(std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice.engine)), o.on_shot)
@@ -1016,6 +1028,14 @@ void run_bake(const BakeOptions& options) {
             choice = choose_engine("ref", false, o.verify_every, mesh, ff_settings);
         }
     }
+    if (choice.stats)
+        for (const formfactor::ShardStats::Member& m : choice.stats->members)
+            if (!m.dropped.empty()) {
+                const std::string warning = fmt::format("{} failed and left the bake: {}; its shots were redone by the others",
+                                                        m.id, m.dropped);
+                if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
+                warnings.push_back(warning);
+            }
     if (const EngineChoice::Shrinks& shrinks = *choice.shrinks; shrinks.count > 0) {
         const std::string warning = fmt::format(
             "{} ran out of memory {} times ({}): its batches were cut to as few as {} shots, with the same results",
@@ -1055,6 +1075,16 @@ void run_bake(const BakeOptions& options) {
     report["scene"] = o.scene;
     report["device"] = {{"backend", choice.backend}, {"platform", choice.platform}, {"name", choice.name}, {"id", choice.id}};
     if (!fallback.is_null()) report["device"]["fallback"] = fallback;
+    if (choice.stats && choice.stats->members.size() > 1) {
+        ordered_json members = ordered_json::array();
+        for (const formfactor::ShardStats::Member& m : choice.stats->members) {
+            ordered_json member = {{"id", m.id}, {"shots", m.shots}, {"chunks", m.chunks}, {"seconds", m.seconds}};
+            if (!m.dropped.empty()) member["dropped"] = m.dropped;
+            members.push_back(member);
+        }
+        report["device"]["members"] = members;
+    }
+    report["device"]["ranks"] = dist::size();
     report["settings"] = {
         {"quality", o.quality},
         {"hemicube", o.hemicube},

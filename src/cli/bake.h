@@ -32,6 +32,7 @@ struct BakeOptions {
     double threshold = -1.0;      // < 0: from the quality
     long max_passes = -1;         // < 0: kDefaultMaxPasses or twice the patches, whichever is more (max_passes_for)
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
+    bool batch_given = false;     // --batch was given; else several devices or ranks raise it (planned_batch)
     int gather = -1;              // final gather hemicube N (0: none); < 0: from the quality
     int gather_passes = 0;        // final gathers, each from the last one's light; 0: from the quality
     int gather_refine = -1;       // gather refinement levels (solve::gather_contrasts); < 0: from the quality
@@ -77,6 +78,13 @@ struct Interrupted : std::runtime_error {
 // Runs a bake. Throws InputError (exit 2), Interrupted, or other exceptions (exit 1). On any
 // throw, whatever this run wrote under the output directory has been removed.
 void run_bake(const BakeOptions& options);
+
+// The batch a bake plans when --batch is not given: 1 on one device, else kShotsPerMember shots
+// for each device and rank that shares it (at most 256), so that every member takes several
+// chunks of each batch (formfactor::ShardedEngine). The rows do not depend on it; the order of
+// shooting does, so a bake matches another with the same batch byte for byte.
+inline constexpr std::size_t kShotsPerMember = 16;
+int planned_batch(std::size_t members);
 
 // The progressive solver's cap on passes for a mesh of `patches` patches: options.max_passes, or
 // where it is < 0 (not given), 100,000 or twice the patches, whichever is more.

@@ -263,12 +263,18 @@ OpenCLFault parse_fault(const std::string& text) {
         const std::size_t colon = item.find(':');
         const std::string name = item.substr(0, colon),
                           count = colon == std::string::npos ? "" : item.substr(colon + 1);
+        if (name == "device") {
+            if (count.rfind("opencl:", 0) != 0)
+                throw std::invalid_argument(fmt::format("'{}': expected device:opencl:P.D", item));
+            fault.device = count;
+            continue;
+        }
         std::size_t* const field = name == "oom-above"     ? &fault.oom_above
                                    : name == "fail-after"  ? &fault.fail_after
                                    : name == "wrong-after" ? &fault.wrong_after
                                                            : nullptr;
         if (!field || count.empty() || count.size() > 9 || count.find_first_not_of("0123456789") != std::string::npos)
-            throw std::invalid_argument(fmt::format("'{}': expected oom-above:K, fail-after:K or wrong-after:K", item));
+            throw std::invalid_argument(fmt::format("'{}': expected oom-above:K, fail-after:K, wrong-after:K or device:opencl:P.D", item));
         *field = std::stoul(count);
     }
     return fault;

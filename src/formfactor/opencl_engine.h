@@ -57,9 +57,11 @@ struct OpenCLFault {
     std::size_t oom_above = kNever;    // buffers for more shots than this fail as out of memory
     std::size_t fail_after = kNever;   // launches after this many fail as the device lost
     std::size_t wrong_after = kNever;  // launches after this many return a wrong form factor
+    std::string device;                // only the engines on this device (opencl:P.D); empty: every device
 };
 
-// HEMIRAD_FAULT's value: comma-separated oom-above:K, fail-after:K, wrong-after:K (K >= 0).
+// HEMIRAD_FAULT's value: comma-separated oom-above:K, fail-after:K, wrong-after:K (K >= 0) and
+// device:opencl:P.D (the faults hit that device alone, as one of several sharing a bake).
 // Throws std::invalid_argument for anything else; an empty text is no fault.
 OpenCLFault parse_fault(const std::string& text);
 
