@@ -262,8 +262,13 @@ void add_bench_options(CLI::App& cmd, BenchCommand& c) {
     cmd.add_flag("--effects", c.effects,
                  "instead of throughput: bake the bundled scenes with each effect as planned and forced the other "
                  "way, and report the time saved and what changed (run from the repository root)");
+    cmd.add_flag("--scaling", c.scaling,
+                 "instead of throughput: shots/s and bake time against MPI ranks (run under mpirun) and devices "
+                 "(--device all or a list), on one scene (default city:100k; --hemicube, --shots, --batch, --repeats "
+                 "apply)");
     cmd.add_flag("--quick", c.quick, "with --accuracy or --effects: a smoke test of a few coarse runs (seconds)");
-    cmd.add_option("--device", c.device, "with --accuracy or --effects: auto, ref or opencl:P.D")
+    cmd.add_option("--device", c.device,
+                   "with --accuracy, --effects or --scaling: auto, ref or opencl:P.D (--scaling: also all or a list)")
         ->capture_default_str();
     cmd.add_option("--json", c.json, "also write the results here (JSON)");
 }
@@ -339,21 +344,31 @@ int run(int argc, char** argv) {
 
     try {
         app.parse(argc, argv);
-    } catch (const CLI::CallForHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::CallForAllHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::CallForVersion& e) {
-        return app.exit(e);
     } catch (const CLI::ParseError& e) {
+        // Under mpirun rank 0 alone prints help, versions and usage errors.
+        if (dist::rank() > 0) return e.get_exit_code() == 0 ? 0 : 2;
+        if (dynamic_cast<const CLI::CallForHelp*>(&e) || dynamic_cast<const CLI::CallForAllHelp*>(&e) ||
+            dynamic_cast<const CLI::CallForVersion*>(&e))
+            return app.exit(e);
         std::cerr << "hemirad: " << printable(e.what()) << " (see hemirad --help)\n";
         return 2;
     }
 
     bake_options.batch_given = bake->get_option("--batch")->count() > 0;
+    if (bench_command.scaling) {  // the throughput options that were given, over the scaling bench's defaults
+        ScalingOptions& sc = bench_command.scaling_options;
+        const bench::ThroughputOptions& t = bench_command.throughput;
+        sc.device = bench_command.device;
+        if (!t.scenes.empty()) sc.scene = t.scenes.front();
+        if (bench_app->get_option("--hemicube")->count() > 0) sc.hemicube = t.hemicubes.front();
+        if (bench_app->get_option("--shots")->count() > 0) sc.shots = t.shots;
+        if (bench_app->get_option("--batch")->count() > 0) sc.batch = t.batch;
+        if (bench_app->get_option("--repeats")->count() > 0) sc.repeats = t.repeats;
+        sc.seed = t.seed;
+    }
     // Under mpirun, every rank but 0 serves rank 0's shots (dist.h) with its own --device; rank 0
     // runs the command alone.
-    if (dist::rank() > 0) return *bake || *bench_app ? serve_rank(bake_options.device) : 0;
+    if (dist::rank() > 0) return serve_rank(*bake ? bake_options.device : bench_command.device);
 
     try {
         if (*devices) {

@@ -561,7 +561,11 @@ void run_bake(const BakeOptions& options) {
     if (o.threshold < 0.0) o.threshold = quality.threshold;
     if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
     // Several devices or ranks share each batch: the top-K shooters grow with them.
-    if (!o.batch_given) o.batch = planned_batch(device_count(o.device) + EngineChoice::remote_ranks());
+    // A resumed bake keeps its checkpoint's batch, on any number of them.
+    if (!o.batch_given) {
+        const std::optional<int> resumed = o.resume.empty() ? std::nullopt : checkpoint_batch(o.resume);
+        o.batch = resumed ? *resumed : planned_batch(device_count(o.device) + EngineChoice::remote_ranks());
+    }
     if (o.contrast < 0.0) o.contrast = quality.contrast;
     if (o.gather < 0) o.gather = quality.gather;
     if (o.gather_passes <= 0) o.gather_passes = quality.gather_passes;

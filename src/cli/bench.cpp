@@ -55,7 +55,8 @@ private:
 
 void run_bench(const BenchCommand& command, std::ostream& log) {
     JsonFile json(command.json);
-    if (command.accuracy && command.effects) throw InputError("bench: --accuracy and --effects are separate runs");
+    if (command.accuracy + command.effects + command.scaling > 1)
+        throw InputError("bench: --accuracy, --effects and --scaling are separate runs");
     if (command.accuracy && !command.throughput.scenes.empty())
         throw InputError("bench --accuracy: takes no scenes (it builds its own)");
     if (command.effects && !command.throughput.scenes.empty())
@@ -71,6 +72,8 @@ void run_bench(const BenchCommand& command, std::ostream& log) {
         const ImageReference reference = load_image_reference(image.reference_dir);
         doc = bench::run_accuracy({command.device, command.quick}, log);
         doc["accuracy"]["cornell"] = run_image_accuracy(image, reference, log);
+    } else if (command.scaling) {
+        doc = run_scaling_bench(command.scaling_options, log);
     } else if (command.effects) {
         EffectsBenchOptions options;
         options.device = command.device;

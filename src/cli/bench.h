@@ -8,6 +8,7 @@
 
 #include "bench/accuracy.h"
 #include "bench/throughput.h"
+#include "cli/bench_scaling.h"
 
 namespace hemirad::cli {
 
@@ -15,6 +16,8 @@ struct BenchCommand {
     bench::ThroughputOptions throughput;
     bool accuracy = false;        // the accuracy-against-time sweep instead of throughput
     bool effects = false;         // each effect as planned against forced, instead of throughput
+    bool scaling = false;         // throughput and bake time against ranks and devices (bench_scaling.h)
+    ScalingOptions scaling_options;
     bool quick = false;           // with accuracy or effects: a smaller sweep
     std::string device = "auto";  // with accuracy or effects: the engine of every run
     std::string json;             // also write the JSON document here (atomically)

@@ -10,6 +10,8 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
+#include <optional>
+#include <regex>
 #include <fstream>
 #include <sstream>
 #include <system_error>
@@ -172,6 +174,25 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
     }
     // The rename too, so that after a power cut the file is this checkpoint or the one before.
     sync_to_disk(fs::absolute(file, ec).parent_path());
+}
+
+std::optional<int> checkpoint_batch(const fs::path& file) {
+    try {
+        const RegularFile in(file, file.string());
+        std::string bytes(static_cast<std::size_t>(in.size()), '\0');
+        in.read_exactly(0, bytes.size(), bytes.data());
+        if (bytes.compare(0, sizeof kMagic - 1, kMagic) != 0) return std::nullopt;
+        Cursor s(bytes, sizeof kMagic - 1);
+        std::uint32_t format = 0;
+        std::string saved;
+        if (!s.read(format) || format != kFormat || !s.read_string(saved)) return std::nullopt;
+        static const std::regex kBatch(R"(, batch (\d{1,3}), )");
+        std::smatch m;
+        if (!std::regex_search(saved, m, kBatch)) return std::nullopt;
+        return std::stoi(m[1]);
+    } catch (const std::exception&) {
+        return std::nullopt;  // read_checkpoint says what is wrong with it
+    }
 }
 
 std::string read_checkpoint(const fs::path& file, const std::string& fingerprint) {

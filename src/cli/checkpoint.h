@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include "mesh/mesh.h"
@@ -35,6 +36,11 @@ void write_checkpoint(const std::filesystem::path& file, const std::string& fing
 // InputError (exit 2, naming the file) when it cannot be read, is not a hemirad checkpoint, is
 // cut short, or belongs to another scene or settings.
 std::string read_checkpoint(const std::filesystem::path& file, const std::string& fingerprint);
+
+// The batch a progressive bake's checkpoint was made with (its fingerprint says), or nullopt for
+// a matrix bake's or a file that is no readable checkpoint: a resumed bake that is not given
+// --batch takes it, so that it may resume with another number of devices or ranks.
+std::optional<int> checkpoint_batch(const std::filesystem::path& file);
 
 // Loads a state from read_checkpoint into the solver; InputError naming `file` if it is damaged.
 void restore(solve::Resumable& solver, const std::string& state, const std::filesystem::path& file);

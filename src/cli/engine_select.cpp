@@ -101,13 +101,14 @@ bool dropped(const EngineChoice& choice, const std::string& id) {
     return false;
 }
 
-// The devices' engines and the worker ranks' as one engine.
+// The devices' engines and the worker ranks' (`ranks` of them, or all when < 0) as one engine.
 std::unique_ptr<formfactor::Engine> assemble(const EngineChoice& choice, std::vector<formfactor::ShardedEngine::Member> members,
-                                             const mesh::Mesh& mesh, const formfactor::Settings& settings) {
-    for (dist::RemoteMember& r : dist::remote_engines(mesh, settings))
-        members.push_back({std::move(r.engine), r.id, choice.automatic});
+                                             const mesh::Mesh& mesh, const formfactor::Settings& settings, int ranks = -1) {
+    if (ranks != 0)
+        for (dist::RemoteMember& r : dist::remote_engines(mesh, settings, std::max(ranks, 0)))
+            members.push_back({std::move(r.engine), r.id, choice.automatic});
     // One member of a bake of several (the others dropped out) still counts its shots.
-    if (members.size() == 1 && choice.members() == 1) return std::move(members.front().engine);
+    if (members.size() == 1 && (choice.members() == 1 || ranks >= 0)) return std::move(members.front().engine);
     return std::make_unique<formfactor::ShardedEngine>(
         std::move(members), [](const std::exception& e) { return device_failure(e); }, choice.stats);
 }
@@ -256,6 +257,14 @@ std::unique_ptr<formfactor::Engine> engine_like(const EngineChoice& choice, cons
                                                 const formfactor::Settings& settings) {
     if (choice.devices.empty()) throw InternalError("engine_like: the choice holds no device");
     return assemble(choice, device_engines(choice, mesh, settings), mesh, settings);
+}
+
+std::unique_ptr<formfactor::Engine> engine_on(const EngineChoice& choice, std::size_t devices, int ranks,
+                                              const mesh::Mesh& mesh, const formfactor::Settings& settings) {
+    std::vector<formfactor::ShardedEngine::Member> members = device_engines(choice, mesh, settings);
+    if (devices < 1 || devices > members.size()) throw InternalError("engine_on: no such number of devices");
+    members.resize(devices);
+    return assemble(choice, std::move(members), mesh, settings, ranks);
 }
 
 }  // namespace hemirad::cli

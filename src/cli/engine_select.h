@@ -74,4 +74,9 @@ std::string device_failure(const std::exception& e);
 std::unique_ptr<formfactor::Engine> engine_like(const EngineChoice& choice, const mesh::Mesh& mesh,
                                                 const formfactor::Settings& settings);
 
+// For the scaling benchmark: an engine on the first `devices` of `choice`'s devices and the first
+// `ranks` worker ranks (0: none); a ShardedEngine when that is more than one member.
+std::unique_ptr<formfactor::Engine> engine_on(const EngineChoice& choice, std::size_t devices, int ranks,
+                                              const mesh::Mesh& mesh, const formfactor::Settings& settings);
+
 }  // namespace hemirad::cli

@@ -69,11 +69,23 @@ void ShardedEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vect
     out.resize(shots.size());
     if (shots.empty()) return;
     const std::size_t n = shots.size();
-    const std::size_t pieces = live() == 1 ? 1 : live() * kChunksPerMember;
-    const std::size_t chunk = std::max<std::size_t>(1, (n + pieces - 1) / pieces);
-    std::deque<std::pair<std::size_t, std::size_t>> queue;  // [first, end) of each chunk not yet taken
-    for (std::size_t first = 0; first < n; first += chunk) queue.emplace_back(first, std::min(n, first + chunk));
-
+    // Guided self-scheduling: each take is a share of what is left, so that launches start large
+    // (a GPU wants many shots at once) and end small (the members finish together).
+    std::size_t next = 0;                                    // shots [next, n) not yet taken
+    std::deque<std::pair<std::size_t, std::size_t>> queue;   // [first, end) given back by a member that dropped out
+    const auto take = [&](std::size_t live_members) -> std::pair<std::size_t, std::size_t> {
+        if (!queue.empty()) {
+            const auto range = queue.front();
+            queue.pop_front();
+            return range;
+        }
+        const std::size_t left = n - next;
+        const std::size_t size =
+            live_members <= 1 ? left : std::max<std::size_t>(1, (left + kShareOfRest * live_members - 1) / (kShareOfRest * live_members));
+        const std::pair<std::size_t, std::size_t> range{next, next + size};
+        next += size;
+        return range;
+    };
     std::mutex mutex;  // guards queue, fatal and the slots' `live`
     std::exception_ptr fatal;
     const auto work = [&](std::size_t slot) {
@@ -83,9 +95,8 @@ void ShardedEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vect
             std::pair<std::size_t, std::size_t> range;
             {
                 std::lock_guard lock(mutex);
-                if (fatal || queue.empty() || !slots_[slot].live) return;
-                range = queue.front();
-                queue.pop_front();
+                if (fatal || (queue.empty() && next == n) || !slots_[slot].live) return;
+                range = take(live());
             }
             try {
                 part.assign(shots.begin() + static_cast<std::ptrdiff_t>(range.first),
@@ -118,7 +129,7 @@ void ShardedEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vect
         }
     };
     // Rounds: a member that drops out after the others have finished leaves its chunk for the next.
-    while (!queue.empty() && !fatal) {
+    while ((!queue.empty() || next < n) && !fatal) {
         std::vector<std::size_t> live_slots;
         for (std::size_t s = 0; s < slots_.size(); ++s)
             if (slots_[s].live) live_slots.push_back(s);

@@ -1,6 +1,6 @@
-// ShardedEngine: one engine over several, each on its own device (or MPI rank: dist/remote.h),
+// ShardedEngine: one engine over several, each on its own device (or MPI rank: dist/dist.h),
 // sharing every batch. A batch is cut into chunks that the members take as they finish their
-// last, one host thread each (dynamic scheduling: a fast GPU takes more chunks than a CPU). A
+// last, one host thread each (dynamic, guided scheduling: a fast GPU takes more than a CPU). A
 // shot's row depends on the shot alone, never on who computed it or what else was in its batch
 // (every engine gives the reference's bits), so the rows are those of any one member.
 //
@@ -55,9 +55,10 @@ public:
 
     std::size_t members() const { return slots_.size(); }
     std::size_t live() const;
-    // Chunks per member a batch is cut into (at least one shot each): enough for a fast member to
-    // take more than a slow one, few enough that each launch still holds many shots.
-    static constexpr std::size_t kChunksPerMember = 4;
+    // A member takes 1 / (kShareOfRest × live members) of the shots left (at least one): the
+    // first chunks are large, the last single shots, so that a fast member takes more and all
+    // finish together.
+    static constexpr std::size_t kShareOfRest = 2;
 
 private:
     struct Slot {
