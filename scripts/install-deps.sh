@@ -14,6 +14,8 @@ packages=(
   catch2 libcli11-dev libfmt-dev
   # The ray-casting peer engine of bench/ (optional in CMake, installed here so CI builds it).
   libembree-dev
+  # Bakes across MPI ranks (optional in CMake, installed here so CI builds and tests it).
+  libopenmpi-dev openmpi-bin
   # tests/fuzz: the libFuzzer targets of the loader and the bake (clang, and the runtime of
   # libFuzzer and the sanitizers, which clang only recommends).
   clang libclang-rt-dev

@@ -1,0 +1,107 @@
+// Bakes whose batches several devices share (--device all, a list): PoCL shows two devices when
+// POCL_DEVICES names two, so two CPU devices stand in for a machine's GPUs. The output is byte for
+// byte that of one device with the same batch; a failing automatic device drops out.
+#include <catch2/catch.hpp>
+
+#include "cl/runtime.h"
+#include "cli_support.h"
+
+using namespace hemirad;
+using namespace hemirad::test;
+
+namespace {
+
+// Two PoCL devices (their ids opencl:0.0 and opencl:0.1 where PoCL is the only platform).
+const std::string kTwoDevices = "POCL_DEVICES='pthread pthread' ";
+
+bool pocl_only() {
+    const std::vector<ocl::DeviceInfo> devices = ocl::list_devices();
+    return !devices.empty() && devices.front().platform_name.find("Portable Computing Language") != std::string::npos &&
+           devices.back().platform == 0;
+}
+
+}  // namespace
+
+TEST_CASE("multi-device: two devices, and the reference with one, bake byte for byte as one device", "[cli][multi]") {
+    if (!pocl_only()) {
+        WARN("not PoCL alone: skipped");
+        return;
+    }
+    const TempDir dir;
+    const std::vector<std::string> args = concat(kFast, {"--solver", "progressive"});
+    const fs::path one = dir / "one", all = dir / "all", mixed = dir / "mixed", planned = dir / "planned";
+    bake_ok(dir, kClosedRoom, one, concat(args, {"--device", "opencl:0.0", "--batch", "32"}));
+
+    // --device all without --batch plans 16 shots per device: the batch of `one`.
+    RunResult r = run_hemirad(dir, bake_args(kClosedRoom, all, concat(args, {"--device", "all"})), kTwoDevices);
+    INFO("stderr: " << r.err);
+    REQUIRE(r.code == 0);
+    const json report = read_json(all / "report.json");
+    CHECK(report["settings"]["batch"] == 32);
+    CHECK(report["device"]["id"] == "opencl:0.0,opencl:0.1");
+    REQUIRE(report["device"]["members"].size() == 2);
+    long shots = 0;
+    for (const json& m : report["device"]["members"]) {
+        CHECK(m["shots"].get<long>() > 0);
+        CHECK_FALSE(m.contains("dropped"));
+        shots += m["shots"].get<long>();
+    }
+    CHECK(shots > report["passes"].get<long>());  // the solve's shots and the gather's
+    CHECK(read_text(all / "baked.bin") == read_text(one / "baked.bin"));
+
+    // The scalar reference beside a device: the reference's bits, so the same bytes.
+    const json m = bake_ok(dir, kClosedRoom, mixed, concat(args, {"--device", "ref,opencl:0.0", "--batch", "32"}));
+    CHECK(m["device"]["backend"] == "ref+opencl");
+    CHECK(read_text(mixed / "baked.bin") == read_text(one / "baked.bin"));
+
+    // One device at the planned batch of one: a batch of 1, other bytes (the order of shooting).
+    const json p = bake_ok(dir, kClosedRoom, planned, concat(args, {"--device", "opencl:0.0"}));
+    CHECK(p["settings"]["batch"] == 1);
+    CHECK_FALSE(p["device"].contains("members"));
+}
+
+TEST_CASE("multi-device: a failing device of `all` drops out and its shots are redone; a named one stops the bake",
+          "[cli][multi][faults]") {
+    if (!pocl_only()) {
+        WARN("not PoCL alone: skipped");
+        return;
+    }
+    const TempDir dir;
+    const std::vector<std::string> args = concat(kFast, {"--solver", "progressive", "--batch", "16"});
+    const fs::path one = dir / "one", dropped = dir / "dropped", named = dir / "named";
+    bake_ok(dir, kClosedRoom, one, concat(args, {"--device", "opencl:0.0"}));
+    const std::string fault = kTwoDevices + "HEMIRAD_FAULT=fail-after:2,device:opencl:0.1 ";
+    RunResult r = run_hemirad(dir, bake_args(kClosedRoom, dropped, concat(args, {"--device", "all"})), fault);
+    INFO("stderr: " << r.err);
+    REQUIRE(r.code == 0);
+    const json report = read_json(dropped / "report.json");
+    CHECK(report["warnings"].dump().find("opencl:0.1 failed and left the bake") != std::string::npos);
+    REQUIRE(report["device"]["members"].size() == 2);
+    CHECK(report["device"]["members"][1]["dropped"].get<std::string>().find("CL_INVALID_COMMAND_QUEUE") != std::string::npos);
+    CHECK_FALSE(report["device"]["members"][0].contains("dropped"));
+    CHECK_FALSE(report["device"].contains("fallback"));
+    CHECK(read_text(dropped / "baked.bin") == read_text(one / "baked.bin"));
+
+    r = run_hemirad(dir, bake_args(kClosedRoom, named, concat(args, {"--device", "opencl:0.0,opencl:0.1"})), fault);
+    CHECK(r.code == 1);
+    CHECK(r.err.find("hemirad: device failed: ") != std::string::npos);
+    CHECK_FALSE(fs::exists(named));
+}
+
+TEST_CASE("multi-device: malformed device lists and faults are one line and exit 2", "[cli][multi]") {
+    const TempDir dir;
+    const auto refused = [&](const std::vector<std::string>& extra, const std::string& env, const std::string& says) {
+        const RunResult r = run_hemirad(dir, bake_args(kClosedRoom, dir / "never", concat(kFast, extra)), env);
+        INFO("stderr: " << r.err);
+        CHECK(r.code == 2);
+        CHECK(r.err.find(says) != std::string::npos);
+        CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+        CHECK_FALSE(fs::exists(dir / "never"));
+    };
+    refused({"--device", "ref,ref"}, "", "names ref twice");
+    refused({"--device", "auto,ref"}, "", "a list holds ref, opencl and opencl:P.D, not 'auto'");
+    refused({"--device", "ref,opencl:7.7"}, "", "no such OpenCL device");
+    refused({"--device", "ref,"}, "", "not ''");
+    refused({"--device", "ref"}, "HEMIRAD_FAULT=device:gpu0 ", "expected device:opencl:P.D");
+    if (!ocl::list_devices().empty()) refused({"--device", "all", "--verify"}, kTwoDevices, "--verify checks one OpenCL device");
+}
