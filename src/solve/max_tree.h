@@ -24,10 +24,15 @@ public:
     std::size_t size() const { return keys_.size(); }
     double key(std::size_t i) const { return keys_[i]; }
 
+    // Climbs only while the change can matter: where a node's winner stays what it was and is not
+    // i, no key above it changed (most of a shot's touched patches stop a level or two up).
     void set(std::size_t i, double key) {
         keys_[i] = key;
-        for (std::size_t node = (leaves_ + i) / 2; node >= 1; node /= 2)
-            tree_[node] = winner(tree_[2 * node], tree_[2 * node + 1]);
+        for (std::size_t node = (leaves_ + i) / 2; node >= 1; node /= 2) {
+            const std::uint32_t was = tree_[node], now = winner(tree_[2 * node], tree_[2 * node + 1]);
+            if (now == was && now != i) return;
+            tree_[node] = now;
+        }
     }
 
     // The index of the largest key, the lowest such index on ties; size() when empty.
