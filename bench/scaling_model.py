@@ -110,7 +110,7 @@ def main():
             for speedup, alpha in ((args.gpu_speedup / 3, 0.45), (args.gpu_speedup, 1.0), (args.gpu_speedup * 3, 0.45)):
                 rows = predict(inputs, speedup, solver)
                 ax.plot([r["gpus"] for r in rows], [100 * r["efficiency"] for r in rows], style, alpha=alpha,
-                        label=f"{solver}, GPU {speedup:g}x one core")
+                        label=f"{solver}, GPU {speedup:.0f}x one core")
         measured = [r for r in doc["runs"] if r["devices"] == 1]
         ax.plot([r["ranks"] for r in measured], [100 * r["efficiency"] for r in measured], "k*", markersize=12,
                 label="measured (CPU ranks, this machine)")

@@ -430,6 +430,9 @@ void list_devices(std::ostream& out, bool json) {
         out << fmt::format("{:<12} {} | {} | {} | {} compute units | fp64 {}\n", d.id(), d.name, d.platform_name,
                            d.type, d.compute_units, d.fp64 ? "yes" : "no");
     if (devices.empty()) out << "(no OpenCL platform or device found)\n";
+    out << "all          every OpenCL device above, sharing each batch (as does a list: opencl:0.0,opencl:0.1)\n";
+    out << (dist::built_with_mpi() ? "MPI          built in: under mpirun or srun, ranks share each batch too\n"
+                                   : "MPI          not built in (install libopenmpi-dev and build again)\n");
 }
 
 namespace {
