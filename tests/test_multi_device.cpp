@@ -60,7 +60,7 @@ TEST_CASE("multi-device: two devices, and the reference with one, bake byte for 
     CHECK_FALSE(p["device"].contains("members"));
 }
 
-TEST_CASE("multi-device: a failing device of `all` drops out and its shots are redone; a named one stops the bake",
+TEST_CASE("multi-device: a failing device of `all` drops out and its shots are redone, and a named one stops the bake",
           "[cli][multi][faults]") {
     if (!pocl_only()) {
         WARN("not PoCL alone: skipped");
