@@ -59,7 +59,9 @@ resume)
   job=$!
   for _ in $(seq 600); do [ -e ck ] && break; sleep 0.02; done
   [ -e ck ] || fail "no checkpoint appeared"
+  # Rank 1 of this job only: a process of this test's directory (other tests may run beside it).
   for p in $(pgrep -f "$exe bake"); do
+    [ "$(readlink "/proc/$p/cwd" 2> /dev/null)" = "$PWD" ] || continue
     if tr '\0' '\n' < "/proc/$p/environ" 2> /dev/null | grep -qx "OMPI_COMM_WORLD_RANK=1"; then kill -KILL "$p"; fi
   done
   wait "$job"
