@@ -317,6 +317,13 @@ int serve_rank(const std::string& device) {
 }  // namespace
 
 int run(int argc, char** argv) {
+    if (!dist::built_with_mpi() && dist::launched_processes() > 1) {
+        std::cerr << fmt::format("hemirad: started as {} processes (mpirun or srun), but this hemirad was built without "
+                                 "MPI, so each would bake the whole scene into the same output; install libopenmpi-dev "
+                                 "and build again, or run one process\n",
+                                 dist::launched_processes());
+        return 2;
+    }
     const dist::Session mpi(argc, argv);
     CLI::App app{"hemirad: radiosity baker with a hemicube form-factor engine"};
     app.set_version_flag("--version", HEMIRAD_VERSION);

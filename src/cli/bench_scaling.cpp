@@ -97,7 +97,8 @@ ordered_json run_scaling_bench(const ScalingOptions& o, std::ostream& log) {
     const formfactor::Settings settings{o.hemicube, o.seed};
     const std::vector<formfactor::ShotRequest> shots = bench::bench_shots(mesh, o.shots);
 
-    const EngineChoice choice = choose_engine(o.device, false, 1, mesh, settings);
+    EngineChoice choice = choose_engine(o.device, false, 1, mesh, settings);
+    choice.engine.reset();  // each configuration makes its own (engine_on)
     const int world = dist::size();
     std::vector<Config> configs;
     for (std::size_t d = 1; d <= choice.devices.size(); ++d) configs.push_back({d, 1});

@@ -162,6 +162,16 @@ std::vector<formfactor::ShotResult> unpack_rows(const std::string& bytes) {
     return rows;
 }
 
+int launched_processes() {
+    for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE"})
+        if (const char* v = std::getenv(name); v && *v) {
+            char* end = nullptr;
+            const long n = std::strtol(v, &end, 10);
+            if (end && *end == '\0' && n > 0) return static_cast<int>(std::min<long>(n, 1 << 20));
+        }
+    return 1;
+}
+
 #ifndef HEMIRAD_HAVE_MPI
 
 bool built_with_mpi() { return false; }

@@ -35,6 +35,11 @@ public:
 int rank();
 int size();  // ranks in the world (1 without MPI)
 
+// How many processes mpirun or srun started, as their environment says (1 when none did): a
+// build without MPI that finds more than one refuses to run, as each would bake the whole scene
+// into the same output.
+int launched_processes();
+
 // Makes a worker's engine for a mesh it was sent (its own --device); throws on failure (the
 // worker sends the reason back with the next shots for that mesh).
 using EngineFactory =
