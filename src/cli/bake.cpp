@@ -27,11 +27,11 @@
 #include "cli/budget.h"
 #include "cli/checkpoint.h"
 #include "cli/engine_select.h"
-#include "dist/dist.h"
 #include "core/durable.h"
 #include "core/error.h"
 #include "core/memory.h"
 #include "core/timing.h"
+#include "dist/dist.h"
 #include "formfactor/near_field.h"
 #include "formfactor/parallel.h"
 #include "formfactor/row_cache.h"
@@ -546,12 +546,12 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
 
 }  // namespace
 
-// A fixed cap stopped scenes of many patches before one round: city:1M at draft (364,391 patches)
-// converges after 150,795 passes, foliage:100k (95,553) after more than 100,000.
 int planned_batch(std::size_t members) {
     return members <= 1 ? 1 : static_cast<int>(std::min<std::size_t>(256, kShotsPerMember * members));
 }
 
+// A fixed cap stopped scenes of many patches before one round: city:1M at draft (364,391 patches)
+// converges after 150,795 passes, foliage:100k (95,553) after more than 100,000.
 long max_passes_for(const BakeOptions& o, std::size_t patches) {
     return o.max_passes >= 0 ? o.max_passes : std::max<long>(100000, 2 * static_cast<long>(patches));
 }
