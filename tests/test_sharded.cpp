@@ -63,6 +63,15 @@ std::vector<formfactor::ShotRequest> every_patch(const mesh::Mesh& m) {
     return shots;
 }
 
+// What one reference engine shoots: the rows every sharing must reproduce.
+std::vector<formfactor::ShotResult> reference_rows(const mesh::Mesh& m, const formfactor::Settings& settings,
+                                                   const std::vector<formfactor::ShotRequest>& shots) {
+    formfactor::ReferenceEngine one(m, settings);
+    std::vector<formfactor::ShotResult> rows;
+    one.shoot_batch(shots, rows);
+    return rows;
+}
+
 std::string failure(const std::exception& e) {
     return dynamic_cast<const ocl::DeviceError*>(&e) ? std::string(e.what()) : std::string();
 }
@@ -74,9 +83,7 @@ TEST_CASE("sharded: the rows of a batch shared by several engines are one engine
     const formfactor::Settings settings{32, 3};
     const std::vector<formfactor::ShotRequest> shots = every_patch(m);
     REQUIRE(shots.size() > 40);
-    formfactor::ReferenceEngine one(m, settings);
-    std::vector<formfactor::ShotResult> want;
-    one.shoot_batch(shots, want);
+    const std::vector<formfactor::ShotResult> want = reference_rows(m, settings, shots);
 
     for (const std::size_t members : {2u, 3u}) {
         std::vector<formfactor::ShardedEngine::Member> list;
@@ -145,9 +152,7 @@ TEST_CASE("sharded: a failing member that may drop out leaves its shots to the o
     const mesh::Mesh m = lit_box();
     const formfactor::Settings settings{32, 3};
     const std::vector<formfactor::ShotRequest> shots = every_patch(m);
-    formfactor::ReferenceEngine one(m, settings);
-    std::vector<formfactor::ShotResult> want;
-    one.shoot_batch(shots, want);
+    const std::vector<formfactor::ShotResult> want = reference_rows(m, settings, shots);
 
     auto stats = std::make_shared<formfactor::ShardStats>();
     std::vector<formfactor::ShardedEngine::Member> list;
@@ -204,9 +209,7 @@ TEST_CASE("sharded: the reference and an OpenCL device share a batch with the re
     const mesh::Mesh m = lit_box();
     const formfactor::Settings settings{64, 3};
     const std::vector<formfactor::ShotRequest> shots = every_patch(m);
-    formfactor::ReferenceEngine one(m, settings);
-    std::vector<formfactor::ShotResult> want;
-    one.shoot_batch(shots, want);
+    const std::vector<formfactor::ShotResult> want = reference_rows(m, settings, shots);
     ocl::Context context(devices.front());
     std::vector<formfactor::ShardedEngine::Member> list;
     list.push_back({std::make_unique<formfactor::ReferenceEngine>(m, settings), "ref", false});

@@ -35,6 +35,7 @@
 #include "formfactor/near_field.h"
 #include "formfactor/parallel.h"
 #include "formfactor/row_cache.h"
+#include "formfactor/timed.h"
 #include "mesh/mesh.h"
 #include "mesh/texturing.h"
 #include "scene/sky.h"
@@ -55,31 +56,6 @@ namespace fs = std::filesystem;
 using ordered_json = nlohmann::ordered_json;
 
 namespace {
-
-// Times every shot of the engine it wraps, so the report can split form factors from solving.
-class TimedEngine final : public formfactor::Engine {
-public:
-    explicit TimedEngine(formfactor::Engine& inner) : inner_(inner) {}
-    std::string name() const override { return inner_.name(); }
-    using formfactor::Engine::shoot;
-    void shoot(const formfactor::ShotRequest& request, formfactor::ShotResult& out) override {
-        const auto t0 = Clock::now();
-        inner_.shoot(request, out);
-        seconds_ += seconds_since(t0);
-    }
-    void shoot_batch(const std::vector<formfactor::ShotRequest>& shots,
-                     std::vector<formfactor::ShotResult>& out) override {
-        const auto t0 = Clock::now();
-        inner_.shoot_batch(shots, out);
-        seconds_ += seconds_since(t0);
-    }
-    formfactor::ParallelRaster* parallel_raster() override { return inner_.parallel_raster(); }
-    double seconds() const { return seconds_; }
-
-private:
-    formfactor::Engine& inner_;
-    double seconds_ = 0.0;
-};
 
 // Shows every shot of the engine it wraps to an observer (BakeOptions::on_shot).
 class ObservedEngine final : public formfactor::Engine {
@@ -815,7 +791,7 @@ void run_bake(const BakeOptions& options) {
             row_cache = cached.get();
             base_engine = std::move(cached);
         }
-        TimedEngine engine(*base_engine);
+        formfactor::TimedEngine engine(*base_engine);
 
         t0 = Clock::now();
         levels.clear();

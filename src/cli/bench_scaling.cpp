@@ -4,7 +4,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <chrono>
 #include <map>
 #include <tuple>
 
@@ -12,38 +11,15 @@
 #include "cli/bake.h"
 #include "cli/engine_select.h"
 #include "core/error.h"
+#include "core/timing.h"
 #include "dist/dist.h"
+#include "formfactor/timed.h"
 #include "solve/progressive.h"
 
 namespace hemirad::cli {
 namespace {
 
-using Clock = std::chrono::steady_clock;
 using nlohmann::ordered_json;
-
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-// Times the engine calls of whatever it wraps: a bake's time less this is the host's.
-class Stopwatch final : public formfactor::Engine {
-public:
-    explicit Stopwatch(formfactor::Engine& inner) : inner_(inner) {}
-    std::string name() const override { return inner_.name(); }
-    using formfactor::Engine::shoot;
-    void shoot(const formfactor::ShotRequest& request, formfactor::ShotResult& out) override {
-        shoot_batch({request}, one_);
-        out = std::move(one_.front());
-    }
-    void shoot_batch(const std::vector<formfactor::ShotRequest>& shots, std::vector<formfactor::ShotResult>& out) override {
-        const auto t0 = Clock::now();
-        inner_.shoot_batch(shots, out);
-        seconds += seconds_since(t0);
-    }
-    double seconds = 0.0;
-
-private:
-    formfactor::Engine& inner_;
-    std::vector<formfactor::ShotResult> one_;
-};
 
 // Keeps every row it passes on, or (replaying) answers from them: a solve replayed on the rows
 // of an earlier one times the solver's own work, with no device competing for the core.
@@ -162,7 +138,7 @@ ordered_json run_scaling_bench(const ScalingOptions& o, std::ostream& log) {
     Recorder recorder(measured.front().engine.get());
     for (int r = 0; r < o.repeats; ++r)
         for (Measured& m : measured) {
-            Stopwatch timed(&m == &measured.front() ? static_cast<formfactor::Engine&>(recorder) : *m.engine);
+            formfactor::TimedEngine timed(&m == &measured.front() ? static_cast<formfactor::Engine&>(recorder) : *m.engine);
             solve::Settings solve_settings;
             solve_settings.batch = batch;
             solve_settings.max_passes = passes;
@@ -172,7 +148,7 @@ ordered_json run_scaling_bench(const ScalingOptions& o, std::ostream& log) {
             while (solver.step()) {
             }
             m.bakes.push_back(seconds_since(t_bake));
-            m.engine_seconds.push_back(timed.seconds);
+            m.engine_seconds.push_back(timed.seconds());
             m.passes = solver.passes();
         }
 
