@@ -10,8 +10,6 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <csignal>
-#include <signal.h>  // sigaction
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -273,11 +271,6 @@ void add_bench_options(CLI::App& cmd, BenchCommand& c) {
     cmd.add_option("--json", c.json, "also write the results here (JSON)");
 }
 
-std::atomic<bool> g_interrupted{false};
-extern "C" void on_interrupt(int) {
-    g_interrupted = true;
-}
-
 struct SceneWriteCommand {
     std::string spec;
     std::string output;
@@ -361,6 +354,15 @@ int run(int argc, char** argv) {
         return 2;
     }
 
+    // An option given an empty value ("--sun ''", "--max-memory ''") would read as not given.
+    for (const CLI::Option* option : bake->get_options())
+        if (option->get_expected_min() > 0)
+            for (const std::string& value : option->results())
+                if (value.empty()) {
+                    if (dist::rank() == 0)
+                        std::cerr << "hemirad: " << option->get_name() << ": an empty value (give one, or leave the option out)\n";
+                    return 2;
+                }
     bake_options.batch_given = bake->get_option("--batch")->count() > 0;
     if (bench_command.scaling) {  // the throughput options that were given, over the scaling bench's defaults
         ScalingOptions& sc = bench_command.scaling_options;
@@ -390,26 +392,21 @@ int run(int argc, char** argv) {
             write_generated_scene(scene_write, std::cout);
             return 0;
         }
-        // SIGHUP (the terminal closed) is an interruption like Ctrl-C: clean up, exit 130. A signal
-        // the parent set to be ignored stays ignored (nohup for SIGHUP, a shell's background job
-        // for SIGINT): a bake run under nohup must survive the logout it was started to survive.
-        for (const int signal : {SIGINT, SIGTERM, SIGHUP}) {
-            struct sigaction old {};
-            if (sigaction(signal, nullptr, &old) == 0 && old.sa_handler == SIG_IGN) continue;
-            std::signal(signal, on_interrupt);
-        }
-        bake_options.interrupted = &g_interrupted;
+        // Every signal that would end the process stops the bake instead: it cleans up and exits
+        // 130 (SIGINT, SIGTERM, SIGHUP) or 128 + the signal, within a second (core/cancel.h).
         bake_options.progress_tty = isatty(fileno(stderr));
         bake_options.progress = !bake_options.quiet && (bake_options.progress || bake_options.progress_tty);
+        cancel::install();
         run_bake(bake_options);
         return 0;
     } catch (const InputError& e) {
         std::cerr << "hemirad: " << printable(e.what()) << "\n";
         return 2;
     } catch (const Interrupted&) {
+        cancel::reported();
         std::cerr << (bake_options.progress && bake_options.progress_tty ? "\n" : "")
-                  << "hemirad: interrupted; no output written\n";
-        return 130;
+                  << "hemirad: " << cancel::describe() << "; no output written\n";
+        return cancel::exit_code();
     } catch (const formfactor::VerifyError& e) {
         std::cerr << "hemirad: verification failed: " << printable(e.what()) << "\n";
         return 1;
@@ -422,6 +419,9 @@ int run(int argc, char** argv) {
         return 1;
     } catch (const cl::Error& e) {
         std::cerr << "hemirad: device failed: " << printable(device_failure(e)) << "\n";
+        return 1;
+    } catch (const OutputError& e) {
+        std::cerr << "hemirad: " << printable(e.what()) << "\n";
         return 1;
     } catch (const std::bad_alloc&) {
         std::cerr << "hemirad: out of memory\n";

@@ -27,6 +27,7 @@
 #include "cli/budget.h"
 #include "cli/checkpoint.h"
 #include "cli/engine_select.h"
+#include "core/cancel.h"
 #include "core/durable.h"
 #include "core/error.h"
 #include "core/memory.h"
@@ -109,6 +110,42 @@ void check_output_names(const BakeOptions& o) {
                                      (dir / "preview").string()));
 }
 
+// Before any work: no output may replace the scene or a file it reads (`inputs`: the scene, then
+// its buffers and images), compared as files, not as names: the same directory entry (a link
+// named like an output is the user's too) or the same file through a link. Re-baking
+// out/baked.gltf into out/, or a scene with a texture named render.png into its own folder,
+// would otherwise replace the input with the bake's output.
+void check_inputs_kept(const BakeOptions& o, const std::vector<fs::path>& inputs) {
+    std::error_code ec;
+    const fs::path dir = o.output;
+    if (!fs::is_directory(dir, ec)) return;  // made by this bake: it holds nothing of the user's
+    const auto entry = [](const fs::path& p) {
+        std::error_code e;
+        return fs::weakly_canonical(fs::absolute(p, e).parent_path(), e) / p.filename();
+    };
+    const auto same = [&](const fs::path& a, const fs::path& b) {
+        std::error_code e;
+        return entry(a) == entry(b) || fs::equivalent(a, b, e);
+    };
+    std::vector<fs::path> outputs;
+    for (const std::string& name : kOutputNames) outputs.push_back(dir / name);
+    const fs::path previews = dir / "preview";
+    for (std::size_t i = 0; i < inputs.size(); ++i) {
+        const std::string what = i == 0 ? "the scene being baked" : fmt::format("'{}', a file the scene reads", inputs[i].string());
+        for (const fs::path& out : outputs)
+            if (fs::exists(fs::symlink_status(out, ec)) && same(out, inputs[i]))
+                throw InputError(fmt::format("{}: is {}; the bake would replace it: choose another output directory (-o)",
+                                             out.string(), what));
+        // Preview frames are pass_NNNNNN.png in DIR/preview.
+        const std::string name = inputs[i].filename().string();
+        if (o.preview_every > 0 && name.rfind("pass_", 0) == 0 && inputs[i].extension() == ".png" &&
+            fs::exists(previews, ec) && same(inputs[i].parent_path(), previews))
+            throw InputError(fmt::format("{}: is {}, and --preview-every writes its frames there; choose another "
+                                         "output directory (-o)",
+                                         (previews / name).string(), what));
+    }
+}
+
 // Staging directories left by bakes that were killed (SIGKILL, power loss): those whose process
 // no longer exists. A live process's, another user's or a reused pid's are left alone.
 void remove_stale_staging(const fs::path& dir) {
@@ -123,6 +160,9 @@ void remove_stale_staging(const fs::path& dir) {
     }
 }
 
+// Where a preview frame is written before it is renamed into place.
+fs::path preview_staging(const fs::path& file) { return file.parent_path() / (".tmp-" + file.filename().string()); }
+
 // Everything this run creates under the output directory; removed unless commit() is reached.
 class OutputTransaction {
 public:
@@ -133,11 +173,15 @@ public:
             created_dirs_.push_back(p);
             if (p == p.parent_path()) break;
         }
+        staging_ = dir_ / fmt::format("{}{}", kStagingPrefix, static_cast<long>(getpid()));
+        // What the watchdog removes should the bake not unwind by itself (core/cancel.h): the
+        // staging directory, then the directories this run made, deepest first, if empty.
+        cleanup_.remove_tree(staging_);
+        for (const auto& d : created_dirs_) cleanup_.remove_if_empty(d);
         fs::create_directories(dir_, ec);
         if (ec || !fs::is_directory(dir_))
             throw InputError(fmt::format("{}: cannot create output directory: {}", dir_.string(), ec ? ec.message() : "not a directory"));
         remove_stale_staging(dir_);
-        staging_ = dir_ / fmt::format("{}{}", kStagingPrefix, static_cast<long>(getpid()));
         fs::remove_all(staging_, ec);
         fs::create_directories(staging_, ec);
         if (ec) throw InputError(fmt::format("{}: cannot write: {}", dir_.string(), ec.message()));
@@ -148,7 +192,10 @@ public:
         if (committed_) return;
         std::error_code ec;  // destructors never throw
         fs::remove_all(staging_, ec);
-        for (const auto& f : previews_) fs::remove(f, ec);
+        for (const auto& f : previews_) {
+            fs::remove(f, ec);
+            fs::remove(preview_staging(f), ec);
+        }
         if (created_preview_dir_) fs::remove(dir_ / "preview", ec);
         for (const auto& d : created_dirs_) fs::remove(d, ec);  // deepest first; only if empty
     }
@@ -159,9 +206,14 @@ public:
     fs::path preview_path(long pass) {
         const fs::path dir = dir_ / "preview";
         std::error_code ec;
-        if (!fs::exists(dir, ec)) created_preview_dir_ = fs::create_directories(dir, ec);
+        if (!fs::exists(dir, ec)) {
+            created_preview_dir_ = fs::create_directories(dir, ec);
+            if (created_preview_dir_) cleanup_.remove_if_empty(dir);
+        }
         const fs::path file = dir / fmt::format("pass_{:06d}.png", pass);
         previews_.push_back(file);
+        cleanup_.remove_file(file);
+        cleanup_.remove_file(preview_staging(file));
         return file;
     }
 
@@ -173,26 +225,31 @@ public:
         for (const auto& name : names)
             if (!sync_to_disk(staging_ / name))
                 throw InternalError(fmt::format("{}: cannot flush {} to the disk", dir_.string(), name));
-        std::vector<fs::path> moved;
-        for (const auto& name : names) {
-            std::error_code ec;
-            fs::rename(staging_ / name, dir_ / name, ec);
-            if (ec) {
-                for (const auto& f : moved) fs::remove(f, ec);
-                throw InternalError(fmt::format("{}: cannot move {} into place: {}", dir_.string(), name, ec.message()));
+        // The renames run whole: a signal's watchdog waits for them (and then leaves the outputs).
+        cleanup_.critical([&] {
+            std::vector<fs::path> moved;
+            for (const auto& name : names) {
+                std::error_code ec;
+                fs::rename(staging_ / name, dir_ / name, ec);
+                if (ec) {
+                    for (const auto& f : moved) fs::remove(f, ec);
+                    throw InternalError(fmt::format("{}: cannot move {} into place: {}", dir_.string(), name, ec.message()));
+                }
+                moved.push_back(dir_ / name);
             }
-            moved.push_back(dir_ / name);
-        }
+            committed_ = true;
+            cleanup_.release();
+        });
         std::error_code ec;
         fs::remove_all(staging_, ec);
         sync_to_disk(dir_);
-        committed_ = true;
     }
 
 private:
     fs::path dir_, staging_;
     bool created_preview_dir_ = false, committed_ = false;
     std::vector<fs::path> previews_, created_dirs_;
+    cancel::Cleanup cleanup_;
 };
 
 ordered_json vec3(const glm::dvec3& v) { return ordered_json::array({v.x, v.y, v.z}); }
@@ -251,10 +308,43 @@ void check_emitters_left(const scene::Scene& scene, const scene::EffectsPlan& pl
                                      scene.path.string()));
 }
 
+// After meshing: a material that emits in the file but whose surfaces give the mesh no light
+// (every texel cut away by alphaMode MASK, an emissive texture black where the surface is, or
+// only triangles of no area) is a lamp the bake cannot see: a warning naming it. With no light
+// left anywhere the bake would be black: exit 2, saying why.
+void check_lamps_seen(scene::Scene& scene, const mesh::Mesh& mesh) {
+    std::vector<double> flux(scene.materials.size(), 0.0);
+    for (const mesh::Element& e : mesh.elements)
+        flux[e.material] += e.area * std::max({e.emission.x, e.emission.y, e.emission.z});
+    std::vector<std::size_t> triangles(scene.materials.size(), 0);
+    for (const scene::Triangle& t : scene.triangles)
+        if (emits(scene, t)) ++triangles[t.material];
+    std::vector<std::string> unseen;
+    for (std::size_t m = 0; m < scene.materials.size(); ++m) {
+        if (triangles[m] == 0 || flux[m] > 0.0) continue;
+        const scene::Material& mat = scene.materials[m];
+        const std::string why = mat.alpha_cutoff >= 0.0
+                                    ? fmt::format("its surfaces are cut away by alphaMode MASK (alpha below its cutoff {:g})",
+                                                  mat.alpha_cutoff)
+                                : mat.emissive_texture ? "its emissive texture is black where its surfaces are"
+                                                       : "its triangles have no area";
+        unseen.push_back(fmt::format("material '{}' emits, but none of its {} triangles gives the bake any light: {}",
+                                     mat.name, triangles[m], why));
+        scene.warnings.push_back(scene.path.string() + ": " + unseen.back());
+    }
+    const bool lit = shining_lights(scene) > 0 ||
+                     std::any_of(flux.begin(), flux.end(), [](double f) { return f > 0.0; });
+    if (!lit && !unseen.empty()) {
+        std::string all;
+        for (const std::string& u : unseen) all += (all.empty() ? "" : "; ") + u;
+        throw InputError(fmt::format("{}: nothing gives light, the bake would be black: {}", scene.path.string(), all));
+    }
+}
+
 void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const solve::Progressive& solver,
                        const output::View& view, int width, int height, const fs::path& file) {
     const output::Image image = output::render(scene, mesh, solver.radiosity(/*ambient=*/true), view, width, height);
-    const fs::path tmp = file.parent_path() / (".tmp-" + file.filename().string());
+    const fs::path tmp = preview_staging(file);
     output::write_png(image, tmp, output::auto_exposure(image));
     fs::rename(tmp, file);
 }
@@ -322,6 +412,9 @@ constexpr double kGatherMinSize = 0.06;
 // The most output vertices the quality's final gather takes on by itself (see solve_and_refine).
 constexpr std::size_t kMaxPlannedGather = 50000;
 
+// A bake expected to take longer than this (seconds) says so before it starts.
+constexpr double kSayTimeAbove = 60.0;
+
 class ProgressLine {
 public:
     // On a terminal (tty), one line redrawn in place five times a second; in a log, a line every
@@ -346,6 +439,10 @@ public:
         }
         print(fmt::format("pass {}  unshot {:.2e}  error {:.2e}  {:.1f} s  left {}", solver.passes(),
                           solver.unshot_fraction(), err, elapsed, eta));
+    }
+    void lights(std::size_t done, std::size_t total) {
+        if (!due(done >= total)) return;
+        print(fmt::format("lights' hemicubes {} / {}  {:.1f} s", done, total, seconds_since(start_)));
     }
     void rows(long done, long total) {
         if (!due(done >= total)) return;
@@ -454,7 +551,7 @@ Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, c
     }
     long checkpointed = solver.rows();  // the rows of the last checkpoint written or resumed
     solver.solve([&](long done, long total) {
-        if (o.interrupted && *o.interrupted) throw Interrupted();
+        cancel::check();
         c.progress.rows(done, total);
         // Every K rows, and all of them: a bake killed while solving or refining then resumes
         // without shooting a row again.
@@ -493,7 +590,7 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
     long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
     long checkpointed = solver.passes();  // the passes of the last checkpoint written or resumed
     while (solver.step()) {
-        if (o.interrupted && *o.interrupted) throw Interrupted();
+        cancel::check();
         c.progress.update(solver, c.threshold);
         if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpointed / o.checkpoint_every) {
             checkpointed = solver.passes();
@@ -581,12 +678,16 @@ void run_bake(const BakeOptions& options) {
     const MemoryLimit memory_limit = memory_limit_of(o.max_memory);
 
     auto t0 = Clock::now();
-    scene::Scene scene = scene::load(o.scene);
+    scene::LoadOptions load_options;
+    load_options.max_bytes = memory_limit.bytes;
+    load_options.limit_source = memory_limit.source;
+    load_options.inputs = [&](const std::vector<fs::path>& inputs) { check_inputs_kept(o, inputs); };
+    scene::Scene scene = scene::load(o.scene, load_options);
     if (sky && !scene.triangles.empty()) scene::add_sky(scene, *sky);
     if (sun) scene.lights.push_back(*sun);
     check_scene(scene);
     const double t_load = seconds_since(t0);
-    if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while loading a large scene
+    cancel::check();  // a signal while loading a large scene
 
     // Which effects this scene calls for (report.json `effects` says why).
     scene::EffectsPlan plan = scene::plan_effects(scene, overrides);
@@ -699,6 +800,8 @@ void run_bake(const BakeOptions& options) {
                                              "squared) and were dropped; report.json counts them",
                                              o.scene, mesh.dropped_triangles, scene.triangles.size()));
 
+    check_lamps_seen(scene, mesh);
+
     const bool checkpoints = !o.checkpoint.empty() || !o.resume.empty();
     if (o.preview_every > 0 && solver_name == "matrix")
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");
@@ -756,6 +859,20 @@ void run_bake(const BakeOptions& options) {
         std::cerr << "hemirad: warning: " << choice.warning << "\n";
         warnings.push_back(choice.warning);
     }
+    // Work that would take minutes is said before it starts (by the model of 2 CPU cores).
+    const TimeEstimate expected = [&] {
+        const double refined = shape.counts.elements * (shape.refine_levels > 0 ? 2.0 : 1.0);
+        const bool gathered = o.gather > 0 && (options.gather >= 0 || refined <= kMaxPlannedGather);
+        return expected_bake_time(shape, solver_name, double(mesh.lights.size()), gathered ? refined : 0.0, o.gather);
+    }();
+    if (expected.total() > kSayTimeAbove) {
+        const std::string warning = fmt::format(
+            "this bake is expected to take about {} ({}; modelled on 2 CPU cores through PoCL, a GPU is faster); "
+            "--progress shows how far it is, and Ctrl-C stops it leaving nothing behind",
+            format_duration(expected.total()), expected.describe());
+        if (!o.quiet) std::cerr << "hemirad: warning: " << warning << "\n";
+        warnings.push_back(warning);
+    }
     const double threshold = plan.convergence.on ? o.threshold : kUnconvergedThreshold;
     const std::size_t elements_before = mesh.elements.size();
     // Should the automatically chosen device fail part-way, the bake starts again on the
@@ -798,7 +915,9 @@ void run_bake(const BakeOptions& options) {
         ProgressLine progress(o.progress, o.progress_tty);
         // The punctual lights shoot first: the solvers start from their direct light.
         std::vector<glm::dvec3> direct;
-        if (solve::has_direct_light(mesh, scene.lights)) direct = solve::direct_light(mesh, scene.lights, engine, 0);
+        if (solve::has_direct_light(mesh, scene.lights))
+            direct = solve::direct_light(mesh, scene.lights, engine, 0, nullptr,
+                                         [&](std::size_t done, std::size_t total) { progress.lights(done, total); });
         const SolveContext context{o, threshold, matrix_settings, fingerprint, resume_state, progress,
                                    [&](const solve::Progressive& solver) {
                                        write_png_preview(scene, mesh, solver, view, width, height,
@@ -832,7 +951,7 @@ void run_bake(const BakeOptions& options) {
             rs.max_levels = o.refine_levels;
             rs.batch = std::max(o.batch, 64);
             rs.max_elements = refinement_room(shape, solver_name, memory_limit.bytes);
-            rs.cancelled = [&] { return o.interrupted && *o.interrupted; };
+            rs.cancelled = [] { return cancel::requested(); };
             const mesh::Texturing texturing(scene);
             rs.texturing = &texturing;
             rs.lights = &scene.lights;
@@ -841,7 +960,7 @@ void run_bake(const BakeOptions& options) {
             solve::RefineResult refined =
                 solve::refine(std::move(mesh), std::move(solution.irradiance), solution.shot, make_engine, rs);
             refining.finish();
-            if (o.interrupted && *o.interrupted) throw Interrupted();
+            cancel::check();
             if (refined.stopped_for_memory.level > 0) {
                 const std::string warning = fmt::format(
                     "refinement stopped before level {}: splitting {} more elements would pass the {} {}",
@@ -925,7 +1044,7 @@ void run_bake(const BakeOptions& options) {
             // The later passes re-use the first's rows, within the progressive solve's row-cache
             // budget (its cache is gone by now).
             gs.kept_entries = static_cast<std::size_t>(row_cache_bytes(shape) / (sizeof(std::uint32_t) + sizeof(double)));
-            gs.cancelled = [&] { return o.interrupted && *o.interrupted; };
+            gs.cancelled = [] { return cancel::requested(); };
             ProgressLine gathering(o.progress, o.progress_tty);
             gs.progress = [&](long done, long total) { gathering.gathering(done, total); };
             // Direct light only (interreflection off): the gather sees the emitters' light alone, or
@@ -1125,6 +1244,8 @@ void run_bake(const BakeOptions& options) {
     if (memory_limit.available) report["plan"]["memory"]["available"] = *memory_limit.available;  // without --max-memory
     // Measured: the most this process held so far (resident), the outputs not yet written.
     report["plan"]["memory"]["peak"] = peak_memory();
+    report["plan"]["expected_seconds"] = ordered_json::object();
+    for (const auto& [what, seconds] : expected.parts) report["plan"]["expected_seconds"][what] = seconds;
     report["passes"] = solution.passes;
     if (solution.resumed_from >= 0) report["resumed_from_pass"] = solution.resumed_from;
     report["converged"] = solution.converged;
@@ -1211,7 +1332,7 @@ void run_bake(const BakeOptions& options) {
         f << report.dump(2) << "\n";
         if (!f) throw InternalError("cannot write report.json");
     }
-    if (o.interrupted && *o.interrupted) throw Interrupted();  // a signal while writing: nothing is committed
+    cancel::check();  // a signal while writing: nothing is committed
     out.commit(kOutputNames);
     if (!o.quiet)
         std::cerr << fmt::format("hemirad: {}, {} elements, wrote {}/report.json, baked.gltf, render.exr, render.png\n",

@@ -10,6 +10,7 @@
 #include <limits>
 #include <string>
 
+#include "core/cancel.h"
 #include "core/quality.h"
 
 namespace hemirad::formfactor {
@@ -64,16 +65,13 @@ struct BakeOptions {
     bool quiet = false;
     bool progress = false;                       // report progress (a TTY or --progress, and not --quiet)
     bool progress_tty = false;                   // ... as one line redrawn in place (a TTY), else a line every few seconds
-    const std::atomic<bool>* interrupted = nullptr;  // set by SIGINT, SIGTERM or SIGHUP
     // Called with every shot the solve and refinement's re-gather take, as the solver sees it
     // (near-field corrected), so tests and the fuzzer can check what the engines return.
     std::function<void(const formfactor::ShotResult&)> on_shot;
 };
 
-// Thrown when the user interrupts a bake; nothing has been written (or it was removed).
-struct Interrupted : std::runtime_error {
-    Interrupted() : std::runtime_error("interrupted") {}
-};
+// Thrown when a signal stops a bake (core/cancel.h); nothing has been written (or it was removed).
+using Interrupted = cancel::Interrupted;
 
 // Runs a bake. Throws InputError (exit 2), Interrupted, or other exceptions (exit 1). On any
 // throw, whatever this run wrote under the output directory has been removed.

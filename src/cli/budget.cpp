@@ -26,12 +26,16 @@ const double kProgressivePerPatch = 2 * 24.0 + 2 * 8.0 + 4.0 + solve::Settings{}
 constexpr double kRowCachePerElement = 256.0;
 constexpr double kRowCacheMin = 64.0 * (1 << 20), kRowCacheMax = 512.0 * (1 << 20);
 // Output: the welded mesh (about four vertices per element: position, normal, radiosity, index)
-// and the renderer's supersampled strip and image (3 × 3 samples of depth and colour per pixel).
+// and the render: the image (RGB floats, 12 B a pixel) and the automatic exposure's luminances
+// (a double a pixel, reserved whole), then the PNG's bytes (3 B) once those are gone; the
+// renderer's supersampled strip is a few rows (output/render.cpp). Measured: 14.5 B a pixel at
+// 4096² and 8192² (peak resident less a 256² bake's; the closed room). It was 320 B, counting
+// the strip for every row: --image-width 16384 "needed 86 GB".
 constexpr double kWeldedPerElement = 4 * 40.0;
 // A parallel shot's bytes per element: its projection (the element's corners and plane, ~130 B),
 // its record (corners in fixed point, box and plane, ~116 B) and a few bin entries.
 constexpr double kParallelPerElement = 260.0;
-constexpr double kRenderPerPixel = 9 * 32.0 + 32.0;
+constexpr double kRenderPerPixel = 12.0 + 8.0;
 
 // The model's constants, fitted on 2 EPYC cores through PoCL after clusters, sparse rows and
 // occlusion culling (ratios matter): an OpenCL shot at N = 256 over ~8k elements, which grows
@@ -132,13 +136,50 @@ double refinement_room(const BakeShape& s, const std::string& solver, double lim
     return std::max(s.counts.elements, (limit - spent) / per_element);
 }
 
+namespace {
+
+// A hemicube's seconds: it grows with the elements it sets up and the cells it draws.
+double shot_seconds(const BakeShape& s, int hemicube) {
+    const double scale = std::max(0.5, std::sqrt(s.counts.elements / 8316.0));
+    const double n = double(hemicube) / 256.0;
+    return s.opencl ? kShotSeconds * scale * std::max(1.0, n) : kReferenceShotSeconds * scale * std::max(1.0, n * n);
+}
+
+}  // namespace
+
+std::string format_duration(double seconds) {
+    if (seconds < 90.0) return fmt::format("{:.0f} s", seconds);
+    if (seconds < 5400.0) return fmt::format("{:.0f} min", seconds / 60.0);
+    return fmt::format("{:.1f} h", seconds / 3600.0);
+}
+
+double TimeEstimate::total() const {
+    double sum = 0.0;
+    for (const auto& p : parts) sum += p.second;
+    return sum;
+}
+
+std::string TimeEstimate::describe() const {
+    std::string out;
+    for (const auto& [what, seconds] : parts)
+        if (seconds >= 1.0) out += (out.empty() ? "" : ", ") + what + " " + format_duration(seconds);
+    return out;
+}
+
+TimeEstimate expected_bake_time(const BakeShape& s, const std::string& solver, double light_hemicubes,
+                                double gather_points, int gather) {
+    const SolverTimes t = expected_times(s);
+    TimeEstimate e;
+    e.parts.emplace_back("solve", solver == "matrix" ? t.matrix : t.progressive);
+    if (light_hemicubes > 0.0) e.parts.emplace_back("lights' hemicubes", light_hemicubes * shot_seconds(s, s.hemicube));
+    if (gather > 0 && gather_points > 0.0) e.parts.emplace_back("final gather", gather_points * shot_seconds(s, gather));
+    return e;
+}
+
 SolverTimes expected_times(const BakeShape& s) {
     const double E = s.counts.elements, P = s.counts.patches;
     const double channels = s.matrix.grey ? 1.0 : 3.0;
-    // A shot's time grows with the elements it sets up and the cells it draws.
-    const double scale = std::max(0.5, std::sqrt(E / 8316.0));
-    const double n = double(s.hemicube) / 256.0;
-    const double shot = s.opencl ? kShotSeconds * scale * std::max(1.0, n) : kReferenceShotSeconds * scale * std::max(1.0, n * n);
+    const double shot = shot_seconds(s, s.hemicube);
     const double passes = kProgressiveRounds * std::sqrt(std::min(P, kRoundsPatches) * P);
     SolverTimes t;
     const double sweeps = direct_only(s) ? 0.0 : expected_sweeps(s);

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "mesh/mesh.h"
@@ -60,6 +61,19 @@ struct SolverTimes {
     double matrix = 0.0, progressive = 0.0;
 };
 SolverTimes expected_times(const BakeShape& shape);
+
+// Seconds a whole bake is expected to take, by part, in the model of expected_times (2 CPU cores
+// through PoCL; a GPU is faster): the solve, the lights' hemicubes (`light_hemicubes`), and the
+// final gather (`gather_points` hemicubes of resolution `gather`, the first pass's; the later
+// passes re-use its rows). Said before a bake that would take minutes.
+struct TimeEstimate {
+    std::vector<std::pair<std::string, double>> parts;  // (what, seconds)
+    double total() const;
+    std::string describe() const;  // "solve 3.2 min, lights' hemicubes 9 min, ..."
+};
+std::string format_duration(double seconds);  // "45 s", "12 min", "2.5 h"
+TimeEstimate expected_bake_time(const BakeShape& shape, const std::string& solver, double light_hemicubes,
+                                double gather_points, int gather);
 
 // `auto`'s choice: the matrix where the bake with it needs at most half the memory limit and it
 // is expected to be no slower; else progressive. `why` says which rule decided, with the numbers.

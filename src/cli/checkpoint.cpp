@@ -58,6 +58,9 @@ void write_string(std::ostream& out, const std::string& s) {
 }
 
 // Reads a file's bytes from `at` on, as written by the functions above: false where they end.
+// The longest fingerprint (settings and mesh hash) a checkpoint may hold.
+constexpr std::uint32_t kMaxFingerprint = 1u << 20;
+
 class Cursor {
 public:
     Cursor(const std::string& bytes, std::size_t at) : bytes_(bytes), at_(std::min(at, bytes.size())) {}
@@ -70,7 +73,7 @@ public:
     }
     bool read_string(std::string& s) {
         std::uint32_t n = 0;
-        if (!read(n) || n > (1u << 20) || bytes_.size() - at_ < n) return false;
+        if (!read(n) || n > kMaxFingerprint || bytes_.size() - at_ < n) return false;
         s.assign(bytes_, at_, n);
         at_ += n;
         return true;
@@ -81,6 +84,13 @@ private:
     const std::string& bytes_;
     std::size_t at_;
 };
+
+// A checkpoint's first bytes: enough for its magic, format and fingerprint (at most 1 MiB).
+std::string read_head(const RegularFile& in) {
+    std::string bytes(static_cast<std::size_t>(std::min<std::uint64_t>(in.size(), sizeof kMagic + 8 + kMaxFingerprint)), '\0');
+    in.read_exactly(0, bytes.size(), bytes.data());
+    return bytes;
+}
 
 // Whether an open file starts with the checkpoint magic.
 bool starts_with_magic(const RegularFile& file) {
@@ -178,9 +188,7 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
 
 std::optional<int> checkpoint_batch(const fs::path& file) {
     try {
-        const RegularFile in(file, file.string());
-        std::string bytes(static_cast<std::size_t>(in.size()), '\0');
-        in.read_exactly(0, bytes.size(), bytes.data());
+        const std::string bytes = read_head(RegularFile(file, file.string()));
         if (bytes.compare(0, sizeof kMagic - 1, kMagic) != 0) return std::nullopt;
         Cursor s(bytes, sizeof kMagic - 1);
         std::uint32_t format = 0;
@@ -195,12 +203,10 @@ std::optional<int> checkpoint_batch(const fs::path& file) {
     }
 }
 
-std::string read_checkpoint(const fs::path& file, const std::string& fingerprint) {
-    // A regular file only (a directory or FIFO is refused, never waited on), read once into the
-    // string that is returned: a matrix bake's checkpoint can be large.
-    const RegularFile in(file, file.string());
-    std::string bytes(static_cast<std::size_t>(in.size()), '\0');
-    in.read_exactly(0, bytes.size(), bytes.data());
+// The head of a checkpoint (`bytes`, its first bytes at least): the magic, the format, and the
+// fingerprint of the bake it was made for, which must be `fingerprint`. Returns where the state
+// begins.
+std::size_t check_head(const std::string& bytes, const fs::path& file, const std::string& fingerprint) {
     if (bytes.compare(0, sizeof kMagic - 1, kMagic) != 0)
         throw InputError(fmt::format("{}: not a hemirad checkpoint", file.string()));
     Cursor s(bytes, sizeof kMagic - 1);
@@ -214,7 +220,19 @@ std::string read_checkpoint(const fs::path& file, const std::string& fingerprint
     if (saved != fingerprint)
         throw InputError(fmt::format("{}: the checkpoint is of another bake: it was made for [{}], this bake is [{}]",
                                      file.string(), saved, fingerprint));
-    const std::size_t begin = s.at();
+    return s.at();
+}
+
+std::string read_checkpoint(const fs::path& file, const std::string& fingerprint) {
+    // A regular file only (a directory or FIFO is refused, never waited on), read once into the
+    // string that is returned: a matrix bake's checkpoint can be large.
+    const RegularFile in(file, file.string());
+    // Its head first: a file of another bake, or of anything else, is refused without reading it
+    // whole (a 3 GiB one was).
+    std::string bytes = read_head(in);
+    const std::size_t begin = check_head(bytes, file, fingerprint);
+    bytes.resize(static_cast<std::size_t>(in.size()));
+    in.read_exactly(0, bytes.size(), bytes.data());
     std::uint64_t end = 0, sum = 0;
     if (bytes.size() >= begin + sizeof sum + sizeof end) {
         std::memcpy(&end, bytes.data() + bytes.size() - sizeof end, sizeof end);

@@ -20,6 +20,13 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+// A file that could not be written (a full disk, no permission): exit code 1, the message as
+// it is ("render.png: written incompletely ..."), not labelled an internal error.
+class OutputError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
 // `text` as one printable line: control characters (a newline, or a terminal escape, that the
 // names in a file or on the command line may hold) become \xNN, so that a message the CLI prints
 // stays one line and cannot rewrite the terminal. Other bytes, UTF-8 included, are kept.

@@ -4,6 +4,7 @@
 #include "formfactor/opencl_engine.h"
 
 #include <fmt/core.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <cmath>
@@ -62,6 +63,24 @@ const TuningEntry kTuningTable[] = {
     // 5.5 -> 7.9 ms (9% hidden); an occluder share of 4 hides more and costs as much more.
     {"cpu", {32, true, 1, 16, 256, 8, 8, true, "", 0, 0, 0, true, Occlusion::measured, 16, {}, ""}},
 };
+
+// The private memory of one raster_records work-item (kernels/hemicube.cl): a tile's winners
+// (an int and a double per cell, LANES - 1 more), its table of pending sums (an int and a long per
+// entry), its columns' and rows' coordinates, and a little for the rest. On PoCL with 8 MiB
+// stacks, tiles of 32 (12.5 KB by this count) ran at 700 work-items a group and crashed at 850.
+double raster_records_private_bytes(const OpenCLTuning& t) {
+    constexpr double kSumTable = 64.0 * (4 + 8), kRest = 512.0;
+    const double cells = double(t.tile) * t.tile + t.lanes - 1;
+    return cells * (4 + 8) + kSumTable + (2.0 * t.tile + t.lanes - 1) * 8 + kRest;
+}
+
+// The stack of a thread the OpenCL CPU runtime starts: glibc gives threads the soft stack limit
+// (8 MiB by default), or 2 MiB where it is unlimited.
+std::size_t worker_stack_bytes() {
+    struct rlimit limit {};
+    if (getrlimit(RLIMIT_STACK, &limit) != 0 || limit.rlim_cur == RLIM_INFINITY) return std::size_t{2} << 20;
+    return std::max<std::size_t>(std::size_t(limit.rlim_cur), std::size_t{1} << 20);
+}
 
 // Binds a kernel's arguments in order: the one place each kernel's signature is spelled out.
 template <class... Args>
@@ -369,7 +388,23 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh* packed, ocl
     if (tuning.setup_lanes) cull_ = cl::Kernel(program, "cull_clusters");
     check_layout(context, program);
     const auto check_group = [&](cl::Kernel& kernel, const char* name, int size) {
-        const std::size_t most = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(context.device());
+        const cl::Device& device = context.device();
+        std::size_t most = kernel.getWorkGroupInfo<CL_KERNEL_WORK_GROUP_SIZE>(device);
+        // On a CPU a work-group's private memory lives on the stack of the thread that runs it:
+        // at most half of that stack (PoCL reports a nominal 1 KB a work-item; raster_records'
+        // per-cell winners are ours to count).
+        if (info.type == "cpu") {
+            const double per_item = std::max<double>(
+                double(kernel.getWorkGroupInfo<CL_KERNEL_PRIVATE_MEM_SIZE>(device)),
+                std::string_view(name) == "raster" && tuning.raster_per_record ? raster_records_private_bytes(tuning) : 0.0);
+            if (per_item > 0.0)
+                most = std::min(most, std::max<std::size_t>(1, std::size_t(0.5 * double(worker_stack_bytes()) / per_item)));
+        }
+        // And the local memory it declares must fit the device's.
+        const cl_ulong local = kernel.getWorkGroupInfo<CL_KERNEL_LOCAL_MEM_SIZE>(device);
+        if (local > device.getInfo<CL_DEVICE_LOCAL_MEM_SIZE>())
+            throw InternalError(fmt::format("{}: kernel {} needs {} bytes of local memory, the device has {}", info.name,
+                                            name, local, device.getInfo<CL_DEVICE_LOCAL_MEM_SIZE>()));
         if (static_cast<std::size_t>(size) > most && !tuning.overrides.empty())
             throw InputError(fmt::format("HEMIRAD_OPENCL_OPTIONS ({}): on {} kernel {} runs at most {} work-items per "
                                          "group, these knobs ask for {}",

@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <fstream>
+#include <cstring>
 #include <cmath>
 #include <cstdint>
 
@@ -39,7 +41,24 @@ void write_image(const std::filesystem::path& file, const char* format, const OI
         throw InternalError(fmt::format("{}: cannot write {}: {}", name, format, OIIO::geterror()));
     }
     const bool ok = out->open(name, spec) && out->write_image(pixel_type, pixels) && out->close();
-    if (!ok) throw InternalError(fmt::format("{}: {}", name, out->geterror()));
+    if (!ok) throw OutputError(fmt::format("{}: cannot write: {}", name, out->geterror()));
+}
+
+// OpenImageIO's PNG writer does not see libpng's failed writes: on a full disk it left 0-byte
+// frames and said nothing. A whole PNG ends with its IEND chunk, the last bytes written.
+void check_png_written(const std::filesystem::path& file) {
+    static constexpr unsigned char kEnd[8] = {'I', 'E', 'N', 'D', 0xAE, 0x42, 0x60, 0x82};
+    std::error_code ec;
+    const std::uintmax_t size = std::filesystem::file_size(file, ec);
+    unsigned char tail[8] = {};
+    std::ifstream in(file, std::ios::binary);
+    if (!ec && size >= sizeof tail) {
+        in.seekg(std::streamoff(size - sizeof tail));
+        in.read(reinterpret_cast<char*>(tail), sizeof tail);
+    }
+    if (ec || size < sizeof tail || !in || std::memcmp(tail, kEnd, sizeof tail) != 0)
+        throw OutputError(fmt::format("{}: written incompletely ({} bytes, no end chunk): is the disk full?",
+                                      file.string(), ec ? 0 : size));
 }
 
 void check_size(const Image& image, const std::filesystem::path& file) {
@@ -92,6 +111,7 @@ void write_png(const Image& image, const std::filesystem::path& file, double exp
     }
     OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
     write_image(file, "png", spec, OIIO::TypeDesc::UINT8, bytes.data());
+    check_png_written(file);
 }
 
 }  // namespace hemirad::output

@@ -16,6 +16,7 @@
 #include <glm/gtc/type_ptr.hpp>
 #include <limits>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <memory>
 #include <regex>
 #include <set>
@@ -25,11 +26,14 @@
 #include <utility>
 #include <vector>
 
+#include "core/cancel.h"
 #include "core/error.h"
+#include "core/memory.h"
 #include "core/regular_file.h"
 #include "scene/gltf_compression.h"
 #include "scene/gltf_source.h"
 #include "scene/image_mean.h"
+#include "scene/load_estimate.h"
 
 namespace hemirad::scene {
 namespace {
@@ -284,13 +288,40 @@ std::string base_dir(const std::string& file) {
     return slash == std::string::npos ? std::string() : file.substr(0, slash);
 }
 
+// Before tinygltf reads anything the JSON names: the extensions' integers (which it would cut to
+// 32 bits), the files it will read (options.inputs), and what loading will ask for, against
+// options.max_bytes. Returns the triangles the scene will hold. A file whose JSON does not parse
+// is left to tinygltf, which says what is wrong with it.
+double look_before_loading(const std::vector<unsigned char>& bytes, bool glb, const fs::path& file,
+                           const std::string& name, const LoadOptions& options) {
+    const std::size_t start = glb ? kGlbHeader + kChunkHeader : 0;
+    const std::size_t length = glb ? little_endian32(bytes.data() + kGlbHeader) : bytes.size();
+    const nlohmann::json doc = nlohmann::json::parse(bytes.begin() + std::ptrdiff_t(start),
+                                                     bytes.begin() + std::ptrdiff_t(start + length), nullptr,
+                                                     /*allow_exceptions=*/false);
+    if (doc.is_discarded()) return 0.0;
+    check_extension_integers(doc, name);
+    if (options.inputs) {
+        std::vector<fs::path> files = referenced_files(doc, base_dir(file.string()));
+        files.insert(files.begin(), file);
+        options.inputs(files);
+    }
+    const LoadEstimate e = estimate_load(doc);
+    if (e.total() > options.max_bytes)
+        throw InputError(fmt::format("{}: loading it would need about {} ({}), more than the {} {}", name,
+                                     format_bytes(e.total()), e.describe(), format_bytes(options.max_bytes),
+                                     options.limit_source));
+    return e.triangles;
+}
+
 tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector<std::string>& warnings,
-                      std::map<int, EncodedImage>& images) {
+                      std::map<int, EncodedImage>& images, const LoadOptions& options, double& triangles) {
     const std::string ext = lowercase(file.extension().string());
     if (ext != ".gltf" && ext != ".glb") {
         throw InputError(name + ": not a glTF file (expected a .gltf or .glb extension)");
     }
     std::vector<unsigned char> bytes = ext == ".glb" ? read_glb(file, name) : read_gltf(file, name);
+    triangles = look_before_loading(bytes, ext == ".glb", file, name, options);
     const MeshoptFallbacks fallbacks = stand_in_for_compressed_data(bytes, ext == ".glb", name);
 
     tinygltf::TinyGLTF gltf;
@@ -1105,6 +1136,7 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
     const std::uint32_t primitive = primitive_counter++;
     L.source.primitives.push_back({ref.mesh, ref.index});
     for (std::size_t k = 0; k < indices.size(); k += 3) {
+        if (k % (3 << 16) == 0) cancel::check();
         Triangle t;
         for (int v = 0; v < 3; ++v) {
             const std::uint32_t i = indices[k + std::size_t(v)];
@@ -1335,13 +1367,16 @@ double PunctualLight::attenuation(const glm::dvec3& to_point) const {
     return a;
 }
 
-Scene load(const std::filesystem::path& file) {
+Scene load(const std::filesystem::path& file, const LoadOptions& options) {
     Scene scene;
     scene.path = file;
     const std::string name = file.string();
     std::map<int, EncodedImage> images;
     auto source = std::make_shared<GltfSource>();
-    source->model = parse(file, name, scene.warnings, images);
+    double triangles = 0.0;
+    source->model = parse(file, name, scene.warnings, images, options, triangles);
+    // As many as the file places, once they were held against a limit: the vector never doubles.
+    if (std::isfinite(options.max_bytes)) scene.triangles.reserve(std::size_t(triangles));
     source->base_dir = base_dir(name);
     const tinygltf::Model& model = source->model;
     for (std::size_t i = 0; i < model.images.size(); ++i) {  // data uris: tinygltf keeps no uri for them
@@ -1362,6 +1397,7 @@ Scene load(const std::filesystem::path& file) {
 
     std::uint32_t primitive_counter = 0;
     for (const Instance& inst : instances) {
+        cancel::check();  // a signal while a large scene loads (core/cancel.h)
         const tinygltf::Node& node = model.nodes[std::size_t(inst.node)];
         if (node.camera >= 0) {
             if (std::size_t(node.camera) >= model.cameras.size()) {

@@ -5,6 +5,8 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -127,7 +129,18 @@ struct Scene {
     double diagonal() const { return glm::length(bbox_max - bbox_min); }
 };
 
+// What a load may take, and a look at the files it will read before it reads them.
+struct LoadOptions {
+    // Memory the load may use (the scene's triangles and what the loader makes on the way,
+    // scene/load_estimate.h): a file that asks for more is refused before any of it is made.
+    double max_bytes = std::numeric_limits<double>::infinity();
+    std::string limit_source = "the limit allows";  // for the message: "--max-memory allows"
+    // Called with the scene file and every file it names (buffers, images) once its JSON is
+    // read, before any of them is: the bake refuses outputs that would replace one.
+    std::function<void(const std::vector<std::filesystem::path>&)> inputs;
+};
+
 // Loads a .gltf or .glb. Throws InputError("<file>: <problem>") on bad input.
-Scene load(const std::filesystem::path& file);
+Scene load(const std::filesystem::path& file, const LoadOptions& options = {});
 
 }  // namespace hemirad::scene

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <regex>
 #include <sstream>
 
 #include "core/error.h"
@@ -19,10 +20,13 @@ namespace {
 bool comma_numbers(const std::string& text, std::vector<double>& values) {
     std::stringstream in(text);
     std::string part;
+    // Plain decimal numbers: strtod alone would take hex ("0x1p3"), "inf" and leading blanks.
+    static const std::regex kDecimal(R"([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)");
     while (std::getline(in, part, ',')) {
+        if (!std::regex_match(part, kDecimal)) return false;
         char* end = nullptr;
         const double v = std::strtod(part.c_str(), &end);
-        if (part.empty() || end != part.c_str() + part.size() || !std::isfinite(v)) return false;
+        if (end != part.c_str() + part.size() || !std::isfinite(v)) return false;
         values.push_back(v);
     }
     return true;

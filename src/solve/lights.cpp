@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/cancel.h"
 #include "core/error.h"
 #include "formfactor/parallel.h"
 
@@ -22,7 +23,8 @@ bool has_direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualL
 }
 
 std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
-                                     formfactor::Engine& engine, int level, glm::dvec3* landed) {
+                                     formfactor::Engine& engine, int level, glm::dvec3* landed,
+                                     const std::function<void(std::size_t, std::size_t)>& progress) {
     std::vector<glm::dvec3> H(mesh.elements.size(), glm::dvec3(0.0));
     if (landed) *landed = glm::dvec3(0.0);
     // Directional lights: a parallel shot each, its grid turned by the level and the light.
@@ -38,25 +40,31 @@ std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<s
         }
     }
     if (mesh.lights.empty()) return H;
-    std::vector<formfactor::ShotRequest> requests;
     const std::uint64_t first = kLightShots + static_cast<std::uint64_t>(level) * mesh.lights.size();
-    for (std::size_t i = 0; i < mesh.lights.size(); ++i)
-        requests.push_back(formfactor::ShotRequest::of_light(static_cast<std::uint32_t>(i), first + i));
+    std::vector<formfactor::ShotRequest> requests;
     std::vector<formfactor::ShotResult> rows;
-    engine.shoot_batch(requests, rows);
-    for (std::size_t r = 0; r < requests.size(); ++r) {
-        const mesh::LightShooter& shooter = mesh.lights[r];
-        if (shooter.light >= lights.size()) throw InternalError("direct light: a light hemicube names no light");
-        const scene::PunctualLight& light = lights[shooter.light];
-        const formfactor::ShotResult& row = rows[r];
-        for (std::size_t i = 0; i < row.size(); ++i) {
-            const mesh::Element& e = mesh.elements[row.element[i]];
-            // The row holds Ω / 4π: the flux through the element's solid angle is I · Ω.
-            const glm::dvec3 flux =
-                light.intensity * (light.attenuation(e.centroid - shooter.position) * 4.0 * M_PI * row.F[i]);
-            H[row.element[i]] += flux / e.area;
-            if (landed) *landed += flux;
+    for (std::size_t start = 0; start < mesh.lights.size(); start += kLightBatch) {
+        cancel::check();
+        const std::size_t end = std::min(mesh.lights.size(), start + kLightBatch);
+        requests.clear();
+        for (std::size_t i = start; i < end; ++i)
+            requests.push_back(formfactor::ShotRequest::of_light(static_cast<std::uint32_t>(i), first + i));
+        engine.shoot_batch(requests, rows);
+        for (std::size_t r = 0; r < requests.size(); ++r) {
+            const mesh::LightShooter& shooter = mesh.lights[start + r];
+            if (shooter.light >= lights.size()) throw InternalError("direct light: a light hemicube names no light");
+            const scene::PunctualLight& light = lights[shooter.light];
+            const formfactor::ShotResult& row = rows[r];
+            for (std::size_t i = 0; i < row.size(); ++i) {
+                const mesh::Element& e = mesh.elements[row.element[i]];
+                // The row holds Ω / 4π: the flux through the element's solid angle is I · Ω.
+                const glm::dvec3 flux =
+                    light.intensity * (light.attenuation(e.centroid - shooter.position) * 4.0 * M_PI * row.F[i]);
+                H[row.element[i]] += flux / e.area;
+                if (landed) *landed += flux;
+            }
         }
+        if (progress) progress(end, mesh.lights.size());
     }
     return H;
 }

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -25,9 +26,15 @@ inline constexpr std::uint64_t kLightShots = std::uint64_t{1} << 42;
 // intensity > 0.
 bool has_direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights);
 
-// Per element, the irradiance of every light hemicube of the mesh, shot in one batch, and of
-// every directional light. `landed`, if set, receives the flux that reached elements (per channel).
+// Light hemicubes shot per engine call: a scene of 200,000 point lights held all their rows at once.
+inline constexpr std::size_t kLightBatch = 256;
+
+// Per element, the irradiance of every light hemicube of the mesh, shot in batches of
+// kLightBatch (the sums in the same order whatever the batch), and of every directional light.
+// `landed`, if set, receives the flux that reached elements (per channel). Between batches it
+// checks for a stop (core/cancel.h) and reports the hemicubes shot of all (`progress`, if set).
 std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
-                                     formfactor::Engine& engine, int level, glm::dvec3* landed = nullptr);
+                                     formfactor::Engine& engine, int level, glm::dvec3* landed = nullptr,
+                                     const std::function<void(std::size_t, std::size_t)>& progress = {});
 
 }  // namespace hemirad::solve
