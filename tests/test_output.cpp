@@ -476,11 +476,11 @@ TEST_CASE("write_png: exposure, shoulder and sRGB", "[output]") {
     }
 }
 
-TEST_CASE("image writers throw InternalError on failure", "[output]") {
+TEST_CASE("image writers throw OutputError on failure", "[output]") {
     const output::Image image{1, 1, {0.5f, 0.5f, 0.5f}};
     const fs::path bad = fs::temp_directory_path() / "hemirad_no_such_dir" / "sub" / "x";
-    CHECK_THROWS_AS(output::write_exr(image, bad.string() + ".exr"), InternalError);
-    CHECK_THROWS_AS(output::write_png(image, bad.string() + ".png", 1.0), InternalError);
+    CHECK_THROWS_AS(output::write_exr(image, bad.string() + ".exr"), OutputError);
+    CHECK_THROWS_AS(output::write_png(image, bad.string() + ".png", 1.0), OutputError);
 }
 
 TEST_CASE("choose_view: named, first, or framing camera", "[output]") {

@@ -328,8 +328,8 @@ void check_lamps_seen(scene::Scene& scene, const mesh::Mesh& mesh) {
                                                   mat.alpha_cutoff)
                                 : mat.emissive_texture ? "its emissive texture is black where its surfaces are"
                                                        : "its triangles have no area";
-        unseen.push_back(fmt::format("material '{}' emits, but none of its {} triangles gives the bake any light: {}",
-                                     mat.name, triangles[m], why));
+        unseen.push_back(fmt::format("material '{}' emits, but its {} triangle{} the bake no light: {}", mat.name,
+                                     triangles[m], triangles[m] == 1 ? " gives" : "s give", why));
         scene.warnings.push_back(scene.path.string() + ": " + unseen.back());
     }
     const bool lit = shining_lights(scene) > 0 ||
