@@ -34,6 +34,13 @@ void expect_refused(const RunResult& r, const std::string& words) {
     CHECK(r.err.find(words) != std::string::npos);
 }
 
+// The hemirad executable with `args`, each quoted, for a shell script.
+std::string hemirad_command(const std::vector<std::string>& args) {
+    std::string command = shell_quote(HEMIRAD_EXE);
+    for (const std::string& a : args) command += " " + shell_quote(a);
+    return command;
+}
+
 // The closed room (scenes/closed_room.gltf) with `edit` applied, written as dir/name.
 template <class Edit>
 fs::path closed_room_with(const TempDir& dir, const std::string& name, Edit edit) {
@@ -268,12 +275,9 @@ namespace {
 // A long bake (a preview every pass) into dir/out, sent `signal` once its second preview exists;
 // `env --default-signal` undoes the ignoring of SIGINT and SIGQUIT a shell gives background jobs.
 RunResult signalled_bake(const TempDir& dir, const std::string& signal) {
-    std::string script = "env --default-signal=INT,QUIT " + shell_quote(HEMIRAD_EXE);
-    for (const std::string& a : {std::string("bake"), kClosedRoom.string(), std::string("-o"), std::string("out"),
-                                 std::string("--hemicube"), std::string("256"), std::string("--threshold"),
-                                 std::string("1e-7"), std::string("--preview-every"), std::string("1"),
-                                 std::string("--image-width"), std::string("32"), std::string("--quiet")})
-        script += " " + shell_quote(a);
+    std::string script = "env --default-signal=INT,QUIT " +
+                         hemirad_command({"bake", kClosedRoom.string(), "-o", "out", "--hemicube", "256", "--threshold",
+                                          "1e-7", "--preview-every", "1", "--image-width", "32", "--quiet"});
     script += " & pid=$!; i=0; while [ ! -e out/preview/pass_000002.png ] && [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); "
               "done; kill -" + signal + " $pid && echo signal-sent; wait $pid";
     return run_shell(dir, script);
@@ -306,12 +310,8 @@ TEST_CASE("hostile input: every signal that would end a bake stops it cleanly: e
 TEST_CASE("hostile input: a reader that goes away (SIGPIPE on --progress) stops the bake cleanly", "[hostile][signals]") {
     TempDir dir;
     // stderr into a pipe whose reader takes one byte and leaves: the next progress line is SIGPIPE.
-    std::string bake = shell_quote(HEMIRAD_EXE);
-    for (const std::string& a : {std::string("bake"), kClosedRoom.string(), std::string("-o"), std::string("out"),
-                                 std::string("--hemicube"), std::string("256"), std::string("--threshold"),
-                                 std::string("1e-7"), std::string("--image-width"), std::string("32"),
-                                 std::string("--solver"), std::string("progressive"), std::string("--progress")})
-        bake += " " + shell_quote(a);
+    const std::string bake = hemirad_command({"bake", kClosedRoom.string(), "-o", "out", "--hemicube", "256", "--threshold",
+                                              "1e-7", "--image-width", "32", "--solver", "progressive", "--progress"});
     const RunResult r = run_shell(dir, "bash -c " + shell_quote(bake + " 2>&1 | head -c 1 >/dev/null; echo status=${PIPESTATUS[0]}"));
     INFO("stdout: " << r.out << " stderr: " << r.err);
     CHECK(r.out.find("status=141") != std::string::npos);
@@ -325,11 +325,9 @@ TEST_CASE("hostile input: a stop while the bake polls nothing (a large render) e
     // The solve is over in a second; rendering and writing 8192 × 6144 pixels take many more, with
     // no check for a stop inside: the watchdog (core/cancel.h) ends the process.
     // Not --quiet: the bake's "form factors on" line says the solve has begun.
-    std::string script = shell_quote(HEMIRAD_EXE);
-    for (const std::string& a : bake_args(kClosedRoom, "mine",
-                                          {"--hemicube", "32", "--patch-size", "1.0", "--element-size", "0.5",
-                                           "--max-passes", "200", "--image-width", "8192"}))
-        script += " " + shell_quote(a);
+    std::string script = hemirad_command(bake_args(kClosedRoom, "mine",
+                                                   {"--hemicube", "32", "--patch-size", "1.0", "--element-size", "0.5",
+                                                    "--max-passes", "200", "--image-width", "8192"}));
     script += " 2>err.txt & pid=$!; i=0; while ! grep -q 'form factors' err.txt 2>/dev/null && [ $i -lt 600 ]; do sleep 0.05; "
               "i=$((i+1)); done; sleep 2; start=$(date +%s%N); kill -TERM $pid; wait $pid; code=$?; "
               "end=$(date +%s%N); echo code=$code ms=$(( (end - start) / 1000000 )); cat err.txt";
@@ -393,12 +391,9 @@ TEST_CASE("hostile input: empty and hex values of --sun, --sky and --max-memory 
 TEST_CASE("hostile input: a disk that fills while previews are written is an error, nothing left", "[hostile][outputs]") {
     TempDir dir;
     // A 100 KB tmpfs in a mount namespace of the test's own (root only; skipped elsewhere).
-    std::string bake = shell_quote(HEMIRAD_EXE);
-    for (const std::string& a : {std::string("bake"), kClosedRoom.string(), std::string("-o"), std::string("full/out"),
-                                 std::string("--hemicube"), std::string("64"), std::string("--threshold"),
-                                 std::string("1e-7"), std::string("--image-width"), std::string("128"),
-                                 std::string("--preview-every"), std::string("1"), std::string("--quiet")})
-        bake += " " + shell_quote(a);
+    const std::string bake = hemirad_command({"bake", kClosedRoom.string(), "-o", "full/out", "--hemicube", "64",
+                                              "--threshold", "1e-7", "--image-width", "128", "--preview-every", "1",
+                                              "--quiet"});
     const RunResult r = run_shell(
         dir, "mkdir full && unshare -m sh -c " +
                  shell_quote("mount -t tmpfs -o size=100k tmpfs full || exit 77; " + bake +

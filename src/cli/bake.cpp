@@ -167,17 +167,19 @@ fs::path preview_staging(const fs::path& file) { return file.parent_path() / (".
 class OutputTransaction {
 public:
     explicit OutputTransaction(const fs::path& dir) : dir_(dir) {
-        // Remember every directory this run creates (parents too), to remove them on failure.
+        // Every directory this run creates (parents too), to remove them on failure.
         std::error_code ec;
+        std::vector<fs::path> created_dirs;
         for (fs::path p = fs::absolute(dir_, ec); !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
-            created_dirs_.push_back(p);
+            created_dirs.push_back(p);
             if (p == p.parent_path()) break;
         }
         staging_ = dir_ / fmt::format("{}{}", kStagingPrefix, static_cast<long>(getpid()));
-        // What the watchdog removes should the bake not unwind by itself (core/cancel.h): the
-        // staging directory, then the directories this run made, deepest first, if empty.
+        // What a failed run removes (by the destructor, or by the watchdog should the bake not
+        // unwind by itself: core/cancel.h): the staging directory, the preview frames, then the
+        // directories this run made, deepest first, if empty.
         cleanup_.remove_tree(staging_);
-        for (const auto& d : created_dirs_) cleanup_.remove_if_empty(d);
+        for (const auto& d : created_dirs) cleanup_.remove_if_empty(d);
         fs::create_directories(dir_, ec);
         if (ec || !fs::is_directory(dir_))
             throw InputError(fmt::format("{}: cannot create output directory: {}", dir_.string(), ec ? ec.message() : "not a directory"));
@@ -188,17 +190,7 @@ public:
     }
     OutputTransaction(const OutputTransaction&) = delete;
     OutputTransaction& operator=(const OutputTransaction&) = delete;
-    ~OutputTransaction() {
-        if (committed_) return;
-        std::error_code ec;  // destructors never throw
-        fs::remove_all(staging_, ec);
-        for (const auto& f : previews_) {
-            fs::remove(f, ec);
-            fs::remove(preview_staging(f), ec);
-        }
-        if (created_preview_dir_) fs::remove(dir_ / "preview", ec);
-        for (const auto& d : created_dirs_) fs::remove(d, ec);  // deepest first; only if empty
-    }
+    ~OutputTransaction() { cleanup_.remove_now(); }  // nothing once committed; never throws
 
     fs::path staged(const std::string& name) const { return staging_ / name; }
 
@@ -206,12 +198,8 @@ public:
     fs::path preview_path(long pass) {
         const fs::path dir = dir_ / "preview";
         std::error_code ec;
-        if (!fs::exists(dir, ec)) {
-            created_preview_dir_ = fs::create_directories(dir, ec);
-            if (created_preview_dir_) cleanup_.remove_if_empty(dir);
-        }
+        if (!fs::exists(dir, ec) && fs::create_directories(dir, ec)) cleanup_.remove_if_empty(dir);
         const fs::path file = dir / fmt::format("pass_{:06d}.png", pass);
-        previews_.push_back(file);
         cleanup_.remove_file(file);
         cleanup_.remove_file(preview_staging(file));
         return file;
@@ -237,7 +225,6 @@ public:
                 }
                 moved.push_back(dir_ / name);
             }
-            committed_ = true;
             cleanup_.release();
         });
         std::error_code ec;
@@ -247,8 +234,6 @@ public:
 
 private:
     fs::path dir_, staging_;
-    bool created_preview_dir_ = false, committed_ = false;
-    std::vector<fs::path> previews_, created_dirs_;
     cancel::Cleanup cleanup_;
 };
 

@@ -62,6 +62,19 @@ const char* signal_name(int signal) {
     }
 }
 
+// Removes what one scope holds (the registry's mutex held).
+void remove_all_of(const Cleanup::State& s) {
+    std::error_code ec;
+    for (const fs::path& f : s.files) fs::remove(f, ec);
+    for (const fs::path& t : s.trees) fs::remove_all(t, ec);
+    // Deepest first (a preview directory inside a directory the bake made); only if empty.
+    std::vector<fs::path> dirs = s.empty_dirs;
+    std::stable_sort(dirs.begin(), dirs.end(), [](const fs::path& a, const fs::path& b) {
+        return std::distance(a.begin(), a.end()) > std::distance(b.begin(), b.end());
+    });
+    for (const fs::path& d : dirs) fs::remove(d, ec);
+}
+
 // Removes what every live, unreleased scope holds. Returns whether any scope was released (the
 // outputs are committed: the process is to finish by itself).
 bool clean_up_all() {
@@ -71,19 +84,10 @@ bool clean_up_all() {
     for (const std::weak_ptr<Cleanup::State>& weak : r.scopes) {
         const std::shared_ptr<Cleanup::State> s = weak.lock();
         if (!s) continue;
-        if (s->released) {
+        if (s->released)
             committed = true;
-            continue;
-        }
-        std::error_code ec;
-        for (const fs::path& f : s->files) fs::remove(f, ec);
-        for (const fs::path& t : s->trees) fs::remove_all(t, ec);
-        // Deepest first (a preview directory inside a directory the bake made); only if empty.
-        std::vector<fs::path> dirs = s->empty_dirs;
-        std::stable_sort(dirs.begin(), dirs.end(), [](const fs::path& a, const fs::path& b) {
-            return std::distance(a.begin(), a.end()) > std::distance(b.begin(), b.end());
-        });
-        for (const fs::path& d : dirs) fs::remove(d, ec);
+        else
+            remove_all_of(*s);
     }
     return committed;
 }
@@ -100,6 +104,13 @@ void take(int signal) {
     sigemptyset(&action.sa_mask);
     action.sa_flags = SA_RESTART;
     sigaction(signal, &action, nullptr);
+}
+
+// Scopes hold absolute paths: deepest first is then by components, whatever the owner named.
+fs::path absolute_path(const fs::path& p) {
+    std::error_code ec;
+    const fs::path a = fs::absolute(p, ec);
+    return ec ? p : a;
 }
 
 void watchdog() {
@@ -184,20 +195,25 @@ Cleanup::~Cleanup() {
 
 void Cleanup::remove_tree(const fs::path& path) {
     std::lock_guard<std::mutex> lock(registry().mutex);
-    state_->trees.push_back(path);
+    state_->trees.push_back(absolute_path(path));
 }
 
 void Cleanup::remove_file(const fs::path& path) {
     std::lock_guard<std::mutex> lock(registry().mutex);
-    state_->files.push_back(path);
+    state_->files.push_back(absolute_path(path));
 }
 
 void Cleanup::remove_if_empty(const fs::path& dir) {
     std::lock_guard<std::mutex> lock(registry().mutex);
-    state_->empty_dirs.push_back(dir);
+    state_->empty_dirs.push_back(absolute_path(dir));
 }
 
 void Cleanup::release() { state_->released = true; }  // atomic: inside critical() or alone
+
+void Cleanup::remove_now() {
+    std::lock_guard<std::mutex> lock(registry().mutex);
+    if (!state_->released) remove_all_of(*state_);
+}
 
 Cleanup::Lock::Lock(Cleanup&) { registry().mutex.lock(); }
 Cleanup::Lock::~Lock() { registry().mutex.unlock(); }

@@ -70,6 +70,9 @@ public:
         f();
     }
     void release();  // committed: nothing to remove
+    // Removes what the scope holds now, as the watchdog would (files, trees, then the empty
+    // directories deepest first), unless released: the owner's own clean-up when it unwinds.
+    void remove_now();
 
     struct State;  // what the watchdog reads (cancel.cpp)
 
