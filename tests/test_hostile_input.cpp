@@ -408,3 +408,33 @@ TEST_CASE("hostile input: a disk that fills while previews are written is an err
     CHECK(r.err.find("is the disk full?") != std::string::npos);
     CHECK(r.out.find("entries=0") != std::string::npos);
 }
+
+TEST_CASE("hostile input: 100,000 point lights say how long they will take before starting, show progress and stop at once", "[hostile][lights]") {
+    TempDir dir;
+    // An 11 MB file of one light placed by 100,000 nodes: 200,000 hemicubes, minutes on 2 cores.
+    // It ran past 120 s with no estimate and no progress, and held every row at once.
+    const fs::path file = closed_room_with(dir, "lights.gltf", [](json& g) {
+        g["extensionsUsed"] = {"KHR_lights_punctual"};
+        g["extensions"] = {{"KHR_lights_punctual", {{"lights", {{{"type", "point"}, {"intensity", 0.001}}}}}}};
+        for (int i = 0; i < 100000; ++i) {
+            g["scenes"][0]["nodes"].push_back(g["nodes"].size());
+            g["nodes"].push_back({{"translation", {-1.5 + 3.0 * (i % 400) / 400.0, 2.2, -2.0 + 4.0 * (i / 400) / 250.0}},
+                                  {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+        }
+    });
+    const std::string script =
+        hemirad_command({"bake", file.string(), "-o", "out", "--progress"}) +
+        " 2>err.txt & pid=$!; i=0; while ! grep -q \"lights' hemicubes [0-9]\" err.txt 2>/dev/null && [ $i -lt 1200 ]; do "
+        "sleep 0.05; i=$((i+1)); done; kill -TERM $pid; wait $pid; echo code=$?; cat err.txt";
+    const RunResult r = run_shell(dir, script);
+    INFO("stdout: " << r.out);
+    CHECK(r.out.find("code=130") != std::string::npos);
+    const std::size_t warned = r.out.find("this bake is expected to take about");
+    const std::size_t started = r.out.find("form factors on");
+    REQUIRE(warned != std::string::npos);
+    CHECK(warned < started);
+    CHECK(r.out.find("min (") != std::string::npos);  // minutes, not seconds
+    CHECK(r.out.find("lights' hemicubes", warned) != std::string::npos);
+    CHECK(r.out.find("lights' hemicubes 256 / 200000") != std::string::npos);  // progress, a batch at a time
+    CHECK(!fs::exists(dir / "out"));
+}

@@ -62,10 +62,11 @@ struct SolverTimes {
 };
 SolverTimes expected_times(const BakeShape& shape);
 
-// Seconds a whole bake is expected to take, by part, in the model of expected_times (2 CPU cores
-// through PoCL; a GPU is faster): the solve, the lights' hemicubes (`light_hemicubes`), and the
-// final gather (`gather_points` hemicubes of resolution `gather`, the first pass's; the later
-// passes re-use its rows). Said before a bake that would take minutes.
+// Seconds the counted work of a bake is expected to take, by part, in the model of
+// expected_times (2 CPU cores through PoCL; a GPU is faster): the matrix solve's rows and sweeps
+// (not progressive shooting, whose passes are not known before), the lights' hemicubes
+// (`light_hemicubes`), and the final gather (`gather_points` hemicubes of resolution `gather`,
+// the first pass's; the later passes re-use its rows). Said before a bake that would take minutes.
 struct TimeEstimate {
     std::vector<std::pair<std::string, double>> parts;  // (what, seconds)
     double total() const;
