@@ -74,6 +74,10 @@ double raster_records_private_bytes(const OpenCLTuning& t) {
     return cells * (4 + 8) + kSumTable + (2.0 * t.tile + t.lanes - 1) * 8 + kRest;
 }
 
+// The private memory of a setup or scatter work-item on a CPU, measured: with 8 MiB stacks PoCL
+// ran groups of 768 and crashed at 1024 (with 16 MiB stacks 1024 ran), so between 8.2 and 10.9 KB.
+constexpr double kSetupPrivateBytes = 11.0 * 1024;
+
 // The stack of a thread the OpenCL CPU runtime starts: glibc gives threads the soft stack limit
 // (8 MiB by default), or 2 MiB where it is unlimited.
 std::size_t worker_stack_bytes() {
@@ -394,9 +398,12 @@ OpenCLEngine::OpenCLEngine(const mesh::Mesh& mesh, const DeviceMesh* packed, ocl
         // at most half of that stack (PoCL reports a nominal 1 KB a work-item; raster_records'
         // per-cell winners are ours to count).
         if (info.type == "cpu") {
-            const double per_item = std::max<double>(
-                double(kernel.getWorkGroupInfo<CL_KERNEL_PRIVATE_MEM_SIZE>(device)),
-                std::string_view(name) == "raster" && tuning.raster_per_record ? raster_records_private_bytes(tuning) : 0.0);
+            const std::string_view kernel_name(name);
+            const double counted = kernel_name == "raster" && tuning.raster_per_record ? raster_records_private_bytes(tuning)
+                                   : kernel_name == "setup" || kernel_name == "scatter" ? kSetupPrivateBytes
+                                                                                         : 0.0;
+            const double per_item =
+                std::max(double(kernel.getWorkGroupInfo<CL_KERNEL_PRIVATE_MEM_SIZE>(device)), counted);
             if (per_item > 0.0)
                 most = std::min(most, std::max<std::size_t>(1, std::size_t(0.5 * double(worker_stack_bytes()) / per_item)));
         }
