@@ -18,7 +18,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "cli/bake.h"
+#include "bake/bake.h"
 #include "core/error.h"
 #include "formfactor/engine.h"
 #include "scene/random_scene.h"
@@ -51,7 +51,7 @@ private:
 
 struct RandomBake {
     scene::RandomSceneInfo scene;
-    cli::BakeOptions options;
+    bake::Options options;
     std::string settings;  // one line, for messages
 };
 
@@ -74,7 +74,7 @@ inline RandomBake make_random_bake(scene::Choices& c, const std::filesystem::pat
     RandomBake b;
     const std::filesystem::path file = dir / "scene.gltf";
     b.scene = scene::write_random_scene(c, file, limits.scene);
-    cli::BakeOptions& o = b.options;
+    bake::Options& o = b.options;
     o.scene = file.string();
     o.output = (dir / "out").string();
     o.device = "ref";
@@ -121,7 +121,7 @@ inline RandomBake make_random_bake(scene::Choices& c, const std::filesystem::pat
 }
 
 // What the settings make bad usage on purpose (a bake then refuses them with an InputError).
-inline bool refused_by_design(const cli::BakeOptions& o) {
+inline bool refused_by_design(const bake::Options& o) {
     return o.effects == "interreflection=off" && o.solver == "progressive";
 }
 

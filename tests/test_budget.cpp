@@ -5,8 +5,8 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "cli/bake.h"
-#include "cli/budget.h"
+#include "bake/bake.h"
+#include "bake/budget.h"
 #include "cli_support.h"
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
@@ -159,12 +159,12 @@ TEST_CASE("budget: the sweep model against Gauss-Seidel's own sweeps", "[budget]
 }
 
 TEST_CASE("the pass cap: --max-passes, else 100,000 or twice the patches", "[budget]") {
-    cli::BakeOptions o;  // --max-passes not given
-    CHECK(cli::max_passes_for(o, 924) == 100000);
-    CHECK(cli::max_passes_for(o, 50000) == 100000);
-    CHECK(cli::max_passes_for(o, 364391) == 728782);  // city:1M at draft, which needs 150,795
+    bake::Options o;  // --max-passes not given
+    CHECK(bake::max_passes_for(o, 924) == 100000);
+    CHECK(bake::max_passes_for(o, 50000) == 100000);
+    CHECK(bake::max_passes_for(o, 364391) == 728782);  // city:1M at draft, which needs 150,795
     o.max_passes = 0;  // no limit
-    CHECK(cli::max_passes_for(o, 364391) == 0);
+    CHECK(bake::max_passes_for(o, 364391) == 0);
     o.max_passes = 7;
-    CHECK(cli::max_passes_for(o, 364391) == 7);
+    CHECK(bake::max_passes_for(o, 364391) == 7);
 }

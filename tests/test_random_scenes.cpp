@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "cl/runtime.h"
-#include "cli/bake.h"
+#include "bake/bake.h"
 #include "core/error.h"
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
@@ -149,12 +149,12 @@ void check_converged_answer(const test::RandomBake& bake, const std::filesystem:
     const nlohmann::json report = nlohmann::json::parse(test::read_file_text(std::filesystem::path(bake.options.output) / "report.json"));
     if (report.at("settings").at("solver") != "progressive" || !report.at("converged").get<bool>()) return;
     if (bake.options.effects.find("convergence") != std::string::npos) return;
-    cli::BakeOptions full = bake.options;
+    bake::Options full = bake.options;
     full.effects = full.effects.empty() ? "convergence=off" : full.effects + ",convergence=off";
     full.max_passes = 20000;
     full.output = (dir / "out_full").string();
     full.on_shot = nullptr;
-    REQUIRE_NOTHROW(cli::run_bake(full));
+    REQUIRE_NOTHROW(bake::run(full));
     const nlohmann::json shot_on = nlohmann::json::parse(test::read_file_text(std::filesystem::path(full.output) / "report.json"));
     if (!shot_on.at("converged").get<bool>()) return;
     const double threshold = report.at("settings").at("threshold");
@@ -191,13 +191,13 @@ TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with
         test::RandomBake bake = test::make_random_bake(c, dir.path(), limits);
         CAPTURE(seed, bake.scene.summary, bake.settings);
         if (test::refused_by_design(bake.options)) {
-            CHECK_THROWS_AS(cli::run_bake(bake.options), InputError);
+            CHECK_THROWS_AS(bake::run(bake.options), InputError);
             ++refused;
             continue;
         }
         test::ShotChecker shots;
         bake.options.on_shot = std::ref(shots);
-        REQUIRE_NOTHROW(cli::run_bake(bake.options));
+        REQUIRE_NOTHROW(bake::run(bake.options));
         ++baked;
         CHECK(shots.shots() > 0);
         INFO("shots: " << joined(shots.problems()));
@@ -209,11 +209,11 @@ TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with
 
         if (!opencl) continue;
         test::ShotChecker cl_shots;
-        cli::BakeOptions on_cl = bake.options;
+        bake::Options on_cl = bake.options;
         on_cl.device = "opencl";
         on_cl.output = (dir.path() / "out_opencl").string();
         on_cl.on_shot = std::ref(cl_shots);
-        REQUIRE_NOTHROW(cli::run_bake(on_cl));
+        REQUIRE_NOTHROW(bake::run(on_cl));
         CHECK(cl_shots.shots() == shots.shots());
         const std::vector<std::string> differences = test::compare_bakes(bake.options.output, on_cl.output);
         INFO("reference against OpenCL: " << joined(differences));

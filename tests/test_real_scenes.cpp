@@ -31,7 +31,7 @@ std::string joined(const std::vector<std::string>& lines) {
 
 // `hemirad bake SCENE -o DIR --quiet EXTRA…` must exit 0 with outputs that keep every invariant
 // of random_bake.h (books balanced, finite, a baked glTF that loads); returns report.json.
-json bake(const test::TempDir& dir, const fs::path& scene, const std::string& out,
+json bake_scene(const test::TempDir& dir, const fs::path& scene, const std::string& out,
           const std::vector<std::string>& extra = {}) {
     const json report = test::bake_ok(dir, scene, dir / out, test::concat({"--quiet"}, extra));
     const std::vector<std::string> problems = test::check_bake_output(dir / out);
@@ -88,7 +88,7 @@ TEST_CASE("real scenes: the 168-triangle double-sided cylinder lamp bakes and it
     // every watt of it is absorbed, Σ (1 − ρ) H A = E A_outer over the fronts, so Σ H A = 2 E A_outer;
     // the light of its inner side stays inside it. Both sides emit: emitted = 2 E A_outer.
     test::TempDir dir;
-    const json report = bake(dir, kScenes / "double_sided_cylinder.gltf", "out");
+    const json report = bake_scene(dir, kScenes / "double_sided_cylinder.gltf", "out");
     constexpr double kE = 5.0, kRho = 0.5, kRadius = 0.15, kLength = 0.7;
     constexpr int kSegments = 28;
     const double outer = kSegments * 2.0 * kRadius * std::sin(M_PI / kSegments) * kLength +
@@ -129,7 +129,7 @@ TEST_CASE("real scenes: a lamp whose brighter side faces the sky lights the floo
     const std::vector<std::vector<std::string>> runs = {
         {"--solver", "auto"}, {"--solver", "progressive"}, {"--solver", "progressive", "--effects", "convergence=off"}};
     for (std::size_t run = 0; run < runs.size(); ++run) {
-        const json report = bake(dir, kScenes / "lamp_facing_sky.gltf", "out_" + std::to_string(run), runs[run]);
+        const json report = bake_scene(dir, kScenes / "lamp_facing_sky.gltf", "out_" + std::to_string(run), runs[run]);
         CAPTURE(runs[run], report.at("settings").at("solver"), want);
         check_convergence_is_honest(report);
         const std::map<std::string, json> m = meshes(report);
@@ -152,7 +152,7 @@ TEST_CASE("real scenes: a mirrored double-sided torus and a mirrored sphere keep
     // At --quality draft: the default bake takes 26 s on 2 cores (1377 patches, most of it in the
     // form factors and refinement's re-gather), draft 4 s, and both balance to 1%.
     test::TempDir dir;
-    const json report = bake(dir, kScenes / "curved_objects.gltf", "out", {"--quality", "draft"});
+    const json report = bake_scene(dir, kScenes / "curved_objects.gltf", "out", {"--quality", "draft"});
     const std::map<std::string, json> m = meshes(report);
     CHECK(report.at("counts").at("triangles") == 12 + 2 + 24 * 12 * 2 + (2 * 24 + 24 * 10 * 2));
     const json& e = report.at("energy");

@@ -23,9 +23,11 @@
 #include <vector>
 
 #include "cl/runtime.h"
-#include "cli/bake.h"
+#include "bake/bake.h"
+#include "core/quality.h"
 #include "cli/bench.h"
-#include "cli/engine_select.h"
+#include "bake/engine_select.h"
+#include "cli/progress_line.h"
 #include "core/error.h"
 #include "dist/dist.h"
 #include "formfactor/verify.h"
@@ -34,6 +36,8 @@
 
 namespace hemirad::cli {
 namespace {
+
+using BakeOptions = hemirad::bake::Options;
 
 // CLI11 converts with strtod and strtoll, which take "nan", "inf", "1e400" (as inf), hex and
 // octal, and its Range and PositiveNumber checks let NaN through (every comparison with NaN is
@@ -214,7 +218,7 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
     bake.add_option("--preview-every", o.preview_every, "write DIR/preview/pass_NNNNNN.png every K passes")
         ->transform(integer_from(0L));
     bake.add_option("--image-width", o.image_width, "width of render.exr/png; height follows the camera's aspect")
-        ->transform(integer_in(16, kMaxImageSide))
+        ->transform(integer_in(16, hemirad::bake::kMaxImageSide))
         ->capture_default_str();
     bake.add_option("--max-memory", o.max_memory,
                     "memory the bake may use, e.g. 8G or 512M (default: what the machine has available); a bake "
@@ -294,17 +298,17 @@ void write_generated_scene(const SceneWriteCommand& c, std::ostream& out) {
 // A worker rank's loop: its engines are made as a bake on rank 0 would make them on one device
 // (choose_engine, then engine_like for the next meshes), never verifying.
 int serve_rank(const std::string& device) {
-    std::shared_ptr<EngineChoice> choice;
+    std::shared_ptr<bake::EngineChoice> choice;
     const auto factory = [&](const mesh::Mesh& mesh, const formfactor::Settings& settings) {
         if (!choice) {
-            choice = std::make_shared<EngineChoice>(choose_engine(device, false, 1, mesh, settings));
+            choice = std::make_shared<bake::EngineChoice>(bake::choose_engine(device, false, 1, mesh, settings));
             if (!choice->warning.empty())
                 std::cerr << "hemirad: rank " << dist::rank() << ": warning: " << choice->warning << "\n";
             return std::move(choice->engine);
         }
-        return engine_like(*choice, mesh, settings);
+        return bake::engine_like(*choice, mesh, settings);
     };
-    return dist::serve(factory, [](const std::exception& e) { return device_failure(e); });
+    return dist::serve(factory, [](const std::exception& e) { return bake::device_failure(e); });
 }
 
 }  // namespace
@@ -397,12 +401,13 @@ int run(int argc, char** argv) {
         bake_options.progress_tty = isatty(fileno(stderr));
         bake_options.progress = !bake_options.quiet && (bake_options.progress || bake_options.progress_tty);
         cancel::install();
-        run_bake(bake_options);
+        ProgressLine line(bake_options.progress, bake_options.progress_tty, bake_options.quiet);
+        hemirad::bake::run(bake_options, line);
         return 0;
     } catch (const InputError& e) {
         std::cerr << "hemirad: " << printable(e.what()) << "\n";
         return 2;
-    } catch (const Interrupted&) {
+    } catch (const cancel::Interrupted&) {
         cancel::reported();
         std::cerr << (bake_options.progress && bake_options.progress_tty ? "\n" : "")
                   << "hemirad: " << cancel::describe() << "; no output written\n";
@@ -418,7 +423,7 @@ int run(int argc, char** argv) {
                   << " (--device auto would start again on the reference)\n";
         return 1;
     } catch (const cl::Error& e) {
-        std::cerr << "hemirad: device failed: " << printable(device_failure(e)) << "\n";
+        std::cerr << "hemirad: device failed: " << printable(bake::device_failure(e)) << "\n";
         return 1;
     } catch (const OutputError& e) {
         std::cerr << "hemirad: " << printable(e.what()) << "\n";

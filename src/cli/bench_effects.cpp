@@ -15,7 +15,7 @@
 #include <vector>
 
 #include "bench/throughput.h"
-#include "cli/bake.h"
+#include "bake/bake.h"
 #include "core/error.h"
 
 namespace hemirad::cli {
@@ -201,7 +201,7 @@ ordered_json run_effects_bench(const EffectsBenchOptions& o, std::ostream& log) 
     const TempDir temp("hemirad-bench-effects");
     long counter = 0;
     const auto bake = [&](const BakeSpec& s) {
-        BakeOptions b;
+        bake::Options b;
         b.scene = (fs::path(o.scenes_dir) / s.scene).string();
         b.output = (temp.path() / fmt::format("bake-{}", counter++)).string();
         b.device = o.device;
@@ -210,7 +210,7 @@ ordered_json run_effects_bench(const EffectsBenchOptions& o, std::ostream& log) 
         b.effects = s.effects;
         b.max_passes = s.max_passes;
         b.quiet = true;
-        run_bake(b);
+        bake::run(b);
         ordered_json report = read_report(fs::path(b.output) / "report.json");
         std::error_code ec;
         fs::remove_all(b.output, ec);

@@ -13,7 +13,7 @@
 
 #include <glm/glm.hpp>
 
-#include "cli/bake.h"
+#include "bake/bake.h"
 #include "cli/bench_support.h"
 #include "core/error.h"
 
@@ -235,7 +235,7 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
     for (std::size_t k = o.device == "ref" ? 1 : 0; k <= runs.size(); ++k) {
         const bool warm_up = k == 0;
         const Run& r = warm_up ? runs.front() : runs[k - 1];
-        BakeOptions b;
+        bake::Options b;
         b.scene = o.scene;
         b.output = (temp.path() / fmt::format("bake-{}", k)).string();
         b.device = o.device;
@@ -248,7 +248,7 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
         b.gather_contrast = r.gather_contrast;
         b.image_width = ref.width;
         b.quiet = true;
-        run_bake(b);
+        bake::run(b);
         if (warm_up) {
             std::error_code ec;
             fs::remove_all(b.output, ec);

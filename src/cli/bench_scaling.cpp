@@ -8,8 +8,8 @@
 #include <tuple>
 
 #include "bench/throughput.h"
-#include "cli/bake.h"
-#include "cli/engine_select.h"
+#include "bake/bake.h"
+#include "bake/engine_select.h"
 #include "core/error.h"
 #include "core/timing.h"
 #include "dist/dist.h"
@@ -73,14 +73,14 @@ ordered_json run_scaling_bench(const ScalingOptions& o, std::ostream& log) {
     const formfactor::Settings settings{o.hemicube, o.seed};
     const std::vector<formfactor::ShotRequest> shots = bench::bench_shots(mesh, o.shots);
 
-    EngineChoice choice = choose_engine(o.device, false, 1, mesh, settings);
+    bake::EngineChoice choice = bake::choose_engine(o.device, false, 1, mesh, settings);
     choice.engine.reset();  // each configuration makes its own (engine_on)
     const int world = dist::size();
     std::vector<Config> configs;
     for (std::size_t d = 1; d <= choice.devices.size(); ++d) configs.push_back({d, 1});
     for (int k = 2; k <= world; ++k) configs.push_back({choice.devices.size(), k});
     const std::size_t most = std::max<std::size_t>(choice.devices.size() + static_cast<std::size_t>(world - 1), 1);
-    const int batch = o.batch > 0 ? o.batch : planned_batch(most);
+    const int batch = o.batch > 0 ? o.batch : bake::planned_batch(most);
     const int passes = o.passes > 0 ? o.passes : 2 * batch;
 
     log << fmt::format("{}: {} triangles, {} patches, {} elements; N {}, {} shots a run in batches of {}, {} ranks, "
@@ -218,7 +218,7 @@ ordered_json run_scaling_bench(const ScalingOptions& o, std::ostream& log) {
         {"row_unpack_seconds_per_shot", unpack_seconds},
         {"request_bytes_per_shot", static_cast<double>(dist::pack_shots(0, shots).size()) / static_cast<double>(shots.size())},
         {"mesh_bytes", dist::pack_mesh(mesh).size()},
-        {"batch_per_member", kShotsPerMember}};
+        {"batch_per_member", bake::kShotsPerMember}};
     ordered_json doc;
     doc["version"] = HEMIRAD_VERSION;
     doc["machine"] = bench::machine_info();

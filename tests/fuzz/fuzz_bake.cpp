@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "cl/runtime.h"
-#include "cli/bake.h"
+#include "bake/bake.h"
 #include "core/error.h"
 #include "random_bake.h"
 #include "scene/random_scene.h"
@@ -66,9 +66,9 @@ protected:
 
 // Runs one bake: true when it baked, false (with the message in `refusal`) when it refused its
 // input with an InputError, the clean way to refuse bad input.
-bool bake_or_refuse(const test::RandomBake& bake, const cli::BakeOptions& options, std::string& refusal) {
+bool bake_or_refuse(const test::RandomBake& bake, const bake::Options& options, std::string& refusal) {
     try {
-        cli::run_bake(options);
+        bake::run(options);
         return true;
     } catch (const InputError& e) {
         refusal = e.what();
@@ -109,7 +109,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const bool on_opencl = g_opencl && choices.chance(0.25);
 
     test::ShotChecker shots;
-    cli::BakeOptions options = bake.options;
+    bake::Options options = bake.options;
     options.on_shot = std::ref(shots);
     std::string refusal;
     ++g_tally.inputs;
@@ -130,7 +130,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
     if (on_opencl) {
         test::ShotChecker cl_shots;
-        cli::BakeOptions cl = bake.options;
+        bake::Options cl = bake.options;
         cl.device = "opencl";
         cl.output = (dir.path() / "out_opencl").string();
         cl.on_shot = std::ref(cl_shots);

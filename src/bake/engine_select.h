@@ -15,7 +15,7 @@
 #include "formfactor/verify.h"
 #include "mesh/mesh.h"
 
-namespace hemirad::cli {
+namespace hemirad::bake {
 
 struct EngineChoice {
     // One device whose engine takes a share of every batch.
@@ -79,4 +79,4 @@ std::unique_ptr<formfactor::Engine> engine_like(const EngineChoice& choice, cons
 std::unique_ptr<formfactor::Engine> engine_on(const EngineChoice& choice, std::size_t devices, int ranks,
                                               const mesh::Mesh& mesh, const formfactor::Settings& settings);
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bake

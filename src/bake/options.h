@@ -1,28 +1,23 @@
-// The bake pipeline behind `hemirad bake`: load, mesh, solve, write — all or nothing.
+// What a bake is asked for: the settings of `hemirad bake`, as the CLI parses them and tests and
+// benchmarks give them.
 #pragma once
 
-#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
-#include <ostream>
-#include <stdexcept>
 #include <limits>
 #include <string>
-
-#include "core/cancel.h"
-#include "core/quality.h"
 
 namespace hemirad::formfactor {
 struct ShotResult;
 }
 
-namespace hemirad::cli {
+namespace hemirad::bake {
 
 // The largest render, in pixels a side (--image-width, and the height its camera's aspect gives).
 inline constexpr int kMaxImageSide = 16384;
 
-struct BakeOptions {
+struct Options {
     std::string scene;
     std::string output = "out";
     std::string device = "auto";
@@ -70,13 +65,6 @@ struct BakeOptions {
     std::function<void(const formfactor::ShotResult&)> on_shot;
 };
 
-// Thrown when a signal stops a bake (core/cancel.h); nothing has been written (or it was removed).
-using Interrupted = cancel::Interrupted;
-
-// Runs a bake. Throws InputError (exit 2), Interrupted, or other exceptions (exit 1). On any
-// throw, whatever this run wrote under the output directory has been removed.
-void run_bake(const BakeOptions& options);
-
 // The batch a bake plans when --batch is not given: 1 on one device, else kShotsPerMember shots
 // for each device and rank that shares it (at most 256), so that every member takes several
 // chunks of each batch (formfactor::ShardedEngine). The rows do not depend on it; the order of
@@ -86,8 +74,6 @@ int planned_batch(std::size_t members);
 
 // The progressive solver's cap on passes for a mesh of `patches` patches: options.max_passes, or
 // where it is < 0 (not given), 100,000 or twice the patches, whichever is more.
-long max_passes_for(const BakeOptions& options, std::size_t patches);
+long max_passes_for(const Options& options, std::size_t patches);
 
-void list_devices(std::ostream& out, bool json);
-
-}  // namespace hemirad::cli
+}  // namespace hemirad::bake

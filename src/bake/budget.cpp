@@ -1,5 +1,5 @@
 // Memory and time estimates for planning a bake before its mesh is built.
-#include "cli/budget.h"
+#include "bake/budget.h"
 
 #include <fmt/format.h>
 
@@ -11,7 +11,7 @@
 #include "solve/matrix.h"
 #include "solve/refinement.h"
 
-namespace hemirad::cli {
+namespace hemirad::bake {
 namespace {
 
 // Refinement is taken to double the elements (the Cornell box: 8316 → 15204).
@@ -227,4 +227,4 @@ SolverChoice choose_solver(const BakeShape& s, double limit) {
                                        s.max_reflectance)};
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bake

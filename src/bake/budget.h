@@ -9,7 +9,7 @@
 #include "mesh/mesh.h"
 #include "solve/matrix.h"
 
-namespace hemirad::cli {
+namespace hemirad::bake {
 
 // What the estimate is made from.
 struct BakeShape {
@@ -84,4 +84,4 @@ struct SolverChoice {
 };
 SolverChoice choose_solver(const BakeShape& shape, double limit);
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bake

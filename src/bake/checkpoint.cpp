@@ -1,7 +1,7 @@
 // Checkpoints of a bake (see checkpoint.h). Layout: a magic line, the format version, the
 // fingerprint (hash and settings), then the solver's save() bytes, their FNV-1a hash and an end
 // marker.
-#include "cli/checkpoint.h"
+#include "bake/checkpoint.h"
 
 #include <fmt/core.h>
 #include <unistd.h>
@@ -20,7 +20,7 @@
 #include "core/error.h"
 #include "core/regular_file.h"
 
-namespace hemirad::cli {
+namespace hemirad::bake {
 namespace fs = std::filesystem;
 
 namespace {
@@ -260,4 +260,4 @@ void restore(solve::Resumable& solver, const std::string& state, const fs::path&
         throw InputError(fmt::format("{}: the checkpoint is damaged (bytes left over)", file.string()));
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bake

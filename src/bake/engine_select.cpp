@@ -1,5 +1,5 @@
 // Device selection for `hemirad bake` (see engine_select.h).
-#include "cli/engine_select.h"
+#include "bake/engine_select.h"
 
 #include <fmt/core.h>
 
@@ -12,7 +12,7 @@
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
 
-namespace hemirad::cli {
+namespace hemirad::bake {
 namespace {
 
 // `auto` trusts a device only after one shot agrees with the reference: a driver that builds the
@@ -267,4 +267,4 @@ std::unique_ptr<formfactor::Engine> engine_on(const EngineChoice& choice, std::s
     return assemble(choice, std::move(members), mesh, settings, ranks);
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bake

@@ -10,7 +10,7 @@
 #include "mesh/mesh.h"
 #include "solve/resumable.h"
 
-namespace hemirad::cli {
+namespace hemirad::bake {
 
 // What decides a bake's numbers: the mesh (every patch's and element's geometry,
 // reflectance and emission, so the scene file, its buffers and the effects applied to it) and
@@ -45,4 +45,4 @@ std::optional<int> checkpoint_batch(const std::filesystem::path& file);
 // Loads a state from read_checkpoint into the solver; InputError naming `file` if it is damaged.
 void restore(solve::Resumable& solver, const std::string& state, const std::filesystem::path& file);
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bake

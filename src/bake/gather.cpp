@@ -1,0 +1,211 @@
+// Stages "refine" and "gather" (see gather.h).
+#include "bake/gather.h"
+
+#include <algorithm>
+
+#include <fmt/core.h>
+
+#include "core/cancel.h"
+#include "core/memory.h"
+#include "core/timing.h"
+#include "mesh/texturing.h"
+#include "output/welded_mesh.h"
+#include "solve/final_gather.h"
+#include "solve/lights.h"
+
+namespace hemirad::bake {
+
+namespace {
+
+// Before a final gather, elements along contact lines longer than this fraction of the element size
+// (those not yet refined) are split once. Measured on the Cornell box against the path tracer
+// (per-pixel error, gather points): default 2.31% (10,370) → 2.16% (12,660); a uniformly finer
+// element (0.015 for 0.02) costs more for less, 2.08% (16,661); split twice (0.3) 2.11% (17,382);
+// high 1.74% → 1.67%, draft 5.76% → 5.58%.
+constexpr double kContactGrading = 0.6;
+
+// Gather refinement (--gather-refine, --gather-contrast; solve::gather_contrasts): elements whose
+// vertices' gathered light spans more than the contrast and kGatherNoiseFloor of the mean are
+// split, down to kGatherMinSize of the element size, and only their new vertices gathered. On the
+// Cornell box (per-pixel error, gather points; four levels; bench --accuracy): at the default
+// 1.76% (12,660) → contrast 0.5 1.48% (14,570), 0.3 1.36% (18,478), 0.2 1.31% (26,398); one
+// level 1.61%, two 1.53%; down to 0.12 of the element instead of 0.06, contrast 0.2 gave 1.42%
+// (19,935). At high (gather N 192) 1.46% → 0.4 1.14% (18,880), 0.3 1.10% (20,877), 0.2 1.07%
+// (26,487). A uniformly finer element (0.01 for 0.02) gives 1.30% with 3× the gather.
+constexpr double kGatherNoiseFloor = 0.02;
+constexpr double kGatherMinSize = 0.06;
+
+
+}  // namespace
+
+Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
+    const Options& o = c.plan.o;
+    const auto t0 = Clock::now();
+    if (c.setup.effects.refinement.on && o.refine_levels > 0) {
+        solve::RefineSettings rs;
+        rs.contrast = o.contrast;
+        rs.max_levels = o.refine_levels;
+        rs.batch = std::max(o.batch, 64);
+        rs.max_elements = refinement_room(c.meshed.shape, c.meshed.solver, c.plan.memory_limit.bytes);
+        rs.cancelled = [] { return cancel::requested(); };
+        const mesh::Texturing texturing(c.scene);
+        rs.texturing = &texturing;
+        rs.lights = &c.scene.lights;
+        c.progress.begin_stage();
+        rs.progress = [&](int level, long shots, long total) { c.progress.refining(level, shots, total); };
+        Solution& s = lit.solved.solution;
+        solve::RefineResult refined = solve::refine(
+            std::move(lit.mesh), std::move(s.irradiance), s.shot,
+            [&](const mesh::Mesh& m, int level) { return engines.level(m, level); }, rs);
+        c.progress.end_stage();
+        cancel::check();
+        if (refined.stopped_for_memory.level > 0)
+            c.warnings.add(fmt::format("refinement stopped before level {}: splitting {} more elements would pass the {} {}",
+                                       refined.stopped_for_memory.level, refined.stopped_for_memory.split,
+                                       format_bytes(c.plan.memory_limit.bytes), c.plan.memory_limit.source));
+        lit.mesh = std::move(refined.mesh);
+        s.irradiance = std::move(refined.irradiance);
+        s.radiosity = std::move(refined.radiosity);
+        lit.levels = std::move(refined.levels);
+    }
+    lit.refine_seconds = seconds_since(t0);
+    return lit;
+}
+
+namespace {
+
+// Every vertex of the output but the sky dome's, through the patches' cells (gather_mesh).
+std::size_t gathered_vertices(const scene::Scene& scene, const output::WeldedMesh& w) {
+    std::size_t vertices = 0;
+    for (std::size_t n = 0; n < w.nodes.size(); ++n)
+        if (!scene.nodes[n].synthetic) vertices += w.nodes[n].positions.size();
+    return vertices;
+}
+
+// A hemicube per vertex: on real content many times the solve's shots, each costing about as
+// much (a 113k-vertex material ball at draft: the gather ran 15x the solve's time). Beyond
+// kMaxPlannedGather vertices the quality's gather is left out (a warning says so); --gather N
+// asks for it whatever the size. The count is the graded mesh's, so a mesh is graded only to be
+// gathered.
+bool too_many(const LightContext& c, std::size_t vertices, const char* graded) {
+    if (c.plan.gather_given || vertices <= kMaxPlannedGather) return false;
+    c.warnings.add(fmt::format("final gather left out: {} vertices{} would each take a hemicube (more than {}); "
+                               "--gather {} asks for it",
+                               vertices, graded, kMaxPlannedGather, c.plan.o.gather));
+    return true;
+}
+
+// The punctual and directional lights' light on `mesh`, shot on an engine of its own.
+std::vector<glm::dvec3> direct_light_on(const LightContext& c, const mesh::Mesh& mesh, EngineStack& engines) {
+    if (!solve::has_direct_light(mesh, c.scene.lights)) return {};
+    std::unique_ptr<formfactor::Engine> lights_engine = engines.level(mesh, 0);
+    return solve::direct_light(mesh, c.scene.lights, *lights_engine, c.plan.o.refine_levels + 1);
+}
+
+// Gather refinement: where the gathered light changes faster than the vertices follow, the
+// elements are split and only their new vertices gathered, drawing the last pass's light.
+void refine_gather(const LightContext& c, Lit& lit, std::vector<glm::dvec3>& direct, output::WeldedMesh& welded,
+                   const solve::GatherSettings& gs, EngineStack& engines) {
+    const Options& o = c.plan.o;
+    const mesh::Texturing texturing(c.scene);
+    solve::GatherRefinement r;
+    r.levels = o.gather_refine;
+    r.contrast = o.gather_contrast;
+    r.noise_floor = kGatherNoiseFloor;
+    r.min_size = kGatherMinSize * c.setup.mesh_settings.element_size;
+    // At most half as many vertices again as the gather's (the jungle at draft with --gather 32:
+    // 82,724 vertices in 161 s, and four levels went on past 500 s), and the quality's within
+    // kMaxPlannedGather.
+    const std::size_t base = static_cast<std::size_t>(lit.gathered.points);
+    r.max_vertices = base + base / 2;
+    if (!c.plan.gather_given) r.max_vertices = std::min(r.max_vertices, kMaxPlannedGather);
+    r.texturing = &texturing;
+    r.make_engine = [&](const mesh::Mesh& finer_drawn) { return engines.gather(finer_drawn, o.gather); };
+    if (!direct.empty()) r.direct_light = [&](const mesh::Mesh& finer) { return direct_light_on(c, finer, engines); };
+    Solution& s = lit.solved.solution;
+    solve::GatheredMesh g{lit.mesh, s.radiosity, s.irradiance, direct, welded, lit.gathered.light};
+    const auto gathered_node = [&](std::size_t n) { return !c.scene.nodes[n].synthetic; };
+    const solve::GatherRefined refined = solve::refine_gather(g, gathered_node, gs, r);
+    if (refined.cancelled) throw cancel::Interrupted();
+    lit.gathered.points += refined.points;
+    lit.gathered.gather_split = refined.split;
+    if (refined.capped)
+        c.warnings.add(fmt::format("gather refinement stopped at level {} of {}: more would gather at more than {} "
+                                   "vertices (half again the gather's {}, and {} at most unless --gather is given); "
+                                   "that level split only its elements of the highest contrast",
+                                   refined.levels, o.gather_refine, r.max_vertices, base, kMaxPlannedGather));
+}
+
+// The gather proper, on `welded` (the output's vertices of lit.mesh).
+void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded, EngineStack& engines) {
+    const Options& o = c.plan.o;
+    std::vector<glm::dvec3> direct = direct_light_on(c, lit.mesh, engines);
+    const auto gathered_node = [&](std::size_t n) { return !c.scene.nodes[n].synthetic; };
+    mesh::Mesh drawn = solve::gather_mesh(lit.mesh);
+    drawn.gather_points = solve::gather_points(welded, gathered_node);
+    std::unique_ptr<formfactor::Engine> gather_engine = engines.gather(drawn, o.gather);
+    solve::GatherSettings gs;
+    gs.batch = std::max(o.batch, 64);
+    gs.passes = o.gather_passes;
+    // The later passes re-use the first's rows, within the progressive solve's row-cache budget
+    // (its cache is gone by now).
+    gs.kept_entries = static_cast<std::size_t>(row_cache_bytes(c.meshed.shape) / (sizeof(std::uint32_t) + sizeof(double)));
+    gs.cancelled = [] { return cancel::requested(); };
+    gs.progress = [&](long done, long total) { c.progress.gathering(done, total); };
+    // Direct light only (interreflection off): the gather sees the emitters' light alone, or it
+    // would add the bounce the plan leaves out.
+    Solution& s = lit.solved.solution;
+    std::vector<glm::dvec3> emitted;
+    if (c.setup.direct_only) {
+        emitted.resize(lit.mesh.elements.size());
+        for (std::size_t k = 0; k < lit.mesh.elements.size(); ++k) emitted[k] = lit.mesh.elements[k].emission;
+        gs.passes = 1;
+    }
+    if (!solve::final_gather(lit.mesh, welded, gathered_node, c.setup.direct_only ? emitted : s.radiosity, s.irradiance,
+                             direct, drawn, *gather_engine, gs, lit.gathered.light))
+        throw cancel::Interrupted();
+    lit.gathered.points = static_cast<long>(drawn.gather_points.size());
+    gather_engine.reset();
+    if (o.gather_refine > 0 && !c.setup.direct_only) refine_gather(c, lit, direct, welded, gs, engines);
+}
+
+}  // namespace
+
+Lit gather(const LightContext& c, Lit lit, EngineStack& engines) {
+    const auto t0 = Clock::now();
+    lit.gathered = Gathered{};
+    if (c.plan.o.gather > 0) {
+        Solution& s = lit.solved.solution;
+        output::WeldedMesh welded = output::weld(c.scene.nodes.size(), lit.mesh, s.radiosity);
+        if (!too_many(c, gathered_vertices(c.scene, welded), "")) {
+            // Elements along contact lines halved once, so that the gather's vertices follow the
+            // light's fall there (mesh/contact.h): on copies, kept if the gather goes ahead.
+            const mesh::Texturing texturing(c.scene);
+            mesh::Mesh graded = lit.mesh;
+            std::vector<glm::dvec3> radiosity = s.radiosity, irradiance = s.irradiance;
+            const std::size_t split = solve::grade_contacts(
+                graded, radiosity, irradiance, kContactGrading * c.setup.mesh_settings.element_size, &texturing);
+            bool go = true;
+            if (split > 0) {
+                output::WeldedMesh graded_welded = output::weld(c.scene.nodes.size(), graded, radiosity);
+                go = !too_many(c, gathered_vertices(c.scene, graded_welded), " (once graded along contact lines)");
+                if (go) {
+                    lit.mesh = std::move(graded);
+                    s.radiosity = std::move(radiosity);
+                    s.irradiance = std::move(irradiance);
+                    welded = std::move(graded_welded);
+                    lit.gathered.contact_split = split;
+                }
+            }
+            if (go) {
+                c.progress.begin_stage();
+                gather_vertices(c, lit, welded, engines);
+                c.progress.end_stage();
+            }
+        }
+    }
+    lit.gather_seconds = seconds_since(t0);
+    return lit;
+}
+
+}  // namespace hemirad::bake

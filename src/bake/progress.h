@@ -1,0 +1,57 @@
+// What a bake tells whoever runs it while it runs: lines of news, warnings, and how far each long
+// stage is. The CLI draws a progress line (cli/progress_line.h); a library caller may ignore it all
+// (the default: every method does nothing). Warnings also go into report.json whatever this does.
+#pragma once
+
+#include <cstddef>
+#include <string>
+
+namespace hemirad::solve {
+class Progressive;
+}
+
+namespace hemirad::bake {
+
+class Progress {
+public:
+    virtual ~Progress() = default;
+    // A line of news ("form factors on …", the summary at the end); not under --quiet.
+    virtual void note(const std::string& line) { (void)line; }
+    // A warning. `always`: shown even under --quiet (the scene's own problems, a device that failed).
+    virtual void warning(const std::string& text, bool always) {
+        (void)text;
+        (void)always;
+    }
+    // The punctual lights' hemicubes, `done` of `total`.
+    virtual void lights(std::size_t done, std::size_t total) {
+        (void)done;
+        (void)total;
+    }
+    // The progressive solver after a pass; it stops below `threshold`.
+    virtual void passes(const solve::Progressive& solver, double threshold) {
+        (void)solver;
+        (void)threshold;
+    }
+    // The matrix solver's form-factor rows.
+    virtual void rows(long done, long total) {
+        (void)done;
+        (void)total;
+    }
+    // Adaptive refinement's re-gather at `level`.
+    virtual void refining(int level, long shots, long total) {
+        (void)level;
+        (void)shots;
+        (void)total;
+    }
+    // The final gather's vertices.
+    virtual void gathering(long points, long total) {
+        (void)points;
+        (void)total;
+    }
+    // A stage with progress to show (solve, refinement, gather) begins: its clock starts; and ends:
+    // its line is closed.
+    virtual void begin_stage() {}
+    virtual void end_stage() {}
+};
+
+}  // namespace hemirad::bake

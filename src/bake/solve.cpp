@@ -1,0 +1,130 @@
+// Stage "solve" (see solve.h).
+#include "bake/solve.h"
+
+#include <fmt/core.h>
+
+#include "bake/checkpoint.h"
+#include "core/cancel.h"
+#include "core/timing.h"
+#include "formfactor/row_cache.h"
+#include "formfactor/timed.h"
+#include "solve/lights.h"
+
+namespace hemirad::bake {
+
+Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c) {
+    const Options& o = c.o;
+    solve::Matrix solver(mesh, engine, c.matrix, c.direct);
+    Solution solution;
+    if (!o.resume.empty()) {
+        restore(solver, c.resume_state, o.resume);
+        solution.resumed_from = solver.rows();
+    }
+    long checkpointed = solver.rows();  // the rows of the last checkpoint written or resumed
+    solver.solve([&](long done, long total) {
+        cancel::check();
+        c.progress.rows(done, total);
+        // Every K rows, and all of them: a bake killed while solving or refining then resumes
+        // without shooting a row again.
+        if (!o.checkpoint.empty() && done != checkpointed &&
+            (done / o.checkpoint_every > checkpointed / o.checkpoint_every || done == total)) {
+            checkpointed = done;
+            write_checkpoint(o.checkpoint, c.fingerprint, solver);
+        }
+    });
+    solution.radiosity = solver.radiosity();
+    solution.irradiance = solver.irradiance();
+    solution.shot = solver.patch_radiosity();
+    solution.energy = solver.energy();
+    solution.passes = solver.rows();
+    solution.converged = solver.converged();
+    solution.error = solver.error_bound();
+    solution.unshot_fraction = solution.energy.emitted > 0.0 ? solution.energy.unshot / solution.energy.emitted : 0.0;
+    solution.iterations = solver.iterations();
+    if (solution.converged) solution.convergence_rule = "error bound";
+    return solution;
+}
+
+Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c) {
+    const Options& o = c.o;
+    solve::Settings settings;
+    settings.threshold = c.threshold;
+    settings.max_passes = max_passes_for(o, mesh.patches.size());
+    settings.batch = o.batch;
+    solve::Progressive solver(mesh, engine, settings, c.direct);
+    Solution solution;
+    if (!o.resume.empty()) {
+        restore(solver, c.resume_state, o.resume);
+        solution.resumed_from = solver.passes();
+    }
+    // Preview frames and checkpoints: one each time the passes cross a multiple of K.
+    long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
+    long checkpointed = solver.passes();  // the passes of the last checkpoint written or resumed
+    while (solver.step()) {
+        cancel::check();
+        c.progress.passes(solver, c.threshold);
+        if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpointed / o.checkpoint_every) {
+            checkpointed = solver.passes();
+            write_checkpoint(o.checkpoint, c.fingerprint, solver);
+        }
+        if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
+            previews = solver.passes() / o.preview_every;
+            c.preview(solver);
+        }
+    }
+    // The finished solve too: a bake killed while refining resumes straight to refinement.
+    if (!o.checkpoint.empty() && solver.passes() != checkpointed) write_checkpoint(o.checkpoint, c.fingerprint, solver);
+    c.progress.passes(solver, c.threshold);
+    solution.radiosity = solver.radiosity(/*ambient=*/true);
+    solution.irradiance = solver.irradiance(/*ambient=*/true);
+    solution.ambient = solver.ambient();
+    solution.shot = solver.shot();
+    solution.energy = solver.energy();
+    solution.passes = solver.passes();
+    solution.converged = solver.converged();
+    solution.error = solver.error();
+    solution.unshot_fraction = solver.unshot_fraction();
+    solution.convergence_rule = solver.convergence_rule();
+    return solution;
+}
+
+
+Solved solve(const mesh::Mesh& mesh, const scene::Scene& scene, const std::string& solver, const BakeShape& shape,
+             EngineStack& engines, const SolveContext& c) {
+    std::unique_ptr<formfactor::Engine> base = engines.solve(mesh);
+    // Progressive shooting asks for a patch's row again each time it shoots: keep them.
+    formfactor::RowCacheEngine* row_cache = nullptr;
+    if (solver == "progressive") {
+        auto cached = std::make_unique<formfactor::RowCacheEngine>(std::move(base), row_cache_bytes(shape));
+        row_cache = cached.get();
+        base = std::move(cached);
+    }
+    formfactor::TimedEngine engine(*base);
+    const auto t0 = Clock::now();
+    c.progress.begin_stage();
+    // The punctual lights shoot first: the solvers start from their direct light.
+    std::vector<glm::dvec3> direct;
+    if (solve::has_direct_light(mesh, scene.lights))
+        direct = solve::direct_light(mesh, scene.lights, engine, 0, nullptr,
+                                     [&](std::size_t done, std::size_t total) { c.progress.lights(done, total); });
+    SolveContext context = c;
+    context.direct = direct.empty() ? nullptr : &direct;
+    Solved out;
+    out.solution = solver == "matrix" ? solve_with_matrix(mesh, engine, context) : solve_progressively(mesh, engine, context);
+    c.progress.end_stage();
+    const Solution& s = out.solution;
+    // Shown, not reported: report.json's `converged` and `error` say it.
+    if (!s.converged)
+        c.progress.warning(solver == "matrix"
+                         ? fmt::format("Gauss-Seidel stopped after {} sweeps with an error bound of {:.3g}", s.iterations, s.error)
+                         : fmt::format("stopped at --max-passes {} before the threshold {} was reached (error {:.3g})",
+                                       max_passes_for(c.o, mesh.patches.size()), c.threshold, s.error),
+                           false);
+    out.formfactor_seconds = engine.seconds();
+    if (engines.choice().verifier) out.verified = engines.choice().verifier->summary();  // the engine ends with this call
+    if (row_cache) out.row_cache = row_cache->stats();
+    out.solve_seconds = seconds_since(t0) - engine.seconds();
+    return out;
+}
+
+}  // namespace hemirad::bake
