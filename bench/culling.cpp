@@ -19,7 +19,7 @@
 #include "formfactor/opencl_engine.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
-#include "scene/procedural.h"
+#include "gen/procedural.h"
 #if HEMIRAD_HAVE_EMBREE
 #include "formfactor/embree_engine.h"
 #endif
@@ -31,8 +31,8 @@ namespace {
 // procedural:10k with the objects of procedural:<count> moved 20 m down, under its floor, or
 // (beside) 20 m along +x, beyond its wall; procedural:10k alone for 0.
 scene::Scene room_with_clutter(std::size_t count, bool beside) {
-    if (count == 0) return scene::procedural_scene(10000);
-    return scene::procedural_with_clutter(10000, count, beside ? scene::Clutter::beyond : scene::Clutter::below);
+    if (count == 0) return gen::procedural_scene(10000);
+    return gen::procedural_with_clutter(10000, count, beside ? gen::Clutter::beyond : gen::Clutter::below);
 }
 
 double ms_per_shot(formfactor::Engine& engine, const std::vector<std::uint32_t>& shooters, int repeats) {

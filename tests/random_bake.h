@@ -21,7 +21,7 @@
 #include "bake/bake.h"
 #include "core/error.h"
 #include "formfactor/engine.h"
-#include "scene/random_scene.h"
+#include "gen/random_scene.h"
 #include "scene/scene.h"
 
 namespace hemirad::test {
@@ -50,14 +50,14 @@ private:
 };
 
 struct RandomBake {
-    scene::RandomSceneInfo scene;
+    gen::RandomSceneInfo scene;
     bake::Options options;
     std::string settings;  // one line, for messages
 };
 
 // How large a random bake may get: its scene, and its settings' sizes.
 struct RandomBakeLimits {
-    scene::RandomSceneLimits scene;
+    gen::RandomSceneLimits scene;
     int finest_patches = 10;   // patches down to the diagonal / this (from the diagonal / 4 up to 3 ×)
     int most_elements = 3;     // elements a patch side
     long most_passes = 300;    // --max-passes from 20 to this
@@ -69,11 +69,11 @@ struct RandomBakeLimits {
 // levels, an effects override sometimes, and a small image (`limits` may narrow the sizes). The
 // output goes to dir/out on the reference engine (set options.device and options.output for
 // another run).
-inline RandomBake make_random_bake(scene::Choices& c, const std::filesystem::path& dir,
+inline RandomBake make_random_bake(gen::Choices& c, const std::filesystem::path& dir,
                                    const RandomBakeLimits& limits = {}) {
     RandomBake b;
     const std::filesystem::path file = dir / "scene.gltf";
-    b.scene = scene::write_random_scene(c, file, limits.scene);
+    b.scene = gen::write_random_scene(c, file, limits.scene);
     bake::Options& o = b.options;
     o.scene = file.string();
     o.output = (dir / "out").string();

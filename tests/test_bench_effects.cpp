@@ -10,8 +10,8 @@
 #include <sstream>
 #include <string>
 
-#include "cli/bench.h"
-#include "cli/bench_effects.h"
+#include "bench/command.h"
+#include "bench/effects.h"
 #include "core/error.h"
 
 using namespace hemirad;
@@ -44,58 +44,58 @@ TEST_CASE("bench effects: the largest relative difference of any mesh's average 
         ordered_json::array({mesh_summary("floor", 1.0, 0.5, 0.0), mesh_summary("light", 17.0, 12.0, 4.0)});
     ordered_json b =
         ordered_json::array({mesh_summary("floor", 1.0, 0.4, 0.0), mesh_summary("light", 17.0, 12.0, 4.4)});
-    const ordered_json d = cli::max_mesh_difference(a, b);
+    const ordered_json d = bench::max_mesh_difference(a, b);
     CHECK(d["value"].get<double>() == Approx(0.2));  // |0.5 - 0.4| / 0.5 beats |4 - 4.4| / 4.4
     CHECK(d["mesh"] == "floor");
     CHECK(d["channel"] == "g");
-    CHECK(cli::max_mesh_difference(a, a)["value"].get<double>() == 0.0);
+    CHECK(bench::max_mesh_difference(a, a)["value"].get<double>() == 0.0);
     // A zero against a tiny value is a whole difference, not a division by zero.
-    CHECK(cli::max_mesh_difference(ordered_json::array({mesh_summary("m", 0.0, 0.0, 0.0)}),
+    CHECK(bench::max_mesh_difference(ordered_json::array({mesh_summary("m", 0.0, 0.0, 0.0)}),
                                    ordered_json::array({mesh_summary("m", 0.0, 1e-30, 0.0)}))["value"]
               .get<double>() == Approx(1e-18));
     // A NaN must not look like agreement, wherever it is.
     for (int m = 0; m < 2; ++m) {
         ordered_json nan = a;
         nan[m]["radiosity"][0] = std::numeric_limits<double>::quiet_NaN();
-        CHECK_THROWS_AS(cli::max_mesh_difference(a, nan), InternalError);
-        CHECK_THROWS_AS(cli::max_mesh_difference(nan, a), InternalError);
+        CHECK_THROWS_AS(bench::max_mesh_difference(a, nan), InternalError);
+        CHECK_THROWS_AS(bench::max_mesh_difference(nan, a), InternalError);
     }
     // Different meshes are not compared.
-    CHECK_THROWS_AS(cli::max_mesh_difference(a, ordered_json::array({mesh_summary("floor", 1.0, 0.5, 0.0)})),
+    CHECK_THROWS_AS(bench::max_mesh_difference(a, ordered_json::array({mesh_summary("floor", 1.0, 0.5, 0.0)})),
                     InternalError);
     b[1]["name"] = "lamp";
-    CHECK_THROWS_AS(cli::max_mesh_difference(a, b), InternalError);
+    CHECK_THROWS_AS(bench::max_mesh_difference(a, b), InternalError);
 }
 
 TEST_CASE("bench effects: bad options and a missing scene are input errors", "[bench]") {
     std::ostringstream log;
-    cli::BenchCommand c;
+    bench::BenchCommand c;
     c.effects = true;
     c.accuracy = true;
-    CHECK_THROWS_AS(cli::run_bench(c, log), InputError);
+    CHECK_THROWS_AS(bench::run_bench(c, log), InputError);
     c.accuracy = false;
     c.throughput.scenes = {"scenes/cornell_box.gltf"};
-    CHECK_THROWS_AS(cli::run_bench(c, log), InputError);
-    cli::BenchCommand quick_alone;
+    CHECK_THROWS_AS(bench::run_bench(c, log), InputError);
+    bench::BenchCommand quick_alone;
     quick_alone.quick = true;
     quick_alone.throughput.scenes = {"procedural:100"};
-    CHECK_THROWS_AS(cli::run_bench(quick_alone, log), InputError);
+    CHECK_THROWS_AS(bench::run_bench(quick_alone, log), InputError);
 
-    cli::EffectsBenchOptions o;
+    bench::EffectsBenchOptions o;
     o.device = "ref";
     o.quick = true;
     o.scenes_dir = HEMIRAD_SOURCE_DIR "/no-such-scenes-dir";
-    CHECK_THROWS_AS(cli::run_effects_bench(o, log), InputError);
+    CHECK_THROWS_AS(bench::run_effects_bench(o, log), InputError);
     CHECK(leftover_temp_dirs() == 0);
 }
 
 TEST_CASE("bench effects quick on the reference: each pair shows its effect", "[bench]") {
-    cli::EffectsBenchOptions o;
+    bench::EffectsBenchOptions o;
     o.device = "ref";
     o.quick = true;
     o.scenes_dir = HEMIRAD_SOURCE_DIR "/scenes";
     std::ostringstream log;
-    const ordered_json doc = cli::run_effects_bench(o, log);
+    const ordered_json doc = bench::run_effects_bench(o, log);
     INFO(log.str());
     CHECK(leftover_temp_dirs() == 0);
     CHECK(log.str().find("| case | planned | forced |") != std::string::npos);

@@ -5,7 +5,7 @@
 #include <catch2/catch.hpp>
 #include <cmath>
 
-#include "scene/procedural.h"
+#include "gen/procedural.h"
 #include "test_scenes.h"
 
 namespace hemirad::test {
@@ -65,7 +65,7 @@ std::vector<Case> comparison_cases() {
     }
     // A room of tessellated objects: most shooters stand on an object with half the scene or
     // more behind them, which the OpenCL setup culls a group of elements at a time.
-    cases.push_back({"procedural objects", scene::procedural_scene(3000), {2.0, 1.0}});
+    cases.push_back({"procedural objects", gen::procedural_scene(3000), {2.0, 1.0}});
     return cases;
 }
 

@@ -11,15 +11,15 @@
 
 #include "cli_support.h"
 #include "core/error.h"
-#include "scene/content_scenes.h"
+#include "gen/content_scenes.h"
 #include "scene/writer.h"
 #include "test_scenes.h"
 
 using glm::dvec3;
 using hemirad::InputError;
-using hemirad::scene::ContentKind;
-using hemirad::scene::content_scene;
-using hemirad::scene::parse_content_spec;
+using hemirad::gen::ContentKind;
+using hemirad::gen::content_scene;
+using hemirad::gen::parse_content_spec;
 using hemirad::scene::Scene;
 using hemirad::scene::Triangle;
 namespace test = hemirad::test;
@@ -86,7 +86,7 @@ TEST_CASE("content scenes have emitters, and the room kinds are closed", "[conte
     for (const ContentKind kind : kKinds) {
         const Scene s = content_scene(kind, 10'000);
         INFO(s.path.string());
-        CHECK(hemirad::scene::content_kind_closed(kind) == (kind != ContentKind::kCity));
+        CHECK(hemirad::gen::content_kind_closed(kind) == (kind != ContentKind::kCity));
         std::vector<const Triangle*> shell;
         std::size_t emitting = 0, down = 0, degenerate = 0;
         for (const Triangle& t : s.triangles) {
@@ -139,11 +139,11 @@ TEST_CASE("parse_content_spec", "[content]") {
     CHECK_THROWS_AS(parse_content_spec("foliage:0"), InputError);
     CHECK_THROWS_AS(parse_content_spec("furniture:51M"), InputError);
     bool closed = true;
-    CHECK(hemirad::scene::generated_scene("city:1000", &closed));
+    CHECK(hemirad::gen::generated_scene("city:1000", &closed));
     CHECK_FALSE(closed);
-    CHECK(hemirad::scene::generated_scene("procedural:1000", &closed));
+    CHECK(hemirad::gen::generated_scene("procedural:1000", &closed));
     CHECK(closed);
-    CHECK_FALSE(hemirad::scene::generated_scene("scene.gltf"));
+    CHECK_FALSE(hemirad::gen::generated_scene("scene.gltf"));
 }
 
 TEST_CASE("hemirad scene write: the file loads back with the same triangles", "[content][cli]") {
@@ -153,7 +153,7 @@ TEST_CASE("hemirad scene write: the file loads back with the same triangles", "[
         const test::RunResult r = test::run_hemirad(dir, {"scene", "write", spec, "scene.glb"});
         INFO(r.err);
         REQUIRE(r.code == 0);
-        const Scene generated = *hemirad::scene::generated_scene(spec);
+        const Scene generated = *hemirad::gen::generated_scene(spec);
         const Scene loaded = hemirad::scene::load(dir / "scene.glb");
         CHECK(loaded.triangles.size() == generated.triangles.size());
         CHECK(loaded.materials.size() == generated.materials.size());

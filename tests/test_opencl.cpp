@@ -19,8 +19,8 @@
 #include "formfactor/reference.h"
 #include "formfactor/verify.h"
 #include "mesh/mesh.h"
-#include "scene/content_scenes.h"
-#include "scene/procedural.h"
+#include "gen/content_scenes.h"
+#include "gen/procedural.h"
 #include "scene/scene.h"
 #include "solve/progressive.h"
 #include "test_compare.h"
@@ -140,10 +140,10 @@ TEST_CASE("opencl: any tile size gives the reference's result", "[opencl]") {
 TEST_CASE("opencl: occlusion culling hides lane groups and changes no cell", "[opencl]") {
     HEMIRAD_REQUIRE_DEVICE(ctx);
     std::vector<Case> cases;
-    for (const auto kind : {scene::ContentKind::kCity, scene::ContentKind::kFoliage}) {
-        scene::Scene s = scene::content_scene(kind, 20000);
+    for (const auto kind : {gen::ContentKind::kCity, gen::ContentKind::kFoliage}) {
+        scene::Scene s = gen::content_scene(kind, 20000);
         const double patch = s.diagonal() / 16.0;
-        cases.push_back({scene::content_kind_name(kind), std::move(s), {patch, patch / 3.0}});
+        cases.push_back({gen::content_kind_name(kind), std::move(s), {patch, patch / 3.0}});
     }
     {
         scene::Scene s;
@@ -160,7 +160,7 @@ TEST_CASE("opencl: occlusion culling hides lane groups and changes no cell", "[o
     {  // a room, and objects standing on its floor's level 20 m beyond its +x wall: from the floor
        // they lie near the base plane and across the side faces' eye planes, but outside those
        // faces' frusta (hemirad_bench_culling's scene, smaller)
-        scene::Scene s = scene::procedural_with_clutter(2000, 20000, scene::Clutter::beyond);
+        scene::Scene s = gen::procedural_with_clutter(2000, 20000, gen::Clutter::beyond);
         const double patch = 10.0 * std::sqrt(3.0) / 16.0;
         cases.push_back({"beyond a wall", std::move(s), {patch, patch / 3.0}});
     }
@@ -251,7 +251,7 @@ TEST_CASE("opencl: the same shot twice gives bit-identical results", "[opencl]")
 // An engine packs the layout its setup reads piece by piece (pack_lanes or pack_elements over
 // runs of groups); a DeviceMesh packs the whole mesh at once, for engines that share it.
 TEST_CASE("opencl: the mesh packed piece by piece is the mesh packed whole", "[opencl]") {
-    const scene::Scene city = scene::content_scene(scene::ContentKind::kCity, 3000);
+    const scene::Scene city = gen::content_scene(gen::ContentKind::kCity, 3000);
     const double patch = city.diagonal() / 16.0;
     mesh::Mesh m;
     for (double per_patch = 3.0; per_patch < 4.0; per_patch += 0.1) {  // a mesh whose last lane group is padded

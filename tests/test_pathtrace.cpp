@@ -6,7 +6,7 @@
 #include <fstream>
 
 #include "bench/room_reference.h"
-#include "cli/bench_image.h"
+#include "bench/image.h"
 #include "cli_support.h"
 
 using namespace hemirad;
@@ -72,7 +72,7 @@ TEST_CASE("image accuracy: the pixel error removes the reference's noise and fin
     // hemirad 3% above the truth everywhere, 8% in one 16×16 tile.
     const int w = 64, h = 48;
     const double s = 0.02;
-    cli::ImageReference ref;
+    bench::ImageReference ref;
     ref.width = w;
     ref.height = h;
     ref.json = {{"faces", nlohmann::ordered_json::array({{{"node", "a"}, {"emitter", false}}})}};
@@ -87,7 +87,7 @@ TEST_CASE("image accuracy: the pixel error removes the reference's noise and fin
             for (int c = 0; c < 3; ++c) image[(std::size_t(y) * w + x) * 3 + c] = float(tile ? 1.08 : 1.03);
         }
     }
-    const cli::PixelErrors e = cli::compare_pixels(image, w, h, ref);
+    const bench::PixelErrors e = bench::compare_pixels(image, w, h, ref);
     CHECK(e.pixels == long(w - 1) * h);
     // Without the noise: 3% on 11/12 of the pixels, 8% on 1/12, so sqrt((11·9 + 64) / 12) = 3.69%,
     // up to the second-order terms of dividing by 1 ± s.
@@ -103,7 +103,7 @@ TEST_CASE("image accuracy: the pixel error removes the reference's noise and fin
     CHECK(e.worst_tile_light_noise == Approx(s / 16.0).epsilon(1e-6));
     CHECK(e.worst_tile_light_x == 32);
     CHECK(e.worst_tile_light_y == 16);
-    REQUIRE_THROWS(cli::compare_pixels(image, w - 1, h, ref));
+    REQUIRE_THROWS(bench::compare_pixels(image, w - 1, h, ref));
 }
 
 TEST_CASE("accuracy: the default bake of the Cornell box against the path-traced reference", "[accuracy]") {
@@ -114,7 +114,7 @@ TEST_CASE("accuracy: the default bake of the Cornell box against the path-traced
     // (the right wall's open edge under the ceiling), by the mean of its pixels' errors +4.7% (the
     // short block's dark front at the floor); worst face seen −0.9% (the tall block's front);
     // 6.5%, +82% and −5.7% before the final gather, 1.76%, +5.8% and +11.5% before gather refinement.
-    const cli::ImageReference ref = cli::load_image_reference((kSourceDir / "bench" / "reference" / "cornell_box").string());
+    const bench::ImageReference ref = bench::load_image_reference((kSourceDir / "bench" / "reference" / "cornell_box").string());
     TempDir dir;
     const json report = bake_ok(dir, kCornellBox, dir / "out",
                                 {"--quiet", "--image-width", std::to_string(ref.width)});
@@ -124,7 +124,7 @@ TEST_CASE("accuracy: the default bake of the Cornell box against the path-traced
     std::vector<float> rgb(std::size_t(image.width) * image.height * 3);
     for (std::size_t p = 0; p < std::size_t(image.width) * image.height; ++p)
         for (int c = 0; c < 3; ++c) rgb[3 * p + c] = image.pixels[p * image.channels + c];
-    const cli::PixelErrors e = cli::compare_pixels(rgb, image.width, image.height, ref);
+    const bench::PixelErrors e = bench::compare_pixels(rgb, image.width, image.height, ref);
     CAPTURE(e.rms, e.raw_rms, e.noise_rms, e.worst_tile, e.worst_tile_x, e.worst_tile_y, e.worst_tile_light,
             e.worst_tile_light_x, e.worst_tile_light_y);
     CHECK(e.pixels > 200000);
@@ -132,7 +132,7 @@ TEST_CASE("accuracy: the default bake of the Cornell box against the path-traced
     CHECK(std::abs(e.mean) < 0.01);
     CHECK(std::abs(e.worst_tile) < 0.1);
     CHECK(std::abs(e.worst_tile_light) < 0.06);
-    const auto faces = cli::compare_faces(rgb, image.width, image.height, ref);
+    const auto faces = bench::compare_faces(rgb, image.width, image.height, ref);
     int blocks = 0;
     for (const auto& f : faces) {
         if (f.at("emitter").get<bool>()) continue;

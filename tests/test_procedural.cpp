@@ -13,13 +13,13 @@
 #include "core/error.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
-#include "scene/procedural.h"
+#include "gen/procedural.h"
 #include "test_scenes.h"
 
 using glm::dvec3;
 using hemirad::InputError;
-using hemirad::scene::parse_procedural_spec;
-using hemirad::scene::procedural_scene;
+using hemirad::gen::parse_procedural_spec;
+using hemirad::gen::procedural_scene;
 using hemirad::scene::Scene;
 using hemirad::scene::Triangle;
 

@@ -16,7 +16,7 @@
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
 #include "random_bake.h"
-#include "scene/random_scene.h"
+#include "gen/random_scene.h"
 #include "scene/scene.h"
 
 using namespace hemirad;
@@ -41,8 +41,8 @@ double signed_volume(const std::vector<const scene::Triangle*>& triangles) {
 TEST_CASE("random scenes: a seed always writes the same file and another seed another", "[random]") {
     test::ScratchDir dir("hemirad-random-scene");
     const auto write = [&](std::uint64_t seed, const std::string& name) {
-        scene::Choices c = scene::Choices::from_seed(seed);
-        scene::write_random_scene(c, dir.path() / name);
+        gen::Choices c = gen::Choices::from_seed(seed);
+        gen::write_random_scene(c, dir.path() / name);
         return test::read_file_text(dir.path() / name);
     };
     const std::string a = write(7, "a.gltf"), b = write(7, "b.gltf"), other = write(8, "c.gltf");
@@ -50,8 +50,8 @@ TEST_CASE("random scenes: a seed always writes the same file and another seed an
     CHECK(a == b);
     CHECK(a != other);
     // Any bytes make a scene, even none.
-    scene::Choices none(std::vector<std::uint8_t>{});
-    const scene::RandomSceneInfo info = scene::write_random_scene(none, dir.path() / "none.gltf");
+    gen::Choices none(std::vector<std::uint8_t>{});
+    const gen::RandomSceneInfo info = gen::write_random_scene(none, dir.path() / "none.gltf");
     CHECK(info.objects.size() >= 1);
     CHECK_NOTHROW(scene::load(dir.path() / "none.gltf"));
 }
@@ -65,9 +65,9 @@ TEST_CASE("random scenes: the loader keeps every object's triangles, its emitter
     test::ScratchDir dir("hemirad-random-scene");
     int mirrored_closed = 0, double_sided = 0, degenerate = 0, scales_small = 0, scales_large = 0;
     for (std::uint64_t seed = 1; seed <= 300; ++seed) {
-        scene::Choices c = scene::Choices::from_seed(seed);
+        gen::Choices c = gen::Choices::from_seed(seed);
         const std::filesystem::path file = dir.path() / "scene.gltf";
-        const scene::RandomSceneInfo info = scene::write_random_scene(c, file);
+        const gen::RandomSceneInfo info = gen::write_random_scene(c, file);
         CAPTURE(seed, info.summary);
         const scene::Scene s = scene::load(file);
         CHECK(s.triangles.size() == info.triangles);
@@ -81,7 +81,7 @@ TEST_CASE("random scenes: the loader keeps every object's triangles, its emitter
             emits = emits || (area > 0.0 && (e.x > 0.0 || e.y > 0.0 || e.z > 0.0));
         }
         CHECK(emits);
-        for (const scene::RandomObject& object : info.objects) {
+        for (const gen::RandomObject& object : info.objects) {
             CAPTURE(object.node, object.shape, object.mirrored, object.inward);
             REQUIRE(by_node.count(object.node) == 1);
             CHECK(by_node[object.node].size() == object.triangles);
@@ -117,8 +117,8 @@ TEST_CASE("random scenes: the reference and OpenCL engines give the same form fa
     ocl::Context context(devices.front());
     test::ScratchDir dir("hemirad-random-engines");
     for (std::uint64_t seed = 1; seed <= 6; ++seed) {
-        scene::Choices c = scene::Choices::from_seed(seed);
-        const scene::RandomSceneInfo info = scene::write_random_scene(c, dir.path() / "scene.gltf");
+        gen::Choices c = gen::Choices::from_seed(seed);
+        const gen::RandomSceneInfo info = gen::write_random_scene(c, dir.path() / "scene.gltf");
         CAPTURE(seed, info.summary);
         const scene::Scene s = scene::load(dir.path() / "scene.gltf");
         const double patch = s.diagonal() / 6.0;
@@ -184,7 +184,7 @@ TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with
     int baked = 0, refused = 0, converged_checks = 0;
     for (std::uint64_t seed = 1; seed <= 30; ++seed) {
         test::ScratchDir dir("hemirad-random-bake");
-        scene::Choices c = scene::Choices::from_seed(seed);
+        gen::Choices c = gen::Choices::from_seed(seed);
         test::RandomBakeLimits limits;
         limits.scene.max_objects = 4;
         limits.scene.max_triangles = 300;

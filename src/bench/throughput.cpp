@@ -25,7 +25,7 @@
 #include "formfactor/reference.h"
 #include "formfactor/verify.h"
 #include "mesh/mesh.h"
-#include "scene/content_scenes.h"
+#include "gen/content_scenes.h"
 #if HEMIRAD_HAVE_EMBREE
 #include "formfactor/embree_engine.h"
 constexpr bool kHaveEmbree = true;
@@ -140,7 +140,7 @@ ordered_json machine_info() {
 
 BenchScene load_bench_scene(const std::string& spec) {
     bool closed = false;
-    if (std::optional<scene::Scene> generated = scene::generated_scene(spec, &closed))
+    if (std::optional<scene::Scene> generated = gen::generated_scene(spec, &closed))
         return {std::move(*generated), closed};
     return {scene::load(spec), false};
 }

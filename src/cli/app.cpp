@@ -25,13 +25,13 @@
 #include "cl/runtime.h"
 #include "bake/bake.h"
 #include "core/quality.h"
-#include "cli/bench.h"
+#include "bench/command.h"
 #include "bake/engine_select.h"
 #include "cli/progress_line.h"
 #include "core/error.h"
 #include "dist/dist.h"
 #include "formfactor/verify.h"
-#include "scene/content_scenes.h"
+#include "gen/content_scenes.h"
 #include "scene/writer.h"
 
 namespace hemirad::cli {
@@ -229,7 +229,7 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                   "report progress when stderr is not a terminal too (a log): a line every few seconds");
 }
 
-void add_bench_options(CLI::App& cmd, BenchCommand& c) {
+void add_bench_options(CLI::App& cmd, bench::BenchCommand& c) {
     bench::ThroughputOptions& o = c.throughput;
     cmd.add_option("scenes", o.scenes, "glTF files or generated scenes: procedural:, city:, furniture:, foliage:<triangles> (e.g. city:100k, procedural:1M)");
     cmd.add_option("--hemicube", o.hemicubes, "hemicube resolutions N, comma-separated")
@@ -286,7 +286,7 @@ void write_generated_scene(const SceneWriteCommand& c, std::ostream& out) {
     const std::filesystem::path file(c.output);
     if (file.extension() != ".glb" && file.extension() != ".gltf")
         throw InputError(fmt::format("{}: the output must end in .glb or .gltf", c.output));
-    std::optional<scene::Scene> s = scene::generated_scene(c.spec, nullptr, c.seed);
+    std::optional<scene::Scene> s = gen::generated_scene(c.spec, nullptr, c.seed);
     if (!s)
         throw InputError(fmt::format("{}: not a generated scene (procedural:, city:, furniture: or foliage:<triangles>)",
                                      c.spec));
@@ -328,7 +328,7 @@ int run(int argc, char** argv) {
     BakeOptions bake_options;
     CLI::App* bake = app.add_subcommand("bake", "bake diffuse global illumination into a glTF scene");
     add_bake_options(*bake, bake_options);
-    BenchCommand bench_command;
+    bench::BenchCommand bench_command;
     CLI::App* bench_app =
         app.add_subcommand("bench", "benchmark the form-factor engines against each other and the machine");
     add_bench_options(*bench_app, bench_command);
@@ -369,7 +369,7 @@ int run(int argc, char** argv) {
                 }
     bake_options.batch_given = bake->get_option("--batch")->count() > 0;
     if (bench_command.scaling) {  // the throughput options that were given, over the scaling bench's defaults
-        ScalingOptions& sc = bench_command.scaling_options;
+        bench::ScalingOptions& sc = bench_command.scaling_options;
         const bench::ThroughputOptions& t = bench_command.throughput;
         sc.device = bench_command.device;
         if (!t.scenes.empty()) sc.scene = t.scenes.front();
@@ -389,7 +389,7 @@ int run(int argc, char** argv) {
             return 0;
         }
         if (*bench_app) {
-            run_bench(bench_command, std::cout);
+            bench::run_bench(bench_command, std::cout);
             return 0;
         }
         if (*scene_write_app) {

@@ -21,7 +21,7 @@
 #include "bake/bake.h"
 #include "core/error.h"
 #include "random_bake.h"
-#include "scene/random_scene.h"
+#include "gen/random_scene.h"
 
 namespace {
 
@@ -97,7 +97,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     g_data = data;
     g_size = size;
     test::ScratchDir dir("hemirad-fuzz-bake");
-    scene::Choices choices(data, size);
+    gen::Choices choices(data, size);
     // Smaller than the seeded test's: a run is worth many inputs more than a few large ones.
     test::RandomBakeLimits limits;
     limits.scene.max_objects = 4;

@@ -1,5 +1,5 @@
 // `hemirad bench --scaling` (see bench_scaling.h).
-#include "cli/bench_scaling.h"
+#include "bench/scaling.h"
 
 #include <fmt/format.h>
 
@@ -16,7 +16,7 @@
 #include "formfactor/timed.h"
 #include "solve/progressive.h"
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 namespace {
 
 using nlohmann::ordered_json;
@@ -231,4 +231,4 @@ ordered_json run_scaling_bench(const ScalingOptions& o, std::ostream& log) {
     return doc;
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

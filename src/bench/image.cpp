@@ -1,5 +1,5 @@
 // `hemirad bench --accuracy`, the image part (see bench_image.h).
-#include "cli/bench_image.h"
+#include "bench/image.h"
 
 #include <fmt/core.h>
 
@@ -14,10 +14,10 @@
 #include <glm/glm.hpp>
 
 #include "bake/bake.h"
-#include "cli/bench_support.h"
+#include "bench/support.h"
 #include "core/error.h"
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 namespace fs = std::filesystem;
 using ordered_json = nlohmann::ordered_json;
 
@@ -330,4 +330,4 @@ ordered_json run_image_accuracy(const ImageAccuracyOptions& o, const ImageRefere
             {"runs", out_runs}};
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

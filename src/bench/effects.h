@@ -9,7 +9,7 @@
 #include <ostream>
 #include <string>
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 
 struct EffectsBenchOptions {
     std::string device = "auto";        // the bakes' --device (auto, ref, opencl, opencl:P.D)
@@ -32,4 +32,4 @@ nlohmann::ordered_json max_mesh_difference(const nlohmann::ordered_json& a, cons
 // InputError when a scene is missing.
 nlohmann::ordered_json run_effects_bench(const EffectsBenchOptions& options, std::ostream& log);
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

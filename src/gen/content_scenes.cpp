@@ -1,6 +1,6 @@
 // Content-like benchmark scenes (city, furniture, foliage): builders run once per candidate
 // layout and detail level in counting mode to fit the requested triangle count, then once for real.
-#include "scene/content_scenes.h"
+#include "gen/content_scenes.h"
 
 #include <fmt/format.h>
 
@@ -14,9 +14,11 @@
 
 #include "core/error.h"
 #include "core/rng.h"
-#include "scene/procedural.h"
+#include "gen/procedural.h"
 
-namespace hemirad::scene {
+namespace hemirad::gen {
+
+using namespace hemirad::scene;
 namespace {
 
 using glm::dvec3;
@@ -840,4 +842,4 @@ std::optional<Scene> generated_scene(const std::string& spec, bool* closed, std:
     return std::nullopt;
 }
 
-}  // namespace hemirad::scene
+}  // namespace hemirad::gen

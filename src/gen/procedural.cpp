@@ -1,6 +1,6 @@
 // Procedural benchmark scenes: a closed room, a ceiling light and a grid of boxes and ellipsoids,
 // tessellated so the whole scene has about the requested number of triangles.
-#include "scene/procedural.h"
+#include "gen/procedural.h"
 
 #include <fmt/format.h>
 
@@ -17,7 +17,9 @@
 #include "core/error.h"
 #include "core/rng.h"
 
-namespace hemirad::scene {
+namespace hemirad::gen {
+
+using namespace hemirad::scene;
 namespace {
 
 using glm::dvec3;
@@ -444,4 +446,4 @@ std::optional<std::size_t> parse_count_spec(const std::string& spec, const std::
     return std::size_t(count);
 }
 
-}  // namespace hemirad::scene
+}  // namespace hemirad::gen

@@ -9,7 +9,9 @@
 
 #include "scene/scene.h"
 
-namespace hemirad::scene {
+namespace hemirad::gen {
+
+using scene::Scene;
 
 // Requests above this are refused: at ~160 bytes a Triangle, 50M is already 8 GB before meshing.
 inline constexpr std::size_t kMaxProceduralTriangles = 50'000'000;
@@ -47,4 +49,4 @@ std::optional<std::size_t> parse_count_spec(const std::string& spec, const std::
 // "1M", "250k" or digits: how a requested count reads back in scene paths and reports.
 std::string count_label(std::size_t n);
 
-}  // namespace hemirad::scene
+}  // namespace hemirad::gen

@@ -13,7 +13,7 @@
 #include <ostream>
 #include <string>
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 
 struct ScalingOptions {
     std::string scene = "city:100k";  // a glTF file or a generated scene (bench::load_bench_scene)
@@ -31,4 +31,4 @@ struct ScalingOptions {
 // InternalError when a configuration's rows differ from the first one's.
 nlohmann::ordered_json run_scaling_bench(const ScalingOptions& options, std::ostream& log);
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

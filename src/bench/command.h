@@ -8,9 +8,9 @@
 
 #include "bench/accuracy.h"
 #include "bench/throughput.h"
-#include "cli/bench_scaling.h"
+#include "bench/scaling.h"
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 
 struct BenchCommand {
     bench::ThroughputOptions throughput;
@@ -27,4 +27,4 @@ struct BenchCommand {
 // file exists; the JSON file appears only complete.
 void run_bench(const BenchCommand& command, std::ostream& log);
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

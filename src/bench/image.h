@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 
 // A path-traced reference: reference.exr (R, G, B radiosity; noise.Y, its luminance's standard error; face:
 // the face all of a pixel's samples hit, −1 for none or several) and reference.json (faces with
@@ -72,4 +72,4 @@ struct ImageAccuracyOptions {
 nlohmann::ordered_json run_image_accuracy(const ImageAccuracyOptions& options, const ImageReference& reference,
                                           std::ostream& log);
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

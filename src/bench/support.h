@@ -14,7 +14,7 @@
 
 #include "core/error.h"
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 
 // A fresh directory under the system's temporary directory, removed with everything in it when
 // this goes out of scope (on a throw too).
@@ -51,4 +51,4 @@ inline nlohmann::ordered_json read_report(const std::filesystem::path& file) {
     return nlohmann::ordered_json::parse(in);
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

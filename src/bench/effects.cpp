@@ -1,7 +1,7 @@
 // `hemirad bench --effects` (see bench_effects.h): each effect as planned against forced the
 // other way, baked in-process, timed and compared mesh by mesh.
-#include "cli/bench_effects.h"
-#include "cli/bench_support.h"
+#include "bench/effects.h"
+#include "bench/support.h"
 
 #include <fmt/core.h>
 #include <unistd.h>
@@ -18,7 +18,7 @@
 #include "bake/bake.h"
 #include "core/error.h"
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 namespace fs = std::filesystem;
 using ordered_json = nlohmann::ordered_json;
 
@@ -305,4 +305,4 @@ ordered_json run_effects_bench(const EffectsBenchOptions& o, std::ostream& log) 
     return doc;
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench

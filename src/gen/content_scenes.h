@@ -10,7 +10,9 @@
 
 #include "scene/scene.h"
 
-namespace hemirad::scene {
+namespace hemirad::gen {
+
+using scene::Scene;
 
 enum class ContentKind {
     // Open: n × n blocks of buildings (extruded footprints with inset windows, ledges, parapets and
@@ -54,4 +56,4 @@ std::optional<ContentSpec> parse_content_spec(const std::string& spec);
 // none of them (it names a file). `closed` is set to whether the scene is closed.
 std::optional<Scene> generated_scene(const std::string& spec, bool* closed = nullptr, std::uint64_t seed = 1);
 
-}  // namespace hemirad::scene
+}  // namespace hemirad::gen

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-namespace hemirad::scene {
+namespace hemirad::gen {
 
 // The source of every random choice: the given bytes read in order (a fuzzer's input), then
 // zeros once they run out, so any input, even an empty one, makes a scene. A seed is expanded
@@ -82,4 +82,4 @@ struct RandomSceneInfo {
 RandomSceneInfo write_random_scene(Choices& choices, const std::filesystem::path& file,
                                    const RandomSceneLimits& limits = {});
 
-}  // namespace hemirad::scene
+}  // namespace hemirad::gen

@@ -1,5 +1,5 @@
 // Random real-shaped glTF scenes for the seeded random-scene test and the bake fuzzer.
-#include "scene/random_scene.h"
+#include "gen/random_scene.h"
 
 #include <fmt/format.h>
 #include <tiny_gltf.h>
@@ -19,7 +19,9 @@
 #include "core/rng.h"
 #include "scene/gltf_views.h"
 
-namespace hemirad::scene {
+namespace hemirad::gen {
+
+using namespace hemirad::scene;
 
 // ---------------------------------------------------------------------------------------------
 // Choices
@@ -754,4 +756,4 @@ RandomSceneInfo write_random_scene(Choices& c, const std::filesystem::path& file
     return info;
 }
 
-}  // namespace hemirad::scene
+}  // namespace hemirad::gen

@@ -1,5 +1,5 @@
 // `hemirad bench` (see bench.h): runs a benchmark and writes its JSON document atomically.
-#include "cli/bench.h"
+#include "bench/command.h"
 
 #include <fmt/core.h>
 #include <unistd.h>
@@ -8,11 +8,11 @@
 #include <fstream>
 #include <system_error>
 
-#include "cli/bench_effects.h"
-#include "cli/bench_image.h"
+#include "bench/effects.h"
+#include "bench/image.h"
 #include "core/error.h"
 
-namespace hemirad::cli {
+namespace hemirad::bench {
 namespace fs = std::filesystem;
 
 namespace {
@@ -86,4 +86,4 @@ void run_bench(const BenchCommand& command, std::ostream& log) {
     if (!command.json.empty()) log << fmt::format("\nwrote {}\n", command.json);
 }
 
-}  // namespace hemirad::cli
+}  // namespace hemirad::bench
