@@ -14,6 +14,7 @@
 #include "mesh/mesh.h"
 #include "mesh/refine.h"
 #include "output/welded_mesh.h"
+#include "core/error.h"
 #include "test_scenes.h"
 
 using namespace hemirad;
@@ -544,4 +545,60 @@ TEST_CASE("welded refined: an unrefined mesh welds exactly as before", "[output]
     CHECK(face_elements == 4 * 6);
     CHECK(welded.nodes[0].triangle_count() == 2 * 4 * 6);
     CHECK(welded.nodes[0].positions.size() == 5 * 7);
+}
+
+TEST_CASE("welded refined: one weld carries any per-element values to its vertices as welding them would",
+          "[output]") {
+    // A randomly refined mesh (hanging vertices, nested ones) beside a box's crease: weld's own
+    // values for several quantities are vertex_values' on one weld, bit for bit.
+    scene::Scene s;
+    const std::uint32_t grey = scene::add_material(s, dvec3(0.5), dvec3(0.0));
+    scene::add_quad(s, {0, 0, 0}, {3, 0, 0}, {3, 0, 2}, {0, 0, 2}, grey, "floor");
+    scene::add_quad(s, {0, 0, 0}, {0, 0, 2}, {0, 2, 2}, {0, 2, 0}, grey, "wall");  // a crease
+    test::add_triangle(s, {0, 1, 1}, {2.3, 1.4, 1}, {0.7, 1.9, 1}, grey, "triangle");
+    scene::finish(s);
+    const mesh::Mesh built = mesh::build(s, mesh::Settings{0.6, 0.3});
+    std::vector<mesh::Element> elements = built.elements;
+    std::uint32_t state = 777;
+    auto next_random = [&state] {
+        state = state * 1664525u + 1013904223u;
+        return state >> 8;
+    };
+    for (int round = 0; round < 4; ++round) {
+        std::vector<mesh::Element> next;
+        for (const mesh::Element& e : elements) {
+            if (next_random() % 3 == 0) {
+                const auto kids = children(e);
+                next.insert(next.end(), kids.begin(), kids.end());
+            } else {
+                next.push_back(e);
+            }
+        }
+        elements = std::move(next);
+    }
+    elements[elements.size() / 2].area = 0.0;  // a vertex weighed by no area takes the plain mean
+    mesh::Mesh refined;
+    refined.elements = elements;
+    const auto random_values = [&] {
+        std::vector<dvec3> v;
+        for (std::size_t i = 0; i < elements.size(); ++i)
+            v.emplace_back(double(next_random() % 1000) / 7.0, double(next_random() % 100) / 3.0, 1e-3 * double(i));
+        return v;
+    };
+    const output::WeldedMesh one = output::weld(s.nodes.size(), refined, random_values());
+    std::size_t halfway = 0;
+    for (const output::WeldedNode& n : one.nodes) halfway += n.halfway.size();
+    CHECK(halfway > 10);  // the case this is for: hanging vertices set from their edges
+    for (int quantity = 0; quantity < 3; ++quantity) {
+        const std::vector<dvec3> values = random_values();
+        const output::WeldedMesh expected = output::weld(s.nodes.size(), refined, values);
+        const output::VertexValues got = output::vertex_values(one, refined, values);
+        REQUIRE(got.size() == expected.nodes.size());
+        for (std::size_t n = 0; n < got.size(); ++n) {
+            REQUIRE(got[n].size() == expected.nodes[n].radiosity.size());
+            for (std::size_t v = 0; v < got[n].size(); ++v)
+                REQUIRE(std::memcmp(&got[n][v], &expected.nodes[n].radiosity[v], sizeof(dvec3)) == 0);
+        }
+    }
+    CHECK_THROWS_AS(output::vertex_values(one, refined, std::vector<dvec3>(3)), InternalError);
 }

@@ -359,15 +359,20 @@ void warn_engine_events(const EngineChoice& choice, Warnings& warnings) {
 
 // Stage "write outputs": render.exr, render.png and baked.gltf, staged. Returns the exposure of
 // render.png.
-double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, const Lit& lit, OutputTransaction& out,
+double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, Lit& lit, OutputTransaction& out,
                      Warnings& warnings) {
     const Options& o = p.o;
     const auto& radiosity = lit.solved.solution.radiosity;
     const auto& irradiance = lit.solved.solution.irradiance;
     if (!output::all_finite(radiosity) || !output::all_finite(irradiance))
         throw InternalError("the solution has a non-finite value; nothing written");
-    const output::VertexLight* vertex_light = lit.gathered.points > 0 ? &lit.gathered.light : nullptr;
-    const output::Image image = output::render(scene, lit.mesh, radiosity, s.view, s.width, s.height, vertex_light);
+    // One weld of the mesh for every output (the gather's, where it made one), its values the
+    // light drawn: the gather's at the vertices, else the elements' means.
+    const bool gathered = lit.gathered.points > 0;
+    output::WeldedMesh welded = lit.welded ? std::move(*lit.welded) : output::weld(scene.nodes.size(), lit.mesh, radiosity);
+    output::set_vertex_values(welded, gathered ? lit.gathered.light.radiosity
+                                               : output::vertex_values(welded, lit.mesh, radiosity));
+    const output::Image image = output::render(scene, welded, s.view, s.width, s.height);
     if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
     output::write_exr(image, out.staged("render.exr"));
     const double exposure = std::isnan(o.exposure) ? output::auto_exposure(image) : std::exp2(o.exposure);
@@ -375,11 +380,13 @@ double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, c
     // The user's scene with the light baked in; or (--output-mode radiosity, and scenes not read
     // from a file) the element mesh alone.
     if (o.output_mode == "scene" && scene.source) {
-        for (const std::string& w : output::write_scene_gltf(out.staged("baked.gltf"), o.output, scene, lit.mesh,
-                                                             radiosity, irradiance, exposure, vertex_light))
+        const output::VertexValues incident =
+            gathered ? lit.gathered.light.irradiance : output::vertex_values(welded, lit.mesh, irradiance);
+        for (const std::string& w :
+             output::write_scene_gltf(out.staged("baked.gltf"), o.output, scene, lit.mesh, welded, incident, exposure))
             warnings.add("baked.gltf: " + w);
     } else {
-        output::write_baked_gltf(out.staged("baked.gltf"), scene, lit.mesh, radiosity, vertex_light);
+        output::write_baked_gltf(out.staged("baked.gltf"), scene, welded);
     }
     return exposure;
 }
@@ -440,10 +447,10 @@ void run(const Options& options, Progress& progress) {
     const SolveContext solve_context{o, setup.threshold, setup.matrix, fingerprint, resume_state, progress,
                                      [&](const solve::Progressive& solver) {
                                          write_png_preview(scene, meshed.mesh, solver, setup.view, setup.width,
-                                                           setup.height, out.preview_path(solver.passes()));
+                                                           setup.height, out);
                                      }};
     nlohmann::ordered_json fallback;
-    const Lit lit = light_with_fallback(context, meshed.mesh, choice, ff, solve_context, fallback);
+    Lit lit = light_with_fallback(context, meshed.mesh, choice, ff, solve_context, fallback);
     warn_engine_events(choice, warnings);
 
     t0 = Clock::now();

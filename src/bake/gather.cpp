@@ -203,6 +203,7 @@ Lit gather(const LightContext& c, Lit lit, EngineStack& engines) {
                 c.progress.end_stage();
             }
         }
+        lit.welded = std::move(welded);  // of lit.mesh, as graded and refined by the gather
     }
     lit.gather_seconds = seconds_since(t0);
     return lit;

@@ -66,11 +66,9 @@ void remove_stale_staging(const fs::path& dir) {
 }
 
 void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const solve::Progressive& solver,
-                       const output::View& view, int width, int height, const fs::path& file) {
-    const output::Image image = output::render(scene, mesh, solver.radiosity(/*ambient=*/true), view, width, height);
-    const fs::path tmp = preview_staging(file);
-    output::write_png(image, tmp, output::auto_exposure(image));
-    fs::rename(tmp, file);
+                       const output::View& view, int width, int height, OutputTransaction& out) {
+    out.write_preview(solver.passes(),
+                      output::render(scene, mesh, solver.radiosity(/*ambient=*/true), view, width, height));
 }
 
 }  // namespace hemirad::bake

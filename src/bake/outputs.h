@@ -82,15 +82,21 @@ public:
 
     fs::path staged(const std::string& name) const { return staging_ / name; }
 
-    // Previews are visible while the bake runs (so a user can watch), each written atomically.
-    fs::path preview_path(long pass) {
-        const fs::path dir = dir_ / "preview";
-        std::error_code ec;
-        if (!fs::exists(dir, ec) && fs::create_directories(dir, ec)) cleanup_.remove_if_empty(dir);
-        const fs::path file = dir / fmt::format("pass_{:06d}.png", pass);
-        cleanup_.remove_file(file);
-        cleanup_.remove_file(preview_staging(file));
-        return file;
+    // Previews are visible while the bake runs (so a user can watch), each written atomically,
+    // inside critical(): a stop's watchdog either waits for the frame and removes it, or has
+    // removed everything already and the frame is not written (its folder not made again).
+    void write_preview(long pass, const output::Image& image) {
+        cleanup_.critical([&] {
+            cancel::check();
+            const fs::path dir = dir_ / "preview";
+            std::error_code ec;
+            if (!fs::exists(dir, ec) && fs::create_directories(dir, ec)) cleanup_.remove_if_empty(dir);
+            const fs::path file = dir / fmt::format("pass_{:06d}.png", pass);
+            cleanup_.remove_file(file);
+            cleanup_.remove_file(preview_staging(file));
+            output::write_png(image, preview_staging(file), output::auto_exposure(image));
+            fs::rename(preview_staging(file), file);
+        });
     }
 
     // Renames the staged files into place; report.json last, so its presence means complete.
@@ -125,8 +131,8 @@ private:
     cancel::Cleanup cleanup_;
 };
 
-// A preview frame of the progressive solve so far, written atomically to `file`.
+// A preview frame of the progressive solve so far, written into `out`'s preview folder.
 void write_png_preview(const scene::Scene& scene, const mesh::Mesh& mesh, const solve::Progressive& solver,
-                       const output::View& view, int width, int height, const fs::path& file);
+                       const output::View& view, int width, int height, OutputTransaction& out);
 
 }  // namespace hemirad::bake

@@ -121,6 +121,8 @@ struct Lit {
     Solved solved;                            // the solution, refined and graded with the mesh
     std::vector<solve::RefineLevel> levels;   // refinement's
     Gathered gathered;
+    // The weld of `mesh` (output/welded_mesh.h) where the gather made one: the outputs draw it.
+    std::optional<output::WeldedMesh> welded;
     double refine_seconds = 0.0, gather_seconds = 0.0;
 };
 

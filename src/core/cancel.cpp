@@ -29,7 +29,7 @@ static_assert(std::atomic<int>::is_always_lock_free, "the signal handler may onl
 // The scopes alive, and the mutex that orders the watchdog's clean-up against their changes and
 // commits. Never destroyed: the watchdog may still run while static destructors do.
 struct Registry {
-    std::mutex mutex;
+    std::recursive_mutex mutex;  // a critical() section may register paths
     std::vector<std::weak_ptr<Cleanup::State>> scopes;
 };
 Registry& registry() {
@@ -79,7 +79,7 @@ void remove_all_of(const Cleanup::State& s) {
 // outputs are committed: the process is to finish by itself).
 bool clean_up_all() {
     Registry& r = registry();
-    std::lock_guard<std::mutex> lock(r.mutex);
+    std::lock_guard<std::recursive_mutex> lock(r.mutex);
     bool committed = false;
     for (const std::weak_ptr<Cleanup::State>& weak : r.scopes) {
         const std::shared_ptr<Cleanup::State> s = weak.lock();
@@ -181,7 +181,7 @@ void reset_for_test() { g_signal.store(0); }
 
 Cleanup::Cleanup() : state_(std::make_shared<State>()) {
     Registry& r = registry();
-    std::lock_guard<std::mutex> lock(r.mutex);
+    std::lock_guard<std::recursive_mutex> lock(r.mutex);
     r.scopes.erase(std::remove_if(r.scopes.begin(), r.scopes.end(),
                                   [](const std::weak_ptr<State>& w) { return w.expired(); }),
                    r.scopes.end());
@@ -189,29 +189,29 @@ Cleanup::Cleanup() : state_(std::make_shared<State>()) {
 }
 
 Cleanup::~Cleanup() {
-    std::lock_guard<std::mutex> lock(registry().mutex);
+    std::lock_guard<std::recursive_mutex> lock(registry().mutex);
     state_.reset();  // the registry's weak pointer expires with it
 }
 
 void Cleanup::remove_tree(const fs::path& path) {
-    std::lock_guard<std::mutex> lock(registry().mutex);
+    std::lock_guard<std::recursive_mutex> lock(registry().mutex);
     state_->trees.push_back(absolute_path(path));
 }
 
 void Cleanup::remove_file(const fs::path& path) {
-    std::lock_guard<std::mutex> lock(registry().mutex);
+    std::lock_guard<std::recursive_mutex> lock(registry().mutex);
     state_->files.push_back(absolute_path(path));
 }
 
 void Cleanup::remove_if_empty(const fs::path& dir) {
-    std::lock_guard<std::mutex> lock(registry().mutex);
+    std::lock_guard<std::recursive_mutex> lock(registry().mutex);
     state_->empty_dirs.push_back(absolute_path(dir));
 }
 
 void Cleanup::release() { state_->released = true; }  // atomic: inside critical() or alone
 
 void Cleanup::remove_now() {
-    std::lock_guard<std::mutex> lock(registry().mutex);
+    std::lock_guard<std::recursive_mutex> lock(registry().mutex);
     if (!state_->released) remove_all_of(*state_);
 }
 

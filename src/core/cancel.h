@@ -63,7 +63,8 @@ public:
     void remove_tree(const std::filesystem::path& path);    // a directory and all in it
     void remove_file(const std::filesystem::path& path);    // a file
     void remove_if_empty(const std::filesystem::path& dir);  // a directory, only if empty (after the rest)
-    // Runs `f` while the watchdog cannot clean up (a commit's renames): it waits for `f`.
+    // Runs `f` while the watchdog cannot clean up (a commit's renames, a preview frame): it waits
+    // for `f`, which may register paths.
     template <class F>
     void critical(F&& f) {
         Lock lock(*this);

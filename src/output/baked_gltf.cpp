@@ -147,7 +147,10 @@ void write_model(const tinygltf::Model& model, const fs::path& file, const std::
 
 void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene, const mesh::Mesh& mesh,
                       const std::vector<glm::dvec3>& radiosity, const VertexLight* gathered) {
-    const WeldedMesh welded = weld(scene.nodes.size(), mesh, radiosity, gathered ? &gathered->radiosity : nullptr);
+    write_baked_gltf(file, scene, weld(scene.nodes.size(), mesh, radiosity, gathered ? &gathered->radiosity : nullptr));
+}
+
+void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene, const WeldedMesh& welded) {
     tinygltf::Model model = build_model(scene, welded);
     const std::string bin_name = file.stem().string() + ".bin";
     if (!model.buffers.empty()) model.buffers[0].uri = percent_encode(bin_name);

@@ -8,11 +8,11 @@
 #include <glm/glm.hpp>
 
 #include "mesh/mesh.h"
+#include "output/welded_mesh.h"
 #include "scene/scene.h"
 
 namespace hemirad::output {
 
-struct VertexLight;  // welded_mesh.h: a final gather's light at the welded vertices
 
 // Area-weighted averages over one scene mesh node's front-face elements (report.json "meshes").
 struct NodeSummary {
@@ -34,6 +34,8 @@ std::vector<NodeSummary> summarize(const scene::Scene& scene, const mesh::Mesh& 
 void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene,
                       const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
                       const VertexLight* gathered = nullptr);
+// … from a weld already made (its values the light written).
+void write_baked_gltf(const std::filesystem::path& file, const scene::Scene& scene, const WeldedMesh& welded);
 
 // The user's scene back (--output-mode scene): the file the scene was loaded from
 // (scene.source), its nodes, names, transforms, materials, textures, samplers, cameras, lights,
@@ -57,6 +59,11 @@ std::vector<std::string> write_scene_gltf(const std::filesystem::path& file, con
                                           const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
                                           const std::vector<glm::dvec3>& irradiance, double exposure,
                                           const VertexLight* gathered = nullptr);
+// … from a weld of `mesh` already made (`light`: its values the radiosity written) and the
+// irradiance at its vertices.
+std::vector<std::string> write_scene_gltf(const std::filesystem::path& file, const std::filesystem::path& final_dir,
+                                          const scene::Scene& scene, const mesh::Mesh& mesh, const WeldedMesh& light,
+                                          const VertexValues& incident, double exposure);
 
 // A linear RGB image, row 0 at the top.
 struct Image {
@@ -86,6 +93,8 @@ View look_view(const glm::dvec3& from, const glm::dvec3& at, double yfov);
 Image render(const scene::Scene& scene, const mesh::Mesh& mesh,
              const std::vector<glm::dvec3>& radiosity, const View& view, int width, int height,
              const VertexLight* gathered = nullptr);
+// … of a weld already made (its values the radiosity drawn).
+Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& view, int width, int height);
 
 // Exposure that puts the 90th percentile of lit pixels (emitters are too few to matter) at
 // 0.6 linear, about 0.8 on the display.

@@ -258,13 +258,17 @@ double mesh_diagonal(const scene::Scene& scene, const WeldedMesh& welded) {
 
 Image render(const scene::Scene& scene, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
              const View& view, int width, int height, const VertexLight* gathered) {
+    return render(scene, weld(scene.nodes.size(), mesh, radiosity, gathered ? &gathered->radiosity : nullptr), view,
+                  width, height);
+}
+
+Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& view, int width, int height) {
     if (width <= 0 || height <= 0) {
         throw InternalError(fmt::format("output: cannot render a {}x{} image", width, height));
     }
     Image image{width, height, std::vector<float>(std::size_t(width) * height * 3, 0.0f)};
     std::vector<ScreenTriangle> triangles;
-    {  // the welded mesh only while its triangles are set up: it is freed before they are drawn
-        const WeldedMesh welded = weld(scene.nodes.size(), mesh, radiosity, gathered ? &gathered->radiosity : nullptr);
+    {
         const double diagonal = mesh_diagonal(scene, welded);
         if (diagonal <= 0.0) return image;  // nothing (or nothing with extent) to draw
         const TriangleSetup setup(view, width, height, kNearFraction * diagonal);

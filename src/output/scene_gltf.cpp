@@ -162,7 +162,7 @@ bool read_doubles(const tinygltf::Model& m, int index, std::vector<double>& out,
 // The output model, built up: buffer 0 holds every byte it names.
 class Writer {
 public:
-    Writer(const scene::Scene& scene, const mesh::Mesh& mesh, const WeldedMesh& light, const WeldedMesh& incident,
+    Writer(const scene::Scene& scene, const mesh::Mesh& mesh, const WeldedMesh& light, const VertexValues& incident,
            double exposure, const fs::path& final_dir)
         : scene_(scene), src_(scene.source->model), mesh_(mesh), light_(light), incident_(incident),
           exposure_(exposure), final_dir_(final_dir) {}
@@ -373,7 +373,7 @@ private:
     int baked_mesh(std::uint32_t node, int mesh_index) {
         const tinygltf::Mesh& in = src_.meshes[std::size_t(mesh_index)];
         const WeldedNode& w = light_.nodes[node];
-        const WeldedNode& h = incident_.nodes[node];
+        const std::vector<glm::dvec3>& h = incident_[node];
         const scene::GltfSource& source = *scene_.source;
         // The welded triangles of each of the file's primitives (by index in the mesh).
         std::map<int, std::vector<std::size_t>> of_primitive;
@@ -414,7 +414,7 @@ private:
     // The welded triangles `triangles` of one side of a primitive, as a primitive in the node's
     // local space; false when that side has none.
     bool bake_primitive(std::uint32_t node, const tinygltf::Primitive& in, const std::vector<std::size_t>& triangles,
-                        const WeldedNode& w, const WeldedNode& h, bool back, tinygltf::Primitive& out) {
+                        const WeldedNode& w, const std::vector<glm::dvec3>& h, bool back, tinygltf::Primitive& out) {
         std::vector<std::size_t> side;
         for (const std::size_t t : triangles)
             if (mesh_.elements[w.element[t]].back == back) side.push_back(t);
@@ -507,7 +507,7 @@ private:
                     }
                     for (int k = 0; k < a.comps; ++k) corner_values.push_back(static_cast<float>(mixed[std::size_t(k)]));
                 }
-                const dvec3 light = emitter ? w.radiosity[v] : h.radiosity[v];
+                const dvec3 light = emitter ? w.radiosity[v] : h[v];
                 const glm::vec3 shown(vertex_colour * dvec3(tone(exposure_ * light.x), tone(exposure_ * light.y),
                                                             tone(exposure_ * light.z)));
                 key.assign(reinterpret_cast<const char*>(&v), sizeof v);
@@ -524,7 +524,7 @@ private:
                     }
                     colour.push_back(shown);
                     radiosity.push_back(glm::vec3(w.radiosity[v]));
-                    irradiance.push_back(glm::vec3(h.radiosity[v]));
+                    irradiance.push_back(glm::vec3(h[v]));
                 }
                 corner[c] = found->second;
             }
@@ -604,7 +604,7 @@ private:
     const tinygltf::Model& src_;
     const mesh::Mesh& mesh_;
     const WeldedMesh& light_;
-    const WeldedMesh& incident_;
+    const VertexValues& incident_;
     double exposure_;
     fs::path final_dir_;
     tinygltf::Model out_;
@@ -620,9 +620,16 @@ std::vector<std::string> write_scene_gltf(const fs::path& file, const fs::path& 
                                           const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
                                           const std::vector<glm::dvec3>& irradiance, double exposure,
                                           const VertexLight* gathered) {
-    if (!scene.source) throw InternalError("write_scene_gltf: the scene has no source file");
     const WeldedMesh light = weld(scene.nodes.size(), mesh, radiosity, gathered ? &gathered->radiosity : nullptr);
-    const WeldedMesh incident = weld(scene.nodes.size(), mesh, irradiance, gathered ? &gathered->irradiance : nullptr);
+    return write_scene_gltf(file, final_dir, scene, mesh, light,
+                            gathered ? gathered->irradiance : vertex_values(light, mesh, irradiance), exposure);
+}
+
+std::vector<std::string> write_scene_gltf(const fs::path& file, const fs::path& final_dir, const scene::Scene& scene,
+                                          const mesh::Mesh& mesh, const WeldedMesh& light, const VertexValues& incident,
+                                          double exposure) {
+    if (!scene.source) throw InternalError("write_scene_gltf: the scene has no source file");
+    if (incident.size() != light.nodes.size()) throw InternalError("write_scene_gltf: irradiance for other nodes");
     Writer writer(scene, mesh, light, incident, exposure, final_dir);
     tinygltf::Model model = writer.build();
     const std::string bin_name = file.stem().string() + ".bin";

@@ -53,6 +53,7 @@ public:
         for (int i = 0; i < element.poly.n; ++i) {
             placed.ids[i] = vertex(element.poly.v[i], element.normal, element.back);
             accumulate(placed.ids[i], element, radiosity);
+            corners_.push_back({placed.ids[i], index});
         }
         placed_.push_back(placed);
     }
@@ -73,6 +74,7 @@ public:
                                                   : glm::dvec3(0.0);
         }
         apply_constraints();
+        record_corners();
         return std::move(node_);
     }
 
@@ -306,6 +308,7 @@ private:
                     if (pending(c.b)) stack.push_back(c.b);
                 } else {
                     node_.radiosity[v] = 0.5 * (node_.radiosity[c.a] + node_.radiosity[c.b]);
+                    node_.halfway.push_back({v, c.a, c.b});
                     const glm::dvec3 normal = node_.normals[c.a] + node_.normals[c.b];
                     const double length = glm::length(normal);
                     if (length > 0.0) node_.normals[v] = normal / length;
@@ -315,6 +318,24 @@ private:
             }
         }
     }
+
+    // Each vertex's elements, in the order accumulate() took them (a stable counting sort of
+    // corners_ by vertex), for vertex_values.
+    void record_corners() {
+        const std::size_t vertices = node_.positions.size();
+        node_.corner_start.assign(vertices + 1, 0);
+        for (const Corner& c : corners_) ++node_.corner_start[c.vertex + 1];
+        for (std::size_t v = 0; v < vertices; ++v) node_.corner_start[v + 1] += node_.corner_start[v];
+        node_.corner_element.resize(corners_.size());
+        std::vector<std::uint32_t> next(node_.corner_start.begin(), node_.corner_start.end() - 1);
+        for (const Corner& c : corners_) node_.corner_element[next[c.vertex]++] = c.element;
+        corners_.clear();
+        corners_.shrink_to_fit();
+    }
+
+    struct Corner {
+        std::uint32_t vertex, element;
+    };
 
     struct Constraint {
         std::uint32_t a, b;  // the edge m halves
@@ -334,6 +355,7 @@ private:
     std::vector<std::uint32_t> count_;
     std::vector<std::uint64_t> filter_;       // see build_filter
     std::vector<Placed> placed_;              // the elements, in order, with their corners' vertices
+    std::vector<Corner> corners_;             // every corner, in the order accumulated
     std::vector<OutlinePoint> outline_;       // scratch: the element being triangulated
     std::vector<Constraint> constraint_;      // per vertex; empty until a hanging vertex is found
     std::vector<std::uint32_t> constrained_;  // the hanging vertices, in the order found
@@ -358,19 +380,49 @@ WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vecto
     WeldedMesh welded;
     welded.nodes.reserve(node_count);
     for (NodeWelder& welder : welders) welded.nodes.push_back(welder.finish());
-    if (vertex_values) {
-        if (vertex_values->size() != node_count) {
-            throw InternalError(fmt::format("output: vertex values for {} nodes of {}", vertex_values->size(), node_count));
-        }
-        for (std::size_t n = 0; n < node_count; ++n) {
-            if ((*vertex_values)[n].size() != welded.nodes[n].positions.size()) {
-                throw InternalError(fmt::format("output: node {}: {} vertex values for {} vertices", n,
-                                                (*vertex_values)[n].size(), welded.nodes[n].positions.size()));
-            }
-            welded.nodes[n].radiosity = (*vertex_values)[n];
-        }
-    }
+    if (vertex_values) set_vertex_values(welded, *vertex_values);
     return welded;
+}
+
+VertexValues vertex_values(const WeldedMesh& welded, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& values) {
+    if (values.size() != mesh.elements.size()) {
+        throw InternalError(fmt::format("output: {} values for {} elements", values.size(), mesh.elements.size()));
+    }
+    VertexValues out(welded.nodes.size());
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        const WeldedNode& node = welded.nodes[n];
+        std::vector<glm::dvec3>& at = out[n];
+        at.resize(node.positions.size());
+        // As NodeWelder::accumulate and finish do it, operation for operation.
+        for (std::size_t v = 0; v < node.positions.size(); ++v) {
+            glm::dvec3 weighted(0.0), plain(0.0);
+            double weight = 0.0;
+            const std::uint32_t first = node.corner_start[v], last = node.corner_start[v + 1];
+            for (std::uint32_t i = first; i < last; ++i) {
+                const std::uint32_t k = node.corner_element[i];
+                const double area = mesh.elements[k].area;
+                weighted += area * values[k];
+                weight += area;
+                plain += values[k];
+            }
+            at[v] = weight > 0.0 ? weighted / weight : last > first ? plain / double(last - first) : glm::dvec3(0.0);
+        }
+        for (const WeldedNode::Halfway& h : node.halfway) at[h.vertex] = 0.5 * (at[h.a] + at[h.b]);
+    }
+    return out;
+}
+
+void set_vertex_values(WeldedMesh& welded, const VertexValues& values) {
+    if (values.size() != welded.nodes.size()) {
+        throw InternalError(fmt::format("output: vertex values for {} nodes of {}", values.size(), welded.nodes.size()));
+    }
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (values[n].size() != welded.nodes[n].positions.size()) {
+            throw InternalError(fmt::format("output: node {}: {} vertex values for {} vertices", n, values[n].size(),
+                                            welded.nodes[n].positions.size()));
+        }
+        welded.nodes[n].radiosity = values[n];
+    }
 }
 
 }  // namespace hemirad::output

@@ -22,6 +22,16 @@ struct WeldedNode {
     std::vector<std::uint8_t> has_twin;
     std::vector<std::uint32_t> element;  // per triangle: the element it is part of (mesh index)
 
+    // How weld made each vertex's value of the elements', so that any other per-element values
+    // reach the same vertices without welding again (vertex_values): vertex v's elements, in the
+    // order weld summed them, are corner_element[corner_start[v] .. corner_start[v + 1]); then
+    // each hanging vertex, in `halfway`'s order, took the mean of its edge's ends.
+    std::vector<std::uint32_t> corner_start, corner_element;
+    struct Halfway {
+        std::uint32_t vertex, a, b;
+    };
+    std::vector<Halfway> halfway;
+
     std::size_t triangle_count() const { return indices.size() / 3; }
 };
 
@@ -60,5 +70,14 @@ struct VertexLight {
 // that does not exist, or `vertex_values` does not hold one value per welded vertex.
 WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& radiosity,
                 const VertexValues* vertex_values = nullptr);
+
+// Per vertex of `welded` (weld's of `mesh`), the value weld would give it from the per-element
+// `values`, bit for bit: one weld of a mesh serves every quantity on it (light, irradiance,
+// emission, reflectance). Throws InternalError when `values` is not one value per element.
+VertexValues vertex_values(const WeldedMesh& welded, const mesh::Mesh& mesh, const std::vector<glm::dvec3>& values);
+
+// `welded` with its vertices' values replaced by `values` (one per vertex per node, as
+// vertex_values gives them); InternalError where the counts differ.
+void set_vertex_values(WeldedMesh& welded, const VertexValues& values);
 
 }  // namespace hemirad::output

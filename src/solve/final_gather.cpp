@@ -191,17 +191,17 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         emission[k] = mesh.elements[k].emission;
         rho[k] = mesh.elements[k].rho;
     }
-    // The elements' means at the vertices (the same weld, so the same vertices in the same order).
-    const output::WeldedMesh e = output::weld(node_count, mesh, emission);
-    const output::WeldedMesh r = output::weld(node_count, mesh, rho);
-    const output::WeldedMesh h = output::weld(node_count, mesh, irradiance);
-    const output::WeldedMesh d = direct.empty() ? output::WeldedMesh{} : output::weld(node_count, mesh, direct);
+    // The elements' means at the vertices of the one weld of the mesh.
+    const output::VertexValues e = output::vertex_values(welded, mesh, emission);
+    const output::VertexValues r = output::vertex_values(welded, mesh, rho);
+    const output::VertexValues h = output::vertex_values(welded, mesh, irradiance);
+    const output::VertexValues d = direct.empty() ? output::VertexValues{} : output::vertex_values(welded, mesh, direct);
     out.radiosity.assign(node_count, {});
     out.irradiance.assign(node_count, {});
     std::vector<std::pair<std::uint32_t, std::uint32_t>> where;  // point i's node and vertex
     for (std::size_t n = 0; n < node_count; ++n) {
         out.radiosity[n] = welded.nodes[n].radiosity;
-        out.irradiance[n] = h.nodes[n].radiosity;
+        out.irradiance[n] = h[n];
         if (!gathered(n)) continue;
         for (std::size_t v = 0; v < welded.nodes[n].positions.size(); ++v)
             where.push_back({static_cast<std::uint32_t>(n), static_cast<std::uint32_t>(v)});
@@ -282,9 +282,9 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     std::size_t kept = 0;
     const auto store = [&](std::size_t i, const glm::dvec3& gathered) {
         const auto [n, v] = where[i];
-        const glm::dvec3 light = direct.empty() ? gathered : gathered + d.nodes[n].radiosity[v];
+        const glm::dvec3 light = direct.empty() ? gathered : gathered + d[n][v];
         out.irradiance[n][v] = light;
-        out.radiosity[n][v] = e.nodes[n].radiosity[v] + r.nodes[n].radiosity[v] * light;
+        out.radiosity[n][v] = e[n][v] + r[n][v] * light;
     };
     // A shot row's light; `keep`: its near weights appended to the kept ones.
     const auto shot_light = [&](std::size_t i, const formfactor::ShotResult& row, bool keep) {
