@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Bake time and peak memory against scene size: for each generated content scene (city, furniture,
-# foliage; src/scene/content_scenes.h) at each triangle count, writes it as .glb
+# foliage; src/gen/content_scenes.h) at each triangle count, writes it as .glb
 # (`hemirad scene write`), bakes it with `hemirad bake` and records wall time, CPU time (user +
 # sys), peak resident memory (the bake process's ru_maxrss, from wait4) and the patches, elements
 # and passes of its report.json. Writes the results as JSON and a markdown table beside it (.md);

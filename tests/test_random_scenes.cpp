@@ -176,7 +176,7 @@ void check_converged_answer(const test::RandomBake& bake, const std::filesystem:
 
 TEST_CASE("random scenes: 30 seeded scenes bake on the reference and OpenCL with every invariant and the same bits",
           "[random]") {
-    // Each seed: a scene and small settings (random_bake.h), baked through run_bake as the CLI
+    // Each seed: a scene and small settings (random_bake.h), baked through bake::run as the CLI
     // runs it. Every shot must have F >= 0 and ΣF + blocked <= 1 + 1e-9; the outputs must be
     // complete and finite with balanced books; the OpenCL bake must be the reference's, bit for bit.
     const bool opencl = !ocl::list_devices().empty();

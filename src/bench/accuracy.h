@@ -35,7 +35,7 @@ inline constexpr double kPresetMaxThreshold = 1e-2;
 // counts as that), with a threshold of at most kPresetMaxThreshold. The presets set N, meshing
 // and threshold for every bake, so they are read off runs that depend on all of them and stay
 // comparable from one benchmark to the next; the matrix solver, exact form factors and
-// refinement are a scene's plan (src/cli/bake.cpp), not a quality setting.
+// refinement are a scene's plan (src/bake/bake.cpp), not a quality setting.
 bool preset_eligible(const nlohmann::ordered_json& run);
 
 // Of `runs` (each with seconds, rms_rel_error, threshold and the fields preset_eligible reads),

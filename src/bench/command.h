@@ -1,6 +1,6 @@
 // `hemirad bench`: throughput of the form-factor engines (bench/throughput.h), the
 // accuracy-against-time sweep (bench/accuracy.h) or what planning the effects saves
-// (cli/bench_effects.h), printed as tables and written as JSON.
+// (bench/effects.h), printed as tables and written as JSON.
 #pragma once
 
 #include <ostream>

@@ -1,6 +1,6 @@
 // `hemirad bench --effects`: what simulating only the effects a scene calls for saves. Bakes the
 // bundled scenes with each effect as the planner decides it (scene/effects.h) and forced the
-// other way, in-process through run_bake, and reports for each pair the time (median over
+// other way, in-process through bake::run, and reports for each pair the time (median over
 // repeats), the stages that changed, the effect decisions and how far every mesh's average
 // radiosity moved.
 #pragma once

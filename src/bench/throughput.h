@@ -52,7 +52,7 @@ struct Stats {
 Stats stats(std::vector<double> values);
 
 // A scene by name: a generated spec (procedural:<count>, city:, furniture:, foliage:<count>; see
-// scene/content_scenes.h) is generated, anything else loaded as glTF. `closed` is true where every
+// gen/content_scenes.h) is generated, anything else loaded as glTF. `closed` is true where every
 // direction from every patch hits a surface by construction (every generated kind but the open
 // city), so each shot's form factors and blocked share must sum to 1.
 struct BenchScene {

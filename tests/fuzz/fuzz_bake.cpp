@@ -1,6 +1,6 @@
 // libFuzzer target for the whole bake: the input bytes drive the random-scene generator (a glTF of
 // spheres, cylinders, tori, boxes, thin walls and degenerate triangles under nested rotated,
-// scaled and mirrored nodes) and the bake's settings; the scene is baked by run_bake, as the CLI
+// scaled and mirrored nodes) and the bake's settings; the scene is baked by bake::run, as the CLI
 // runs it, at small settings (N 16–32, coarse patches, at most 300 passes), on the reference
 // engine and, for inputs that ask and where an OpenCL device is present, again on OpenCL. A bake
 // must succeed or refuse its input with an InputError; anything else (a crash, a sanitizer
