@@ -63,6 +63,8 @@ Options complete_options(const Options& options, const QualityPreset& quality) {
     return o;
 }
 
+}  // namespace
+
 // Stage "plan": before any file is read.
 Plan make_plan(const Options& options) {
     Plan p;
@@ -90,6 +92,8 @@ Plan make_plan(const Options& options) {
     p.memory_limit = memory_limit_of(o.max_memory);
     return p;
 }
+
+namespace {
 
 // Stage "load": the scene, with the sky and sun the options add, that has something to bake.
 scene::Scene load(const Plan& p) {
@@ -163,6 +167,8 @@ BakeShape plan_shape(const Plan& p, const scene::Scene& scene, const Setup& s) {
     return shape;
 }
 
+}  // namespace
+
 // Stage "set up": what the loaded scene calls for, before any of the mesh is built.
 Setup set_up(const Plan& p, scene::Scene& scene) {
     const Options& o = p.o;
@@ -190,6 +196,8 @@ Setup set_up(const Plan& p, scene::Scene& scene) {
     s.threshold = s.effects.convergence.on ? o.threshold : kUnconvergedThreshold;
     return s;
 }
+
+namespace {
 
 // The solver for a mesh of `counts` (--solver auto: by memory and expected time), and the memory
 // it needs; InputError where that is more than the bake may use.
@@ -235,6 +243,8 @@ void choose_solver_within_memory(const Plan& p, const Setup& s, const mesh::Coun
                                  format_bytes(limit.bytes), limit.source, hint));
 }
 
+}  // namespace
+
 // Stage "mesh": patches and elements, the solver chosen by their counts before they are built.
 Meshed build_mesh(const Plan& p, const Setup& s, scene::Scene& scene) {
     Meshed m;
@@ -254,6 +264,8 @@ Meshed build_mesh(const Plan& p, const Setup& s, scene::Scene& scene) {
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");
     return m;
 }
+
+namespace {
 
 // The form-factor engine: the device's hemicube, or exact unoccluded form factors where nothing
 // hides anything.
@@ -304,6 +316,8 @@ TimeEstimate say_expected_time(const Plan& p, const Meshed& m, Warnings& warning
     return expected;
 }
 
+}  // namespace
+
 // Stages "solve", "refine" and "gather" on the engines `engines` makes. `mesh` is the one the
 // engines were made for: it stays in place while the solve's engines live, then moves on.
 Lit light(const LightContext& c, mesh::Mesh& mesh, EngineStack& engines, const SolveContext& sc) {
@@ -319,6 +333,8 @@ Lit light(const LightContext& c, mesh::Mesh& mesh, EngineStack& engines, const S
     lit = refine(c, std::move(lit), engines);
     return gather(c, std::move(lit), engines);
 }
+
+namespace {
 
 // The device fallback around the lighting stages: should the automatically chosen device fail
 // part-way, the bake starts again on the reference engine from the mesh as built. What was

@@ -15,7 +15,9 @@ std::unique_ptr<formfactor::Engine> observed(std::unique_ptr<formfactor::Engine>
 
 std::unique_ptr<formfactor::Engine> EngineStack::solve(const mesh::Mesh& mesh) {
     if (!occlusion_) return level(mesh, 0);
-    return observed(std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(choice_.engine)), on_shot_);
+    std::unique_ptr<formfactor::Engine> engine =
+        choice_.engine ? std::move(choice_.engine) : engine_like(choice_, mesh, settings_);
+    return observed(std::make_unique<formfactor::NearFieldEngine>(mesh, std::move(engine)), on_shot_);
 }
 
 std::unique_ptr<formfactor::Engine> EngineStack::level(const mesh::Mesh& mesh, int level) const {

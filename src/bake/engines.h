@@ -50,7 +50,8 @@ public:
                 ObservedEngine::Observer on_shot)
         : choice_(choice), settings_(settings), occlusion_(occlusion), on_shot_(std::move(on_shot)) {}
 
-    // The solve's engine on the base mesh: the choice's own (its devices already hold `mesh`).
+    // The solve's engine on the base mesh: the choice's own (its devices already hold `mesh`),
+    // or where it was taken (a benchmark's later runs) one like it.
     std::unique_ptr<formfactor::Engine> solve(const mesh::Mesh& mesh);
     // An engine for a refined mesh at `level` (0: the base): the hemicube's resolution rises with
     // the level, so that children cover as many cells as their parents did.

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "bake/engines.h"
+#include "bake/solve.h"
 #include "bake/stages.h"
 
 namespace hemirad::bake {
@@ -26,6 +27,10 @@ Lit refine(const LightContext& c, Lit lit, EngineStack& engines);
 // gathered light changes faster than the vertices follow. Left out (a warning) beyond
 // kMaxPlannedGather vertices unless --gather was given.
 Lit gather(const LightContext& c, Lit lit, EngineStack& engines);
+
+// Stages "solve", "refine" and "gather" on the engines `engines` makes (bake.cpp). `mesh` is the
+// one the solve's engine was made for: it stays in place while that engine lives, then moves on.
+Lit light(const LightContext& c, mesh::Mesh& mesh, EngineStack& engines, const SolveContext& sc);
 
 // The most output vertices the quality's final gather takes on by itself.
 inline constexpr std::size_t kMaxPlannedGather = 50000;

@@ -126,4 +126,10 @@ struct Lit {
     double refine_seconds = 0.0, gather_seconds = 0.0;
 };
 
+// The first stages (bake.cpp), public for callers that run a bake's stages on a scene of their
+// own (bench --accuracy): plan, set up (the scene is changed as its effects say), mesh.
+Plan make_plan(const Options& options);
+Setup set_up(const Plan& plan, scene::Scene& scene);
+Meshed build_mesh(const Plan& plan, const Setup& setup, scene::Scene& scene);
+
 }  // namespace hemirad::bake

@@ -1,9 +1,13 @@
-// The accuracy-against-time sweep (see accuracy.h). Most runs use the hemicube engine stack of
-// a bake (the hemicube engine under the near-field correction) and the progressive solver; the
-// "solver" sweep also bakes the room as a bake plans it (exact unoccluded form factors, the
-// matrix solver, adaptive refinement) and the combinations in between. A run's time is the
-// wall time of meshing, solving and refining, kernel builds excluded (a context keeps them).
+// The accuracy-against-time sweep (see accuracy.h). Each run of the room is a bake's own stages
+// (src/bake: plan, set up, mesh, solve, refine; no gather) with the run's settings as options:
+// most use the hemicube engine stack and the progressive solver; the "solver" sweep also bakes
+// the room as a bake plans it (exact unoccluded form factors, the matrix solver, adaptive
+// refinement) and the combinations in between. A run's time is the wall time of those stages,
+// kernel builds excluded (one engine choice, so one context, for the whole sweep).
 #include "bench/accuracy.h"
+
+#include "bake/gather.h"
+#include "bake/stages.h"
 
 #include <fmt/core.h>
 
@@ -40,32 +44,27 @@ using ordered_json = nlohmann::ordered_json;
 // Probes per surface edge: 8 × 8 points on each of the seven surfaces.
 constexpr int kProbesPerEdge = 8;
 
-// The engine every run uses: an OpenCL device (one context for the whole sweep, so kernels
-// build once per N) or the reference.
-class EngineFactory {
+// The engines every run uses, made by a bake's builder (bake::EngineStack) on one engine choice
+// for the whole sweep: an OpenCL device (one context, so kernels build once per N) or the
+// reference. `any` is a mesh to choose on (an automatic device's first shot is checked on it).
+class Engines {
 public:
-    explicit EngineFactory(const std::string& spec) {
-        const std::vector<ocl::DeviceInfo> devices =
-            spec == "ref" ? std::vector<ocl::DeviceInfo>{} : ocl::list_devices();
-        if (const ocl::DeviceInfo* chosen = ocl::resolve_device(spec, "--device " + spec, devices))
-            context_ = std::make_unique<ocl::Context>(*chosen);
+    Engines(const std::string& spec, const mesh::Mesh& any)
+        : choice_(bake::choose_engine(spec, false, 1, any, {32, 1})) {
+        choice_.engine.reset();  // every run's engines are made like it, for its own mesh
     }
     std::string device() const {
-        return context_ ? context_->info().name + " (" + context_->info().id() + ")" : "ref (host, 1 thread)";
+        return choice_.id == "ref" ? "ref (host, 1 thread)" : choice_.name + " (" + choice_.id + ")";
     }
-    // The bake's stack: the hemicube engine under the near-field correction.
-    std::unique_ptr<formfactor::Engine> make(const mesh::Mesh& m, const formfactor::Settings& settings) {
-        std::unique_ptr<formfactor::Engine> inner;
-        if (context_)
-            inner = std::make_unique<formfactor::OpenCLEngine>(m, *context_, settings,
-                                                               formfactor::tuning_from_environment(context_->info()));
-        else
-            inner = std::make_unique<formfactor::ReferenceEngine>(m, settings);
-        return std::make_unique<formfactor::NearFieldEngine>(m, std::move(inner));
+    const std::string& id() const { return choice_.id; }
+    // A bake's engine stack at `settings`: the hemicube under the near-field correction, or
+    // (occlusion off) exact unoccluded form factors.
+    bake::EngineStack stack(const formfactor::Settings& settings, bool occlusion) {
+        return bake::EngineStack(choice_, settings, occlusion, {});
     }
 
 private:
-    std::unique_ptr<ocl::Context> context_;
+    bake::EngineChoice choice_;
 };
 
 // --- Analytic configurations: the area form factor from one square to another -------------
@@ -105,7 +104,7 @@ double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine) {
     return weighted / shooter_area;
 }
 
-ordered_json analytic_sweep(EngineFactory& engines, bool quick, std::ostream& log) {
+ordered_json analytic_sweep(Engines& engines, bool quick, std::ostream& log) {
     const std::vector<int> hemicubes =
         quick ? std::vector<int>{32, 128, 512} : std::vector<int>{16, 32, 64, 128, 256, 512, 1024};
     const std::vector<double> patch_sizes =
@@ -117,7 +116,7 @@ ordered_json analytic_sweep(EngineFactory& engines, bool quick, std::ostream& lo
         for (double patch : patch_sizes) {
             const mesh::Mesh m = mesh::build(c.scene, {patch, patch / 3.0});
             for (int n : hemicubes) {
-                auto engine = engines.make(m, {n, 1});
+                auto engine = engines.stack({n, 1}, true).level(m, 0);
                 formfactor::ShotResult warm;
                 engine->shoot(0, 0, warm);  // first uploads
                 const auto t0 = Clock::now();
@@ -176,59 +175,53 @@ std::size_t element_at(const mesh::Mesh& m, std::uint32_t node, const glm::dvec3
     return best;
 }
 
+// A run's settings as a bake's options: the sweep's own refinement contrast (solve::RefineSettings')
+// and no cap on passes, no gather.
+bake::Options room_options(const scene::Scene& room, const std::string& device, const RoomSettings& r) {
+    bake::Options o;
+    o.scene = "the accuracy benchmark's room";
+    o.device = device;
+    o.hemicube = r.hemicube;
+    o.patch_size = room.diagonal() * r.patch_fraction;
+    o.element_size = o.patch_size / r.elements_per_edge;
+    o.threshold = r.threshold;
+    o.batch = r.batch;
+    o.batch_given = true;
+    o.max_passes = 0;
+    o.solver = r.solver;
+    o.effects = r.exact ? "occlusion=off" : "occlusion=on";
+    o.refine_levels = r.refine_levels;
+    o.contrast = solve::RefineSettings().contrast;
+    o.gather = 0;
+    o.quiet = true;
+    return o;
+}
+
 ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, const std::vector<Probe>& probes,
-                      EngineFactory& engines, const RoomSettings& r) {
+                      Engines& engines, const RoomSettings& r) {
     if (r.solver != "progressive" && r.solver != "matrix") throw InternalError("accuracy: unknown solver " + r.solver);
     const auto t0 = Clock::now();
-    const double patch = room.diagonal() * r.patch_fraction;
-    // Clusters only for the hemicube, as a bake meshes (the exact engine integrates over cells).
-    mesh::Mesh m = mesh::build(room, {patch, patch / r.elements_per_edge, /*cluster=*/!r.exact});
-    const std::size_t elements_before = m.elements.size();
-    // As a bake's make_engine: the same kind of engine for a refined mesh, a hemicube's N doubled
-    // per level of refinement (capped), so that children cover as many cells as their parents did.
-    const auto make_engine = [&](const mesh::Mesh& mm, int level) -> std::unique_ptr<formfactor::Engine> {
-        if (r.exact) return std::make_unique<formfactor::UnoccludedEngine>(mm);
-        return engines.make(mm, {solve::regather_hemicube(r.hemicube, level), 1});
-    };
-    std::unique_ptr<formfactor::Engine> engine = make_engine(m, 0);
-    std::vector<glm::dvec3> radiosity, irradiance, shot;  // per element (the ambient term included); per patch
-    long passes = 0;                           // hemicubes (rows, or passes) the solver shot
-    int iterations = 0;                        // Gauss–Seidel sweeps (matrix)
-    if (r.solver == "matrix") {
-        solve::MatrixSettings ms = solve::matrix_settings(r.threshold, r.batch);  // as a bake sets them
-        ms.grey = false;  // the room has a red wall: a bake plans colour on
-        solve::Matrix solver(m, *engine, ms);
-        solver.solve();
-        if (!solver.converged()) throw InternalError("accuracy: the matrix solve did not converge");
-        radiosity = solver.radiosity();
-        irradiance = solver.irradiance();
-        shot = solver.patch_radiosity();
-        passes = solver.rows();
-        iterations = solver.iterations();
-    } else {
-        solve::Settings settings;
-        settings.threshold = r.threshold;
-        settings.batch = r.batch;
-        solve::Progressive solver(m, *engine, settings);
-        while (solver.step()) {
-        }
-        radiosity = solver.radiosity(/*ambient=*/true);
-        irradiance = solver.irradiance(/*ambient=*/true);
-        shot = solver.shot();
-        passes = solver.passes();
-    }
-    engine.reset();  // it holds the unrefined mesh
+    const bake::Plan plan = bake::make_plan(room_options(room, engines.id(), r));
+    scene::Scene scene = room;  // as the bake's set-up leaves it
+    const bake::Setup setup = bake::set_up(plan, scene);
+    bake::Meshed meshed = bake::build_mesh(plan, setup, scene);
+    const std::size_t elements_before = meshed.mesh.elements.size();
+    bake::EngineStack stack = engines.stack({r.hemicube, 1}, setup.effects.occlusion.on);
+    bake::Progress silent;
+    bake::Warnings warnings(silent);
+    const bake::LightContext context{plan, setup, scene, meshed, silent, warnings};
+    const std::string no_checkpoint;
+    const bake::SolveContext solve_context{plan.o, setup.threshold, setup.matrix, no_checkpoint, no_checkpoint, silent, {}};
+    const bake::Lit lit = bake::light(context, meshed.mesh, stack, solve_context);
+    const bake::Solution& solution = lit.solved.solution;
+    if (r.solver == "matrix" && !solution.converged) throw InternalError("accuracy: the matrix solve did not converge");
+    const mesh::Mesh& m = lit.mesh;
+    const std::vector<glm::dvec3>& radiosity = solution.radiosity;
+    const std::vector<glm::dvec3>& irradiance = solution.irradiance;
+    const long passes = solution.passes;        // hemicubes (rows, or passes) the solver shot
+    const int iterations = solution.iterations;  // Gauss–Seidel sweeps (matrix)
     long regather_shots = 0;
-    if (r.refine_levels > 0) {  // as a bake: split where the irradiance contrasts, re-gather
-        solve::RefineSettings rs;
-        rs.max_levels = r.refine_levels;
-        rs.batch = std::max(r.batch, 64);
-        solve::RefineResult refined = solve::refine(std::move(m), std::move(irradiance), shot, make_engine, rs);
-        m = std::move(refined.mesh);
-        irradiance = std::move(refined.irradiance);
-        radiosity = std::move(refined.radiosity);
-        for (const solve::RefineLevel& level : refined.levels) regather_shots += level.shots;
-    }
+    for (const solve::RefineLevel& level : lit.levels) regather_shots += level.shots;
     const double seconds = seconds_since(t0);
 
     // The error a user sees: radiosity (luminance) at probe points over every surface.
@@ -250,8 +243,8 @@ ordered_json room_run(const scene::Scene& room, const RoomSolution& reference, c
                 worst_surface =
                     std::max(worst_surface, std::abs(luminance(s.radiosity) - luminance(average)) / luminance(average));
     ordered_json run = {{"hemicube", r.hemicube},
-                        {"patch_size", patch},
-                        {"element_size", patch / r.elements_per_edge},
+                        {"patch_size", plan.o.patch_size},
+                        {"element_size", plan.o.element_size},
                         {"patch_fraction", r.patch_fraction},
                         {"elements_per_patch_edge", r.elements_per_edge},
                         {"threshold", r.threshold},
@@ -396,14 +389,15 @@ ordered_json derive_presets(const ordered_json& runs, const std::vector<std::siz
 }
 
 ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
-    EngineFactory engines(o.engine);
+    const Room room_spec;
+    const scene::Scene room = make_room_scene(room_spec);
+    const mesh::Mesh coarse = mesh::build(room, {room.diagonal() / 4.0, room.diagonal() / 4.0});
+    Engines engines(o.engine, coarse);
     log << fmt::format("accuracy against time on {}\n", engines.device());
     ordered_json out;
     out["device"] = engines.device();
     out["analytic"] = analytic_sweep(engines, o.quick, log);
 
-    const Room room_spec;
-    const scene::Scene room = make_room_scene(room_spec);
     auto t0 = Clock::now();
     // --quick: a 0.25 m grid, within 0.03% (surface averages) and 0.3% (probes) of converged.
     const double cell_size = o.quick ? 0.25 : kDefaultCellSize;
@@ -430,9 +424,8 @@ ordered_json run_accuracy(const AccuracyOptions& o, std::ostream& log) {
             if (!r.exact)
                 for (int level = 0; level <= r.refine_levels; ++level)
                     hemicubes.insert(solve::regather_hemicube(r.hemicube, level));
-        const mesh::Mesh m = mesh::build(room, {room.diagonal() / 4.0, room.diagonal() / 4.0});
         formfactor::ShotResult shot;
-        for (int n : hemicubes) engines.make(m, {n, 1})->shoot(0, 0, shot);
+        for (int n : hemicubes) engines.stack({n, 1}, true).level(coarse, 0)->shoot(0, 0, shot);
     }
     log << "| sweep | solver | form factors | refine | N | patch | element | threshold | batch | passes | elements "
            "| s | rms error | worst surface |\n"
