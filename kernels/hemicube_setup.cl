@@ -127,8 +127,8 @@ void setup_element(const HrShot* shot, const Element* e, int k, __global HrRecor
     }
 }
 
-#include "hemicube_setup_lanes.cl"
-#include "hemicube_cull.cl"
+#include "hemicube_setup_lanes.cl"  // setup_lanes (HEMIRAD_SETUP_LANES: the file holds its own #if)
+#include "hemicube_cull.cl"         // its culling and cull_clusters (HEMIRAD_SETUP_LANES too)
 
 // The record slots of work-group g of setup (and of scatter): lanes setup, a region of
 // group_capacity; otherwise five per element it sets up, from five times its first element.
