@@ -113,8 +113,8 @@ private:
     ProgramCounts counts_;
 };
 
-// The embedded text of kernels/<name> with its includes of the shared layout header inlined.
-// Throws std::out_of_range for an unknown name.
+// The embedded text of kernels/<name>, its includes of kernels/ files inlined with #line directives
+// (cmake/EmbedKernels.cmake). Throws std::out_of_range for an unknown name or a file another includes.
 std::string_view kernel_source(std::string_view name);
 
 }  // namespace hemirad::ocl
