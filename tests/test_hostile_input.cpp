@@ -17,6 +17,7 @@
 
 #include <catch2/catch.hpp>
 
+#include "backends.h"
 #include "cl/runtime.h"
 #include "cli_support.h"
 
@@ -249,10 +250,7 @@ TEST_CASE("hostile input: --image-width up to 16384 is estimated at what the ren
 }
 
 TEST_CASE("hostile input: a kernel knob inside its documented range but beyond what the device runs is exit 2, never a crash", "[hostile][opencl]") {
-    if (hemirad::ocl::list_devices().empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     TempDir dir;
     // PoCL ran raster_records' work-groups on 8 MiB thread stacks: 1024 work-items of 12.5 KB
     // each crashed (SIGSEGV), under --device auto before its first-shot check could fall back.
