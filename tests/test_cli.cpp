@@ -23,6 +23,7 @@
 
 #include <catch2/catch.hpp>
 
+#include "backends.h"
 #include "cli_support.h"
 #include "cl/runtime.h"
 #include "bench/room_reference.h"
@@ -30,13 +31,6 @@
 #include <nlohmann/json.hpp>
 #include <OpenImageIO/imageio.h>
 #include <tiny_gltf.h>
-
-// Ends a test that needs an OpenCL device, visibly, where there is none.
-#define HEMIRAD_SKIP_WITHOUT_OPENCL()           \
-    if (hemirad::ocl::list_devices().empty()) { \
-        WARN("no OpenCL device: skipped");      \
-        return;                                 \
-    }
 
 namespace {
 
@@ -718,31 +712,54 @@ TEST_CASE("bad input after a scene warning is still one line on stderr", "[cli]"
                      "no_such_camera");
 }
 
-TEST_CASE("an OpenCL bake under verify gives the reference bake byte for byte", "[cli]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+// Every backend a bake can run on (--device ref, each opencl:P.D, the reference with a device
+// sharing its batches) bakes the closed room byte for byte as the reference; one OpenCL device
+// does so under --verify too, every shot checked and no cell off.
+TEST_CASE("bakes on every --device give the reference bake byte for byte", "[cli][backends]") {
+    const hemirad::test::Backend& b = hemirad::test::backend(GENERATE(from_range(hemirad::test::backend_names())));
+    HEMIRAD_SKIP_ABSENT(hemirad::test::bakeable(b));
+    INFO("backend " << b.name << ", --device " << b.device);
+    const bool one_device = b.device.rfind("opencl:", 0) == 0;
     const TempDir dir;
-    const fs::path with_cl = dir / "opencl", with_ref = dir / "ref";
-    const json report = bake_ok(dir, kClosedRoom, with_cl, concat(kFast, {"--device", "opencl", "--verify"}));
-    bake_ok(dir, kClosedRoom, with_ref, concat(kFast, {"--device", "ref"}));
-    CHECK(report["device"]["backend"] == "opencl");
-    CHECK(report["verify"]["shots_checked"].get<long>() == report["passes"].get<long>());
-    CHECK(report["verify"]["cells_mismatched"].get<long>() == 0);
-    CHECK(read_text(with_cl / "baked.bin") == read_text(with_ref / "baked.bin"));
+    const fs::path on_backend = dir / "backend", with_ref = dir / "ref";
+    // A list's planned batch is one per member's share; --batch 1 as one device plans it.
+    const std::vector<std::string> args = concat(kFast, {"--batch", "1"});
+    const json report = bake_ok(dir, kClosedRoom, on_backend,
+                                concat(args, one_device ? std::vector<std::string>{"--device", b.device, "--verify"}
+                                                        : std::vector<std::string>{"--device", b.device}));
+    const json ref_report = bake_ok(dir, kClosedRoom, with_ref, concat(args, {"--device", "ref"}));
+    CHECK(report["device"]["id"] == b.device);
+    CHECK(report["settings"]["batch"] == 1);
+    CHECK(report["passes"] == ref_report["passes"]);
+    if (one_device) {
+        CHECK(report["device"]["backend"] == "opencl");
+        CHECK(report["verify"]["shots_checked"].get<long>() == report["passes"].get<long>());
+        CHECK(report["verify"]["cells_mismatched"].get<long>() == 0);
+    }
+    CHECK(read_text(on_backend / "baked.bin") == read_text(with_ref / "baked.bin"));
 }
 
-TEST_CASE("a batched OpenCL bake under verify gives the batched reference bake byte for byte", "[cli]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+TEST_CASE("batched bakes on every --device give the batched reference bake byte for byte", "[cli][backends]") {
+    const hemirad::test::Backend& b = hemirad::test::backend(GENERATE(from_range(hemirad::test::backend_names())));
+    HEMIRAD_SKIP_ABSENT(hemirad::test::bakeable(b));
+    INFO("backend " << b.name << ", --device " << b.device);
+    const bool one_device = b.device.rfind("opencl:", 0) == 0;
     const TempDir dir;
-    const fs::path with_cl = dir / "opencl", with_ref = dir / "ref";
-    const json report =
-        bake_ok(dir, kClosedRoom, with_cl, concat(kFast, {"--device", "opencl", "--verify", "--batch", "6"}));
-    const json ref_report = bake_ok(dir, kClosedRoom, with_ref, concat(kFast, {"--device", "ref", "--batch", "6"}));
+    const fs::path on_backend = dir / "backend", with_ref = dir / "ref";
+    const std::vector<std::string> args = concat(kFast, {"--batch", "6"});
+    const json report = bake_ok(dir, kClosedRoom, on_backend,
+                                concat(args, one_device ? std::vector<std::string>{"--device", b.device, "--verify"}
+                                                        : std::vector<std::string>{"--device", b.device}));
+    const json ref_report = bake_ok(dir, kClosedRoom, with_ref, concat(args, {"--device", "ref"}));
+    CHECK(report["device"]["id"] == b.device);
     CHECK(report["settings"]["batch"] == 6);
     CHECK(report["passes"] == ref_report["passes"]);
-    // Every shot the engine made; a batch cut short by convergence shoots more than it applies.
-    CHECK(report["verify"]["shots_checked"].get<long>() >= report["passes"].get<long>());
-    CHECK(report["verify"]["cells_mismatched"].get<long>() == 0);
-    CHECK(read_text(with_cl / "baked.bin") == read_text(with_ref / "baked.bin"));
+    if (one_device) {
+        // Every shot the engine made; a batch cut short by convergence shoots more than it applies.
+        CHECK(report["verify"]["shots_checked"].get<long>() >= report["passes"].get<long>());
+        CHECK(report["verify"]["cells_mismatched"].get<long>() == 0);
+    }
+    CHECK(read_text(on_backend / "baked.bin") == read_text(with_ref / "baked.bin"));
 }
 
 TEST_CASE("HEMIRAD_DEVICE picks the device when --device is auto", "[cli]") {
@@ -761,7 +778,7 @@ TEST_CASE("HEMIRAD_DEVICE picks the device when --device is auto", "[cli]") {
 }
 
 TEST_CASE("auto falls back to the reference when the OpenCL kernels do not build", "[cli]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     const TempDir dir;
     const fs::path out = dir / "out", forced = dir / "forced";
     const std::string broken = "HEMIRAD_OPENCL_OPTIONS=-DClipPolygon=42 ";  // turns a kernel typedef into nonsense
@@ -825,7 +842,7 @@ TEST_CASE("zero-area triangles are dropped and counted in the report with a warn
 // the automatic choice starts again on the reference and ends with exactly the reference bake's
 // numbers; a device asked for by name stops the bake (exit 1) with the reason, writing nothing.
 TEST_CASE("a device that fails part-way: auto starts again on the reference and a named device stops", "[cli][faults]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     const TempDir dir;
     const std::vector<std::string> args = concat(kFast, {"--solver", "progressive", "--batch", "4"});
     const fs::path ref = dir / "ref", fell_back = dir / "fell_back", named = dir / "named";
@@ -852,7 +869,7 @@ TEST_CASE("a device that fails part-way: auto starts again on the reference and 
 }
 
 TEST_CASE("a device that returns wrong numbers: --verify catches it and auto starts again on the reference", "[cli][faults]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     const TempDir dir;
     const std::vector<std::string> args = concat(kFast, {"--solver", "progressive"});
     const fs::path ref = dir / "ref";
@@ -891,7 +908,7 @@ TEST_CASE("a device that returns wrong numbers: --verify catches it and auto sta
 }
 
 TEST_CASE("a device out of memory: batches shrink and the numbers do not change", "[cli][faults]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     const TempDir dir;
     const std::vector<std::string> args = concat(kFast, {"--solver", "progressive", "--batch", "8"});
     const fs::path ref = dir / "ref", shrunk = dir / "shrunk", none = dir / "none";
@@ -1037,7 +1054,7 @@ TEST_CASE("bench rejects bad input with exit 2 before any output and keeps an ex
 }
 
 TEST_CASE("bench refuses a fast wrong OpenCL kernel: no result, no JSON", "[cli][bench]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     const TempDir dir;
     const fs::path file = dir / "results.json";
     // HEMIRAD_FAULT=wrong-after:0: every launch returns a wrong form factor, as a broken kernel or
@@ -1686,7 +1703,7 @@ void check_environments_keep_bytes(const TempDir& dir, const std::vector<std::st
 }  // namespace
 
 TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same bytes) and values the kernels cannot take exit 2", "[cli][opencl][hostile]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     TempDir dir;
     // -DHEMIRAD_TILE=8 and many counter copies used to corrupt the heap: the host sized the
     // buffers with its own knobs. Now the host takes the overrides, and the results are the same.
@@ -1709,7 +1726,7 @@ TEST_CASE("HEMIRAD_OPENCL_OPTIONS: knob overrides reach the host too (the same b
 }
 
 TEST_CASE("HEMIRAD_OCCLUSION and HEMIRAD_OCCLUDER_SHARE: the same bytes either way, other values exit 2", "[cli][opencl][hostile]") {
-    HEMIRAD_SKIP_WITHOUT_OPENCL();
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     TempDir dir;
     check_environments_keep_bytes(dir, {"HEMIRAD_OCCLUSION=0 ", "HEMIRAD_OCCLUSION=1 HEMIRAD_OCCLUDER_SHARE=1 "});
     const std::vector<std::string> on_opencl = concat(kFast, {"--device", "opencl"});

@@ -1,4 +1,5 @@
-// The Embree ray-casting peer (bench/) against the scalar reference and analytic answers. Built
+// The Embree ray-casting peer (bench/) against the scalar reference (the analytic answers it
+// owes, as every backend does: test_formfactor.cpp). Built
 // only with Embree (HEMIRAD_HAVE_EMBREE). The rays go through the cell centres that the
 // rasterizers test, so the two may differ only where float rounding moves a centre across an
 // element's edge, and on genuine depth ties (which the reference gives the lower element id,
@@ -73,21 +74,8 @@ TEST_CASE("embree: depth ties go to one of the tied elements", "[embree]") {
     CHECK(seen > 0.1);  // the copies are in view of some shooters
 }
 
-TEST_CASE("embree: parallel and perpendicular unit squares match the analytic form factors", "[embree]") {
-    scene::Scene base;
-    const auto grey = test::add_material(base, glm::dvec3(0.5), glm::dvec3(0.0));
-    {
-        const mesh::Mesh m = mesh::build(test::parallel_rectangles(1, 1, 1, grey, grey, base), {0.125, 0.0625});
-        formfactor::EmbreeEngine rays(m, {256, 1});
-        CHECK_THAT(test::area_form_factor(m, rays, 0, 1), WithinRel(test::parallel_rectangles_ff(1, 1, 1), 0.005));
-    }
-    {
-        const mesh::Mesh m = mesh::build(test::perpendicular_rectangles(1, 1, 2, grey, grey, base), {1.0 / 16, 1.0 / 32});
-        formfactor::EmbreeEngine rays(m, {256, 5});
-        CHECK_THAT(test::area_form_factor(m, rays, 0, 1),
-                   WithinRel(test::perpendicular_rectangles_ff(1, 1, 2), 0.005));
-    }
-}
+// The analytic answers every backend owes, Embree among them (parallel and perpendicular squares,
+// a closed box, the furnace), are test_formfactor.cpp's "every backend: ..." tests.
 
 TEST_CASE("embree: the same bits for any thread count, and a batch as its shots one at a time", "[embree]") {
     const test::Case c = test::comparison_cases().back();

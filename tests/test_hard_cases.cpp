@@ -18,6 +18,7 @@
 #include "output/output.h"
 #include "solve/matrix.h"
 #include "solve/progressive.h"
+#include "backends.h"
 #include "test_scenes.h"
 
 using namespace hemirad;
@@ -35,6 +36,12 @@ bool finite(const std::vector<glm::dvec3>& values) {
 std::unique_ptr<formfactor::Engine> bake_engine(const mesh::Mesh& m, int hemicube, std::uint64_t seed = 1) {
     return std::make_unique<formfactor::NearFieldEngine>(
         m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{hemicube, seed}));
+}
+
+// The same stack over any backend's hemicube engine (tests/backends.h).
+std::unique_ptr<formfactor::Engine> bake_engine(const test::Backend& b, const mesh::Mesh& m, int hemicube,
+                                                std::uint64_t seed = 1) {
+    return std::make_unique<formfactor::NearFieldEngine>(m, b.make(m, formfactor::Settings{hemicube, seed}));
 }
 
 // Area-weighted radiosity (red) of node `node` for any per-element B.
@@ -346,7 +353,10 @@ TEST_CASE("hard cases: a closed room at rho = 0.999 lit by one wall holds sum(A 
     }
 }
 
-TEST_CASE("hard cases: perpendicular squares sharing an edge and the right-angled corners of a box", "[hard]") {
+TEST_CASE("hard cases: perpendicular squares sharing an edge and the right-angled corners of a box, on every backend", "[hard][backends]") {
+    const test::Backend& b = test::backend(GENERATE(from_range(test::backend_names())));
+    HEMIRAD_SKIP_ABSENT(b);
+    INFO("backend " << b.name);
     scene::Scene base;
     const std::uint32_t grey = scene::add_material(base, glm::dvec3(0.5), glm::dvec3(0.0));
 
@@ -358,7 +368,7 @@ TEST_CASE("hard cases: perpendicular squares sharing an edge and the right-angle
         // 1% on each. The correction's per-element accuracy is test_near_field.cpp's subject.
         const scene::Scene s = test::perpendicular_rectangles(1, 1, 1, grey, grey, base);
         const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
-        auto engine = bake_engine(m, 64);
+        auto engine = bake_engine(b, m, 64);
         const double exact = 0.2000437761;
         REQUIRE_THAT(test::perpendicular_rectangles_ff(1, 1, 1), WithinRel(exact, 1e-9));
         const double f_floor_wall = test::area_form_factor(m, *engine, 0, 1);
@@ -423,7 +433,7 @@ TEST_CASE("hard cases: perpendicular squares sharing an edge and the right-angle
         const scene::Scene s = test::closed_box(
             {1.0, 0.7, 1.3}, [&](int) { return grey; }, base);
         const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
-        auto engine = bake_engine(m, 64);
+        auto engine = bake_engine(b, m, 64);
         formfactor::ShotResult r;
         for (std::uint32_t p = 0; p < m.patches.size(); ++p) {
             engine->shoot(p, p, r);

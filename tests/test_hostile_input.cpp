@@ -17,6 +17,7 @@
 
 #include <catch2/catch.hpp>
 
+#include "backends.h"
 #include "cl/runtime.h"
 #include "cli_support.h"
 
@@ -249,10 +250,7 @@ TEST_CASE("hostile input: --image-width up to 16384 is estimated at what the ren
 }
 
 TEST_CASE("hostile input: a kernel knob inside its documented range but beyond what the device runs is exit 2, never a crash", "[hostile][opencl]") {
-    if (hemirad::ocl::list_devices().empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     TempDir dir;
     // PoCL ran raster_records' work-groups on 8 MiB thread stacks: 1024 work-items of 12.5 KB
     // each crashed (SIGSEGV), under --device auto before its first-shot check could fall back.
@@ -400,10 +398,9 @@ TEST_CASE("hostile input: a disk that fills while previews are written is an err
         dir, "mkdir full && unshare -m sh -c " +
                  shell_quote("mount -t tmpfs -o size=100k tmpfs full || exit 77; " + bake +
                              "; echo code=$?; echo entries=$(ls -A full | wc -l)"));
-    if (r.code == 77 || r.out.find("entries=") == std::string::npos) {
-        WARN("cannot mount a small tmpfs here (needs root): skipped; " << r.err);
-        return;
-    }
+    const Presence tmpfs{"a 100 KB tmpfs", r.code != 77 && r.out.find("entries=") != std::string::npos,
+                         "cannot mount one here (needs root): " + r.err};
+    HEMIRAD_SKIP_ABSENT(tmpfs);
     INFO("stdout: " << r.out << " stderr: " << r.err);
     CHECK(r.out.find("code=1") != std::string::npos);
     CHECK(r.err.find("written incompletely") != std::string::npos);

@@ -3,6 +3,7 @@
 // byte that of one device with the same batch; a failing automatic device drops out.
 #include <catch2/catch.hpp>
 
+#include "backends.h"
 #include "cl/runtime.h"
 #include "cli_support.h"
 
@@ -20,13 +21,14 @@ bool pocl_only() {
            devices.back().platform == 0;
 }
 
+test::Presence two_pocl_devices() {
+    return {"two PoCL devices (POCL_DEVICES)", pocl_only(), "PoCL is not the only OpenCL platform here"};
+}
+
 }  // namespace
 
 TEST_CASE("multi-device: two devices, and the reference with one, bake byte for byte as one device", "[cli][multi]") {
-    if (!pocl_only()) {
-        WARN("not PoCL alone: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_ABSENT(two_pocl_devices());
     const TempDir dir;
     const std::vector<std::string> args = concat(kFast, {"--solver", "progressive"});
     const fs::path one = dir / "one", all = dir / "all", mixed = dir / "mixed", planned = dir / "planned";
@@ -62,10 +64,7 @@ TEST_CASE("multi-device: two devices, and the reference with one, bake byte for 
 
 TEST_CASE("multi-device: a failing device of `all` drops out and its shots are redone, and a named one stops the bake",
           "[cli][multi][faults]") {
-    if (!pocl_only()) {
-        WARN("not PoCL alone: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_ABSENT(two_pocl_devices());
     const TempDir dir;
     const std::vector<std::string> args = concat(kFast, {"--solver", "progressive", "--batch", "16"});
     const fs::path one = dir / "one", dropped = dir / "dropped", named = dir / "named";

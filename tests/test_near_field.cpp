@@ -2,10 +2,12 @@
 // hemicube at the shooter's centre misjudges it; the correction takes Lambert's exact factor at
 // the receiver instead. Checked on the perpendicular unit squares at the default quality,
 // against the exact irradiance of every wall element (Lambert's point-to-polygon factor averaged
-// over the element by a fine midpoint rule: the integrand is smooth and bounded up to the edge).
+// over the element by a fine midpoint rule: the integrand is smooth and bounded up to the edge),
+// over every backend's hemicube engine (tests/backends.h).
 #include <catch2/catch.hpp>
 #include <cmath>
 #include <map>
+#include <memory>
 
 #include "bench/room_reference.h"
 #include "core/quality.h"
@@ -13,6 +15,7 @@
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
 #include "solve/matrix.h"
+#include "backends.h"
 #include "test_scenes.h"
 
 using namespace hemirad;
@@ -80,7 +83,10 @@ mesh::Settings default_sizes(const scene::Scene& s) {
 
 }  // namespace
 
-TEST_CASE("near field: perpendicular squares within 1% at the default quality", "[near_field]") {
+TEST_CASE("near field: perpendicular squares within 1% at the default quality, on every backend", "[near_field][backends]") {
+    const test::Backend& b = test::backend(GENERATE(from_range(test::backend_names())));
+    HEMIRAD_SKIP_ABSENT(b);
+    INFO("backend " << b.name);
     scene::Scene base;
     const std::uint32_t grey = scene::add_material(base, glm::dvec3(0.5), glm::dvec3(0.0));
     const scene::Scene s = test::perpendicular_rectangles(1, 1, 1, grey, grey, base);
@@ -88,9 +94,9 @@ TEST_CASE("near field: perpendicular squares within 1% at the default quality", 
     const mesh::Mesh m = mesh::build(s, ms);
     const formfactor::Settings settings{quality_preset("default").hemicube, 1};
 
-    formfactor::ReferenceEngine plain(m, settings);
-    formfactor::NearFieldEngine corrected(m, std::make_unique<formfactor::ReferenceEngine>(m, settings));
-    const RowErrors without = wall_errors(m, plain);
+    const std::unique_ptr<formfactor::Engine> plain = b.make(m, settings);
+    formfactor::NearFieldEngine corrected(m, b.make(m, settings));
+    const RowErrors without = wall_errors(m, *plain);
     const RowErrors with = wall_errors(m, corrected);
 
     // The surfaces' form factor is within 1% either way (the default patches are small)...
@@ -112,13 +118,16 @@ TEST_CASE("near field: perpendicular squares within 1% at the default quality", 
     CHECK(worst_without > 10 * worst_with);
 }
 
-TEST_CASE("near field: the corners of a room", "[near_field]") {
+TEST_CASE("near field: the corners of a room, on every backend", "[near_field][backends]") {
+    const test::Backend& b = test::backend(GENERATE(from_range(test::backend_names())));
+    HEMIRAD_SKIP_ABSENT(b);
+    INFO("backend " << b.name);
     // The room of src/bench/room_reference.h, baked at the default quality by the matrix solver
     // on hemicube rows with and without the correction, each element compared with the exact
     // reference's average over it. Along the room's edges, where two surfaces meet at a right
     // angle, receivers lie next to their shooters.
     const bench::Room room;
-    const bench::RoomSolution reference = bench::solve_room(room, 0.2);
+    static const bench::RoomSolution reference = bench::solve_room(room, 0.2);  // once for every backend
     const scene::Scene s = bench::make_room_scene(room);
     const mesh::Settings ms = default_sizes(s);
     const mesh::Mesh m = mesh::build(s, ms);
@@ -152,9 +161,9 @@ TEST_CASE("near field: the corners of a room", "[near_field]") {
         }
         return std::pair<double, double>{sum[0] / count[0], sum[1] / count[1]};
     };
-    formfactor::ReferenceEngine plain(m, settings);
-    formfactor::NearFieldEngine corrected(m, std::make_unique<formfactor::ReferenceEngine>(m, settings));
-    const auto [edge_without, inner_without] = errors(plain);
+    const std::unique_ptr<formfactor::Engine> plain = b.make(m, settings);
+    formfactor::NearFieldEngine corrected(m, b.make(m, settings));
+    const auto [edge_without, inner_without] = errors(*plain);
     const auto [edge_with, inner_with] = errors(corrected);
     // Measured: along the edges 6.4% without, 0.76% with; elsewhere 0.83% and 0.57%.
     CAPTURE(edge_without, inner_without, edge_with, inner_with);

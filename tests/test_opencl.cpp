@@ -1,12 +1,12 @@
 // The OpenCL hemicube engine against the scalar reference (cell for cell) and analytic answers.
-// Runs on the first OpenCL device (PoCL in CI); every test warns and skips without one.
+// Runs on the first OpenCL device (PoCL in CI; test::first_opencl()); every test warns and skips
+// without one. What every backend owes the analytic answers is in test_formfactor.cpp.
 #include <algorithm>
 #include <array>
 #include <catch2/catch.hpp>
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <optional>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -23,6 +23,7 @@
 #include "gen/procedural.h"
 #include "scene/scene.h"
 #include "solve/progressive.h"
+#include "backends.h"
 #include "test_compare.h"
 #include "test_scenes.h"
 
@@ -36,20 +37,6 @@ using test::comparison_cases;
 
 namespace {
 
-// The first device's context, or nothing (after a visible warning) when there is none.
-std::optional<ocl::Context> first_device() {
-    const auto devices = ocl::list_devices();
-    if (devices.empty()) return std::nullopt;
-    return std::optional<ocl::Context>(std::in_place, devices.front());
-}
-
-#define HEMIRAD_REQUIRE_DEVICE(ctx)        \
-    auto ctx = first_device();             \
-    if (!ctx) {                            \
-        WARN("no OpenCL device: skipped"); \
-        return;                            \
-    }
-
 // The agreement every OpenCL configuration owes the reference: the same doubles in the same
 // order and a total order on (depth, index), so not even a genuine depth tie can differ and no
 // cell may; form factors within the issue's relative tolerance.
@@ -62,7 +49,8 @@ void check_matches_reference(const Comparison& r) {
 }  // namespace
 
 TEST_CASE("opencl: id buffers and form factors match the reference cell for cell", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     for (const Case& c : comparison_cases()) {
         const mesh::Mesh m = mesh::build(c.scene, c.mesh);
         // 8 and 40: faces that do not fill whole tiles.
@@ -82,7 +70,8 @@ TEST_CASE("opencl: id buffers and form factors match the reference cell for cell
 }
 
 TEST_CASE("opencl: a point light's two hemicubes match the reference cell for cell", "[opencl][lights]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     for (Case c : comparison_cases()) {
         // A point light a little off the centre of the scene's box, and a spot light near a corner.
         glm::dvec3 lo = c.scene.triangles.front().p[0], hi = lo;
@@ -116,7 +105,8 @@ TEST_CASE("opencl: a point light's two hemicubes match the reference cell for ce
 }
 
 TEST_CASE("opencl: any tile size gives the reference's result", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     for (int tile : {5, 16}) {  // 5: tiles straddle every face edge
@@ -138,7 +128,8 @@ TEST_CASE("opencl: any tile size gives the reference's result", "[opencl]") {
 // thin slabs 1e-4 above it, seen at grazing angles from the floor's own shooters, where rounding
 // and the snapped edges of planes passing near the shooter are largest.
 TEST_CASE("opencl: occlusion culling hides lane groups and changes no cell", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     std::vector<Case> cases;
     for (const auto kind : {gen::ContentKind::kCity, gen::ContentKind::kFoliage}) {
         scene::Scene s = gen::content_scene(kind, 20000);
@@ -203,7 +194,8 @@ TEST_CASE("opencl: occlusion culling hides lane groups and changes no cell", "[o
 }
 
 TEST_CASE("opencl: lists that overflow grow and the shot is redone", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
@@ -214,7 +206,8 @@ TEST_CASE("opencl: lists that overflow grow and the shot is redone", "[opencl]")
 }
 
 TEST_CASE("opencl: record regions that overflow grow and the shot is redone", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
@@ -227,7 +220,8 @@ TEST_CASE("opencl: record regions that overflow grow and the shot is redone", "[
 }
 
 TEST_CASE("opencl: the same shot twice gives bit-identical results", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::OpenCLEngine a(m, *ctx, {128, 9});
@@ -274,7 +268,8 @@ TEST_CASE("opencl: the mesh packed piece by piece is the mesh packed whole", "[o
     CHECK(only_lanes.elements.empty());
     CHECK(std::memcmp(only_lanes.lanes.data(), whole.lanes.data(), lanes.size() * sizeof(HrElementLanes)) == 0);
 
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());
     formfactor::OpenCLEngine shared(m, whole, *ctx, {128, 9}, tuning);
     formfactor::OpenCLEngine own(m, *ctx, {128, 9}, tuning);
@@ -289,44 +284,15 @@ TEST_CASE("opencl: the mesh packed piece by piece is the mesh packed whole", "[o
     }
 }
 
-TEST_CASE("opencl: parallel unit squares match the analytic form factor", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
-    scene::Scene s;
-    const auto grey = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-    s = test::parallel_rectangles(1, 1, 1, grey, grey, s);
-    const mesh::Mesh m = mesh::build(s, {0.125, 0.0625});
-    formfactor::OpenCLEngine engine(m, *ctx, {256, 1});
-    const double f = test::area_form_factor(m, engine, 0, 1);
-    CAPTURE(f);
-    CHECK_THAT(f, WithinRel(0.1998248957, 0.005));
-}
-
-TEST_CASE("opencl: a uniform closed-box furnace reaches B = E/(1 - rho)", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
-    const double rho = 0.9;
-    scene::Scene s;
-    const auto mat = test::add_material(s, glm::dvec3(rho), glm::dvec3(1.0, 0.5, 0.25));
-    s = test::closed_box(
-        {1.0, 1.0, 1.0}, [&](int) { return mat; }, s);
-    const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
-    formfactor::NearFieldEngine engine(
-        m, std::make_unique<formfactor::OpenCLEngine>(m, *ctx, formfactor::Settings{64, 1}));
-    REQUIRE(engine.name() == "opencl");
-    solve::Progressive solver(m, engine, {1e-4, 200000});
-    while (solver.step()) {
-    }
-    CAPTURE(solver.passes());
-    REQUIRE(solver.converged());
-    const glm::dvec3 expected = glm::dvec3(1.0, 0.5, 0.25) / (1.0 - rho);
-    for (const auto& b : solver.radiosity(true))
-        for (int c = 0; c < 3; ++c) REQUIRE_THAT(b[c], WithinRel(expected[c], 0.01));
-}
+// The analytic answers (parallel and perpendicular squares, a closed box, the furnace) every
+// backend owes, OpenCL devices among them, are test_formfactor.cpp's "every backend: ..." tests.
 
 // raster_records' spans rest on floor_div: a double quotient corrected in integers. Held to
 // exact integer division where the double is least exact: large |m|, small and large d, and
 // remainders 0, 1 and d - 1 on either side of zero.
 TEST_CASE("opencl: floor_div is exact integer floor division", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     std::vector<cl_long> ms, ds;
     std::vector<std::pair<std::int64_t, std::int64_t>> expected;  // quotient, remainder
     const std::int64_t divisors[] = {std::int64_t{1} << 16, (std::int64_t{1} << 16) + 1, 3 << 16,
@@ -386,7 +352,8 @@ TEST_CASE("opencl: floor_div is exact integer floor division", "[opencl]") {
 }
 
 TEST_CASE("opencl: kernel build failures throw BuildError with the device and the log", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const std::string device = ctx->info().name;
     try {
         ctx->program("this is not OpenCL C", "");
@@ -414,7 +381,8 @@ TEST_CASE("opencl: kernel build failures throw BuildError with the device and th
 }
 
 TEST_CASE("opencl: a batch of shots gives exactly the shots one at a time", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::OpenCLEngine batched(m, *ctx, {128, 5});
@@ -455,7 +423,8 @@ TEST_CASE("opencl: a batch of shots gives exactly the shots one at a time", "[op
 }
 
 TEST_CASE("opencl: batched shooting converges to the same furnace and books as one at a time", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     // A lit closed box: Σ B·A = Φ/(1 − ρ) exactly in the limit, whatever the shooting order.
     const double rho = 0.9;
     scene::Scene s;
@@ -501,7 +470,8 @@ TEST_CASE("opencl: batched shooting converges to the same furnace and books as o
 }
 
 TEST_CASE("opencl: the GPU kernels (setup per patch, raster per cell) give the reference's cells too", "[opencl]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     // Whatever the device, run the tuning a GPU gets, so the kernels are checked where no GPU
     // is; and on a GPU, setup in lanes as CPUs run it.
     const Case c = comparison_cases().back();
@@ -549,7 +519,8 @@ TEST_CASE("opencl: PoCL's workers are pinned only where every worker's CPU is al
 
 TEST_CASE("opencl: out of device memory, a batch runs again in smaller parts with the same results",
           "[opencl][faults]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     formfactor::OpenCLEngine whole(m, *ctx, {128, 5});
@@ -590,7 +561,8 @@ TEST_CASE("opencl: out of device memory, a batch runs again in smaller parts wit
 
 TEST_CASE("opencl: a device that fails says so as a DeviceError, a wrong one is caught by comparison",
           "[opencl][faults]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    ocl::Context* const ctx = test::first_opencl().context();
     const Case c = comparison_cases().back();
     const mesh::Mesh m = mesh::build(c.scene, c.mesh);
     const formfactor::OpenCLTuning tuning = formfactor::default_tuning(ctx->info());

@@ -13,6 +13,7 @@
 
 #include "cl/program_cache.h"
 #include "cl/runtime.h"
+#include "backends.h"
 #include "cli_support.h"
 
 using namespace hemirad;
@@ -74,19 +75,6 @@ std::vector<float> expected_affine(float offset) {
     for (const float x : {0.0f, 1.0f, -2.5f, 1e6f, 0.125f}) out.push_back(x * 3.0f + offset);
     return out;
 }
-
-std::optional<ocl::DeviceInfo> first_device() {
-    const auto devices = ocl::list_devices();
-    if (devices.empty()) return std::nullopt;
-    return devices.front();
-}
-
-#define HEMIRAD_REQUIRE_DEVICE(device)     \
-    const auto device = first_device();    \
-    if (!device) {                         \
-        WARN("no OpenCL device: skipped"); \
-        return;                            \
-    }
 
 std::vector<fs::path> files_in(const fs::path& dir) {
     std::vector<fs::path> out;
@@ -235,7 +223,8 @@ TEST_CASE("opencl: the program cache skips a directory it cannot create, and a r
 }
 
 TEST_CASE("opencl: a second context loads its program from the disk cache and computes the same", "[opencl][cache]") {
-    HEMIRAD_REQUIRE_DEVICE(device);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    const ocl::DeviceInfo* const device = &test::first_opencl().context()->info();
     const TempDir tmp;
     std::vector<float> built, loaded;
     {
@@ -262,7 +251,8 @@ TEST_CASE("opencl: a second context loads its program from the disk cache and co
 
 TEST_CASE("opencl: a damaged or refused program cache entry is built from source again and rewritten",
           "[opencl][cache]") {
-    HEMIRAD_REQUIRE_DEVICE(device);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    const ocl::DeviceInfo* const device = &test::first_opencl().context()->info();
     const TempDir tmp;
     fs::path entry;
     {
@@ -302,7 +292,8 @@ TEST_CASE("opencl: a damaged or refused program cache entry is built from source
 }
 
 TEST_CASE("opencl: the program cache misses for other options or another source", "[opencl][cache]") {
-    HEMIRAD_REQUIRE_DEVICE(device);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    const ocl::DeviceInfo* const device = &test::first_opencl().context()->info();
     const TempDir tmp;
     {
         ocl::Context first(*device, tmp.path());
@@ -326,7 +317,8 @@ TEST_CASE("opencl: the program cache misses for other options or another source"
 }
 
 TEST_CASE("opencl: HEMIRAD_CACHE_DIR=off keeps no program on the disk", "[opencl][cache]") {
-    HEMIRAD_REQUIRE_DEVICE(device);
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
+    const ocl::DeviceInfo* const device = &test::first_opencl().context()->info();
     const TempDir tmp;
     ScopedEnv off("HEMIRAD_CACHE_DIR", "off");
     ScopedEnv xdg("XDG_CACHE_HOME", (tmp / "xdg").c_str());

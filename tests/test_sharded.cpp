@@ -8,6 +8,7 @@
 #include <chrono>
 #include <thread>
 
+#include "backends.h"
 #include "cl/runtime.h"
 #include "core/error.h"
 #include "dist/dist.h"
@@ -201,11 +202,8 @@ TEST_CASE("sharded: a failure ends the batch where the member may not drop, is t
 }
 
 TEST_CASE("sharded: the reference and an OpenCL device share a batch with the reference's bits", "[sharded][opencl]") {
+    HEMIRAD_SKIP_ABSENT(test::first_opencl());
     const std::vector<ocl::DeviceInfo> devices = ocl::list_devices();
-    if (devices.empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
     const mesh::Mesh m = lit_box();
     const formfactor::Settings settings{64, 3};
     const std::vector<formfactor::ShotRequest> shots = every_patch(m);

@@ -8,6 +8,7 @@
 
 #include <glm/gtc/quaternion.hpp>
 
+#include "backends.h"
 #include "cli_support.h"
 #include "cl/runtime.h"
 #include "formfactor/parallel.h"
@@ -237,11 +238,8 @@ TEST_CASE("a sun on a tessellated ball lights each front element by exactly cos(
 
 TEST_CASE("a parallel shot on every OpenCL device gives the host's owner for every cell, and the same rows",
           "[sun][opencl]") {
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     const auto devices = hemirad::ocl::list_devices();
-    if (devices.empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
     // The ball over its floor, and a floor under a one-sided roof and beside a double-sided card,
     // at several angles and turns of the grid, with cells finer and coarser than the elements.
     hemirad::scene::Scene shadow;
@@ -277,10 +275,7 @@ TEST_CASE("a parallel shot on every OpenCL device gives the host's owner for eve
 
 TEST_CASE("a sunlit bake gives the same bytes on the reference and on OpenCL, and passes its verification",
           "[sun][opencl][cli]") {
-    if (hemirad::ocl::list_devices().empty()) {
-        WARN("no OpenCL device: skipped");
-        return;
-    }
+    HEMIRAD_SKIP_ABSENT(hemirad::test::first_opencl());
     TempDir dir;
     const fs::path atrium = kSourceDir / "scenes" / "atrium.gltf";
     const std::vector<std::string> draft = {"--quality", "draft"};
