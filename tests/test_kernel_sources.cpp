@@ -16,6 +16,7 @@
 #include <string_view>
 #include <vector>
 
+#include "backends.h"
 #include "cl/runtime.h"
 
 using namespace hemirad;
@@ -114,20 +115,6 @@ std::map<std::string, std::set<int>> check_mapping(const std::string& kernel) {
     return covered;
 }
 
-// The first OpenCL device's context, or nothing (after a visible warning) when there is none.
-std::optional<ocl::Context> first_device() {
-    const auto devices = ocl::list_devices();
-    if (devices.empty()) return std::nullopt;
-    return std::optional<ocl::Context>(std::in_place, devices.front());
-}
-
-#define HEMIRAD_REQUIRE_DEVICE(ctx)        \
-    auto ctx = first_device();             \
-    if (!ctx) {                            \
-        WARN("no OpenCL device: skipped"); \
-        return;                            \
-    }
-
 // The build log of `source` with `options`, which must fail to build.
 std::string failed_build_log(ocl::Context& ctx, const std::string& source, const std::string& options) {
     try {
@@ -193,7 +180,9 @@ TEST_CASE("kernels: every embedded line is the line of the real file that its #l
 }
 
 TEST_CASE("opencl: a build log names the file and line a #line directive gives", "[opencl][kernels]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const test::Backend& device = test::first_opencl();
+    HEMIRAD_SKIP_ABSENT(device);
+    ocl::Context* ctx = device.context();
     const std::string source =
         "__kernel void fine(__global int* a) { a[0] = 1; }\n"
         "#line 40 \"kernels/x.cl\"\n"
@@ -207,7 +196,9 @@ TEST_CASE("opencl: a build log names the file and line a #line directive gives",
 
 TEST_CASE("opencl: an error in any stage of hemicube.cl is reported at its real file and line",
           "[opencl][kernels]") {
-    HEMIRAD_REQUIRE_DEVICE(ctx);
+    const test::Backend& device = test::first_opencl();
+    HEMIRAD_SKIP_ABSENT(device);
+    ocl::Context* ctx = device.context();
     const std::string source(ocl::kernel_source("hemicube.cl"));
     // The engine's kind of options (knobs as -D, both setups), and one -D that turns a name into
     // a number: the compiler then stops at the name's definition, which the log must place.
