@@ -260,7 +260,7 @@ TEST_CASE("a directional shot is the host's parallel shot, bit for bit, on the r
     }
 }
 
-TEST_CASE("--verify checks every directional shot exactly: each cell's owner and the row's bits", "[sun][directional][verify]") {
+TEST_CASE("verification checks every directional shot exactly: each cell's owner and the row's bits", "[sun][directional][verify]") {
     const scene::Scene s = sunlit();
     const mesh::Mesh m = mesh::build(s, {0.25, 0.125});
     const formfactor::Settings settings{32, 1};
