@@ -62,6 +62,44 @@ TEST_CASE("multi-device: two devices, and the reference with one, bake byte for 
     CHECK_FALSE(p["device"].contains("members"));
 }
 
+TEST_CASE("multi-device: a sunlit bake sends its suns' parallel shots to the devices like any shots, byte for byte as one "
+          "device", "[cli][multi][sun]") {
+    HEMIRAD_SKIP_ABSENT(two_pocl_devices());
+    // The atrium's sun and a second from --sun: two directional shots, one batch of the lights.
+    // Without refinement and the final gather, every shot of the bake is the solve's: the row
+    // cache's requests are the passes and the suns' shots, and what it did not have in hand went
+    // to the members. (Before suns were shooters, they took a second door past the devices, and
+    // the requests were the passes alone.)
+    const TempDir dir;
+    const fs::path atrium = kSourceDir / "scenes" / "atrium.gltf";
+    const long suns = 2, batch = 2;
+    const std::vector<std::string> args =
+        concat(kFast, {"--solver", "progressive", "--batch", std::to_string(batch), "--gather", "0", "--refine-levels", "0",
+                       "--sun", "135,40,10"});
+    const fs::path one = dir / "one", all = dir / "all";
+    const json single = bake_ok(dir, atrium, one, concat(args, {"--device", "opencl:0.0"}));
+    const RunResult r = run_hemirad(dir, bake_args(atrium, all, concat(args, {"--device", "all"})), kTwoDevices);
+    INFO("stderr: " << r.err);
+    REQUIRE(r.code == 0);
+    const json report = read_json(all / "report.json");
+    CHECK(read_text(all / "baked.bin") == read_text(one / "baked.bin"));
+    REQUIRE(report["device"]["members"].size() == 2);
+    long shots = 0;
+    for (const json& m : report["device"]["members"]) {
+        CHECK(m["shots"].get<long>() > 0);
+        shots += m["shots"].get<long>();
+    }
+    const json& cache = report["row_cache"];
+    INFO("passes " << report["passes"] << ", row cache " << cache.dump());
+    CHECK(shots == cache["shot"].get<long>());
+    // The last batch may be cut short by convergence: up to batch − 1 requests beyond the passes.
+    const long extra = cache["requests"].get<long>() - report["passes"].get<long>() - suns;
+    CHECK(extra >= 0);
+    CHECK(extra < batch);
+    CHECK(single["row_cache"]["requests"] == cache["requests"]);
+    CHECK(single["energy"]["emitted"] == report["energy"]["emitted"]);
+}
+
 TEST_CASE("multi-device: a failing device of `all` drops out and its shots are redone, and a named one stops the bake",
           "[cli][multi][faults]") {
     HEMIRAD_SKIP_ABSENT(two_pocl_devices());

@@ -31,7 +31,6 @@ public:
         for (const formfactor::ShotResult& r : out) observer_(r);
     }
     const std::vector<std::int32_t>* last_ids(std::size_t i) const override { return inner_->last_ids(i); }
-    formfactor::ParallelRaster* parallel_raster() override { return inner_->parallel_raster(); }
 
 private:
     std::unique_ptr<formfactor::Engine> inner_;

@@ -89,6 +89,7 @@ std::string pack_mesh(const mesh::Mesh& m) {
     Writer w;
     w.put_vector(m.patches);
     w.put_vector(m.lights);
+    w.put_vector(m.directions);
     w.put_vector(m.gather_points);
     w.put_vector(m.elements);
     for (const std::size_t n : {m.dropped_triangles, m.quads, m.clusters, m.split_clusters, m.moved_clusters,
@@ -102,6 +103,7 @@ mesh::Mesh unpack_mesh(const std::string& bytes) {
     mesh::Mesh m;
     m.patches = r.get_vector<mesh::Patch>();
     m.lights = r.get_vector<mesh::LightShooter>();
+    m.directions = r.get_vector<mesh::DirectionalShooter>();
     m.gather_points = r.get_vector<mesh::GatherPoint>();
     m.elements = r.get_vector<mesh::Element>();
     for (std::size_t* n : {&m.dropped_triangles, &m.quads, &m.clusters, &m.split_clusters, &m.moved_clusters,
@@ -129,7 +131,8 @@ std::vector<formfactor::ShotRequest> unpack_shots(const std::string& bytes, std:
     std::vector<formfactor::ShotRequest> shots(r.get<std::uint64_t>());
     for (formfactor::ShotRequest& s : shots) {
         const auto kind = r.get<std::uint8_t>();
-        if (kind > static_cast<std::uint8_t>(formfactor::Shooter::Kind::point)) throw InternalError("dist: a shot of no kind");
+        if (kind > static_cast<std::uint8_t>(formfactor::Shooter::Kind::directional))
+            throw InternalError("dist: a shot of no kind");
         s.shooter.kind = static_cast<formfactor::Shooter::Kind>(kind);
         s.shooter.patch = r.get<std::uint32_t>();
         s.shot = r.get<std::uint64_t>();

@@ -15,6 +15,7 @@
 
 #include "core/error.h"
 #include "formfactor/embree_ray.h"
+#include "formfactor/parallel.h"
 
 namespace hemirad::formfactor {
 
@@ -455,15 +456,37 @@ unsigned EmbreeEngine::threads() const {
 }
 
 void EmbreeEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    if (request.shooter.kind == Shooter::Kind::directional) {
+        place_.assign(1, -1);
+        shoot_directional(impl_->mesh, request, out);
+        return;
+    }
+    place_.clear();
     impl_->run(&request, 1, &out);
 }
 
 void EmbreeEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     out.resize(shots.size());
-    impl_->run(shots.data(), shots.size(), out.data());
+    // Directional lights' parallel shots on the host (no rays: the host's raster), the
+    // hemicubes cast together.
+    if (!split_directional(shots, hemicubes_, place_)) {
+        place_.clear();
+        impl_->run(shots.data(), shots.size(), out.data());
+        return;
+    }
+    rows_.resize(hemicubes_.size());
+    impl_->run(hemicubes_.data(), hemicubes_.size(), rows_.data());
+    for (std::size_t i = 0; i < shots.size(); ++i) {
+        if (place_[i] < 0) shoot_directional(impl_->mesh, shots[i], out[i]);
+        else out[i] = std::move(rows_[static_cast<std::size_t>(place_[i])]);
+    }
 }
 
 const std::vector<std::int32_t>* EmbreeEngine::last_ids(std::size_t i) const {
+    if (!place_.empty()) {  // a batch with directional shots: the hemicubes' last is kept
+        if (i >= place_.size() || place_[i] < 0) return nullptr;
+        i = static_cast<std::size_t>(place_[i]);
+    }
     return i + 1 == impl_->last_batch ? &impl_->ids : nullptr;
 }
 

@@ -33,8 +33,8 @@ public:
     // The tiles of every shot of the batch shared out at once, so that the threads go on from
     // one shot to the next without waiting for each other; results as shoot() one at a time.
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
-    // Keeps the id buffer of the batch's last shot (as the reference's: element, −1 empty, −2 a
-    // blocker).
+    // Keeps the id buffer of the batch's last hemicube (as the reference's: element, −1 empty, −2
+    // a blocker). A directional light's shot is the host's parallel shot (parallel.h).
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
 
     unsigned threads() const;
@@ -44,6 +44,11 @@ public:
 
 private:
     std::unique_ptr<Impl> impl_;
+    // A batch with directional shots: its hemicubes, and per shot its place among them (−1 a
+    // directional one); place_ empty for a batch of hemicubes alone.
+    std::vector<ShotRequest> hemicubes_;
+    std::vector<long> place_;
+    std::vector<ShotResult> rows_;
 };
 
 }  // namespace hemirad::formfactor

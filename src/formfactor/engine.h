@@ -12,8 +12,6 @@
 
 namespace hemirad::formfactor {
 
-class ParallelRaster;
-
 struct Settings {
     int hemicube = 256;       // resolution N: top face N×N, four half faces N×N/2; even, >= 8
     std::uint64_t seed = 1;   // drives the per-shot rotation of the hemicube about the normal
@@ -78,7 +76,7 @@ void for_each_in_union(const ShotResult& a, const ShotResult& b, Fn fn) {
 }
 
 // What shoots, as data: every engine takes a Shooter, so that new kinds of shooter come as new
-// kinds here, not as new engine interfaces. Three kinds:
+// kinds here, not as new engine interfaces. Four kinds:
 // - a patch of the mesh, shooting its hemicube from its centre along its normal (a planar cell
 //   skips its own elements and its twin's; a cluster draws its own, see shot_skips); the row
 //   holds form factors;
@@ -86,17 +84,23 @@ void for_each_in_union(const ShotResult& a, const ShotResult& b, Fn fn) {
 //   skipping nothing; the row holds each element's visible solid angle over 4π (Weights);
 // - a final gather's point (mesh::Mesh::gather_points), a hemicube from the point along its
 //   normal, skipping nothing (its own surface lies in the base plane); the row holds the point's
-//   form factors to the elements, F(dA → element), so that Σ F·B is its irradiance.
+//   form factors to the elements, F(dA → element), so that Σ F·B is its irradiance;
+// - a directional light (mesh::Mesh::directions: a sun), a parallel shot across its direction
+//   (formfactor/parallel.h: shoot_parallel, drawn by the engine's own raster, which gives the
+//   host's bits), no hemicube; the row holds each element's cos θ times its lit share (an element
+//   receives E × that), `blocked` the area its one-sided backs shade, in scene units².
+// The shot counter turns a hemicube about its axis, and a parallel shot's grid about its direction.
 struct Shooter {
-    enum class Kind : std::uint8_t { patch, light, point };
+    enum class Kind : std::uint8_t { patch, light, point, directional };
     Kind kind = Kind::patch;
     // Kind::patch: the patch; Kind::light: the index in mesh::Mesh::lights; Kind::point: in
-    // mesh::Mesh::gather_points.
+    // mesh::Mesh::gather_points; Kind::directional: in mesh::Mesh::directions.
     std::uint32_t patch = 0;
 
     static Shooter of_patch(std::uint32_t patch) { return {Kind::patch, patch}; }
     static Shooter of_light(std::uint32_t light) { return {Kind::light, light}; }
     static Shooter of_point(std::uint32_t point) { return {Kind::point, point}; }
+    static Shooter of_directional(std::uint32_t direction) { return {Kind::directional, direction}; }
     bool operator==(const Shooter& o) const { return kind == o.kind && patch == o.patch; }
 };
 
@@ -109,6 +113,9 @@ struct ShotRequest {
     static ShotRequest of_patch(std::uint32_t patch, std::uint64_t shot) { return {Shooter::of_patch(patch), shot}; }
     static ShotRequest of_light(std::uint32_t light, std::uint64_t shot) { return {Shooter::of_light(light), shot}; }
     static ShotRequest of_point(std::uint32_t point, std::uint64_t shot) { return {Shooter::of_point(point), shot}; }
+    static ShotRequest of_directional(std::uint32_t direction, std::uint64_t shot) {
+        return {Shooter::of_directional(direction), shot};
+    }
 };
 
 // The patches whose elements a shot leaves out (mesh::kNoPatch: none): a planar cell's own
@@ -143,15 +150,13 @@ public:
         for (std::size_t i = 0; i < shots.size(); ++i) shoot(shots[i], out[i]);
     }
     // The id buffer of shot i of the last shoot_batch (a shoot() is a batch of one): element
-    // index, −1 empty, −2 blocker, cells in DeltaFormFactors order; nullptr where the engine
-    // does not keep it. Used by verification.
+    // index, −1 empty, −2 blocker, cells in DeltaFormFactors order; for a directional shot the
+    // owner of each cell of its grid (parallel.h: a record, −1 none), row-major. nullptr where the
+    // engine does not keep it. Used by verification.
     virtual const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const {
         (void)i;
         return nullptr;
     }
-    // What draws a directional light's parallel shots (parallel.h) on this engine's device; null:
-    // the host does. Decorators pass their inner engine's on.
-    virtual ParallelRaster* parallel_raster() { return nullptr; }
 };
 
 }  // namespace hemirad::formfactor

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/error.h"
 #include "core/rng.h"
 #include "formfactor/analytic.h"
 #include "formfactor/engine.h"
@@ -85,6 +86,8 @@ Frame make_frame(const mesh::Mesh& mesh, const Shooter& shooter, std::uint64_t s
         const mesh::GatherPoint& point = mesh.gather_points.at(shooter.patch);
         return make_frame(point.position, point.normal, seed, shot);
     }
+    if (shooter.kind == Shooter::Kind::directional)  // engines answer it with shoot_directional (parallel.h)
+        throw InternalError("a directional light takes a parallel shot, not a hemicube");
     return make_frame(mesh.patches.at(shooter.patch), seed, shot);
 }
 

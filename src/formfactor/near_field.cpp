@@ -11,7 +11,8 @@ namespace hemirad::formfactor {
 NearFieldEngine::NearFieldEngine(const mesh::Mesh& mesh, std::unique_ptr<Engine> inner, double reach)
     : mesh_(mesh), inner_(std::move(inner)), reach_(reach) {}
 
-// Lights' rows are left as they are: a point has no extent for receivers to be near.
+// Only patches' rows are corrected. Lights' are left as they are: a point has no extent for
+// receivers to be near, and a directional light (a sun) shoots parallel rays from no place at all.
 void NearFieldEngine::shoot(const ShotRequest& request, ShotResult& out) {
     inner_->shoot(request, out);
     if (request.shooter.kind == Shooter::Kind::patch) correct(request.shooter.patch, out);

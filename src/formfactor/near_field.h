@@ -23,7 +23,6 @@ public:
     void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return inner_->last_ids(i); }
-    ParallelRaster* parallel_raster() override { return inner_->parallel_raster(); }
 
     static constexpr double kDefaultReach = 4.0;
 

@@ -868,6 +868,28 @@ void OpenCLEngine::shoot(const ShotRequest& request, ShotResult& out) {
 }
 
 void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
+    // Directional lights' parallel shots on this device's raster (kernels/parallel.cl, the
+    // host's bits), one at a time; the hemicubes together.
+    if (!split_directional(shots, hemicubes_, place_)) {
+        place_.clear();
+        owner_ = {};  // up to 64 MiB: not kept past the lights
+        shoot_hemicubes(shots, out);
+        return;
+    }
+    out.resize(shots.size());
+    if (!parallel_) parallel_ = std::make_unique<OpenCLParallelRaster>(context_);
+    owner_shot_ = 0;
+    for (std::size_t i = 0; i < shots.size(); ++i)
+        if (place_[i] < 0) owner_shot_ = i;
+    for (std::size_t i = 0; i < shots.size(); ++i)
+        if (place_[i] < 0)
+            shoot_directional(mesh_, shots[i], out[i], parallel_.get(), i == owner_shot_ ? &owner_ : nullptr);
+    shoot_hemicubes(hemicubes_, rows_);
+    for (std::size_t i = 0; i < shots.size(); ++i)
+        if (place_[i] >= 0) out[i] = std::move(rows_[static_cast<std::size_t>(place_[i])]);
+}
+
+void OpenCLEngine::shoot_hemicubes(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     out.resize(shots.size());
     if (shots.empty()) return;
     // Per-shot buffers are large (records for every element and face): a batch beyond the
@@ -877,12 +899,12 @@ void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vecto
         std::vector<ShotResult> part;
         std::size_t first = 0;
         for (; first + most < shots.size(); first += most) {
-            shoot_batch({shots.begin() + static_cast<std::ptrdiff_t>(first),
+            shoot_hemicubes({shots.begin() + static_cast<std::ptrdiff_t>(first),
                          shots.begin() + static_cast<std::ptrdiff_t>(first + most)},
                         part);
             std::move(part.begin(), part.end(), out.begin() + static_cast<std::ptrdiff_t>(first));
         }
-        shoot_batch({shots.begin() + static_cast<std::ptrdiff_t>(first), shots.end()}, part);
+        shoot_hemicubes({shots.begin() + static_cast<std::ptrdiff_t>(first), shots.end()}, part);
         std::move(part.begin(), part.end(), out.begin() + static_cast<std::ptrdiff_t>(first));
         ids_first_ += first;  // the id buffers kept are the last part's
         return;
@@ -906,7 +928,7 @@ void OpenCLEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vecto
         release_batch();
         batch_limit_ = (shots.size() + 1) / 2;
         if (tuning_.on_shrink) tuning_.on_shrink(shots.size(), batch_limit_, ocl::error_name(e.err()));
-        shoot_batch(shots, out);
+        shoot_hemicubes(shots, out);
     }
 }
 
@@ -959,6 +981,11 @@ void OpenCLEngine::shoot_fitting(const std::vector<ShotRequest>& shots, std::vec
 }
 
 const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t shot) const {
+    if (!place_.empty()) {  // a batch with directional shots: the last one's grid, and the hemicubes' ids
+        if (shot >= place_.size()) return nullptr;
+        if (place_[shot] < 0) return shot == owner_shot_ ? &owner_ : nullptr;
+        shot = static_cast<std::size_t>(place_[shot]);
+    }
     if (shot < ids_first_ || shot - ids_first_ >= last_batch_) return nullptr;
     const std::size_t i = shot - ids_first_;
     if (ids_stale_[i] || ids_[i].empty()) {
@@ -968,11 +995,6 @@ const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t shot) const 
         ids_stale_[i] = false;
     }
     return &ids_[i];
-}
-
-ParallelRaster* OpenCLEngine::parallel_raster() {
-    if (!parallel_) parallel_ = std::make_unique<OpenCLParallelRaster>(context_);
-    return parallel_.get();
 }
 
 }  // namespace hemirad::formfactor

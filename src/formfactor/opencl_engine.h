@@ -99,7 +99,9 @@ public:
     void shoot(const ShotRequest& request, ShotResult& out) override;
 
     // Runs a batch's shots together: each stage is one launch over every shot (dimension 1 of
-    // the NDRange), so a GPU has enough work. The buffers grow to the largest batch seen; a
+    // the NDRange), so a GPU has enough work. A directional light's shot (Shooter::Kind::directional)
+    // runs apart, a launch of its own on this device's parallel raster (kernels/parallel.cl, built
+    // on first use), whose cells' owners are the host's; last_ids gives those of the batch's last. The buffers grow to the largest batch seen; a
     // batch beyond the memory budget (launch_budget) runs in parts,
     // and then only the last part's id buffers are kept. Should the device run out of memory
     // all the same, the batch runs again in halves, and every later batch in parts no larger
@@ -115,8 +117,6 @@ public:
     static constexpr std::int32_t kBlocker = -2;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
     const std::string& build_options() const { return options_; }
-    // Directional lights' parallel shots on this device (kernels/parallel.cl), built on first use.
-    ParallelRaster* parallel_raster() override;
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
 
@@ -156,6 +156,16 @@ private:
     const mesh::Mesh& mesh_;
     ocl::Context& context_;
     std::unique_ptr<OpenCLParallelRaster> parallel_;
+    // A batch with directional shots: its hemicubes, per shot its place among them (−1: a
+    // directional one), and their rows; the owners of the grid of its last directional shot
+    // (owner_shot_). place_ is empty after a batch of hemicubes alone.
+    std::vector<ShotRequest> hemicubes_;
+    std::vector<long> place_;
+    std::vector<std::int32_t> owner_;
+    std::size_t owner_shot_ = 0;
+    std::vector<ShotResult> rows_;
+    // shoot_batch for hemicubes alone.
+    void shoot_hemicubes(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out);
     Settings settings_;
     OpenCLTuning tuning_;
     std::string options_;

@@ -7,6 +7,8 @@
 #include <cmath>
 #include <thread>
 
+#include <fmt/format.h>
+
 #include "core/error.h"
 #include "formfactor/hemicube.h"
 #include "formfactor/reference.h"
@@ -104,9 +106,35 @@ void draw_parallel(const ParallelRecords& records, std::vector<std::int32_t>& ow
         for (std::size_t q = 0; q < covered.size(); ++q) covered[q] += counts[i][q];
 }
 
+ParallelGrid shoot_directional(const mesh::Mesh& mesh, const ShotRequest& request, ShotResult& out,
+                               ParallelRaster* raster, std::vector<std::int32_t>* owner) {
+    if (request.shooter.kind != Shooter::Kind::directional)
+        throw InternalError("parallel shot: the shooter is not a directional light");
+    if (request.shooter.patch >= mesh.directions.size())
+        throw InternalError(fmt::format("parallel shot: directional light {} of {}", request.shooter.patch,
+                                        mesh.directions.size()));
+    return shoot_parallel(mesh, mesh.directions[request.shooter.patch].direction, request.shot, out, {}, raster, owner);
+}
+
+bool split_directional(const std::vector<ShotRequest>& shots, std::vector<ShotRequest>& hemicubes,
+                       std::vector<long>& place) {
+    const auto directional = [](const ShotRequest& r) { return r.shooter.kind == Shooter::Kind::directional; };
+    if (std::none_of(shots.begin(), shots.end(), directional)) return false;
+    hemicubes.clear();
+    place.assign(shots.size(), -1);
+    for (std::size_t i = 0; i < shots.size(); ++i) {
+        if (directional(shots[i])) continue;
+        place[i] = static_cast<long>(hemicubes.size());
+        hemicubes.push_back(shots[i]);
+    }
+    return true;
+}
+
 ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction, std::uint64_t shot, ShotResult& out,
-                            const ParallelSettings& settings, ParallelRaster* raster) {
+                            const ParallelSettings& settings, ParallelRaster* raster,
+                            std::vector<std::int32_t>* owner_out) {
     out.clear();
+    if (owner_out) owner_out->clear();
     const double length = glm::length(direction);
     if (!(std::abs(length - 1.0) < 1e-9)) throw InternalError("parallel shot: the direction must be a unit vector");
     if (settings.max_cells < 2 || settings.max_cells > kMaxHemicube * 2 || !(settings.cell > 0.0))
@@ -278,6 +306,7 @@ ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction,
         if (lit > 0.0) out.push(d.element, -d.nw * lit);
     }
     out.blocked = static_cast<double>(blocked) * cell * cell;
+    if (owner_out) *owner_out = std::move(owner);
     return grid;
 }
 

@@ -84,8 +84,22 @@ void draw_parallel(const ParallelRecords& records, std::vector<std::int32_t>& ow
 // doubleSided surface's back is its twin's front. Coarse elements (the sky dome) neither block
 // nor receive: the sun lies beyond them. `shot` turns the grid about the direction (seeded like
 // a hemicube's frame) so that its cells' aliasing is not the same at every refinement level.
-// `raster` draws the records (null: the host's).
+// `raster` draws the records (null: the host's). `owner`, if set, receives the owner of each cell
+// (the raster's, row-major over the grid; empty where nothing was drawn): what --verify compares.
 ParallelGrid shoot_parallel(const mesh::Mesh& mesh, const glm::dvec3& direction, std::uint64_t shot, ShotResult& out,
-                            const ParallelSettings& settings = {}, ParallelRaster* raster = nullptr);
+                            const ParallelSettings& settings = {}, ParallelRaster* raster = nullptr,
+                            std::vector<std::int32_t>* owner = nullptr);
+
+// A directional shooter's shot (Shooter::Kind::directional): shoot_parallel along the direction
+// of mesh.directions[request.shooter.patch], its grid turned by request.shot, at the default
+// settings. How every engine answers such a request, each with its own raster (null: the host's).
+ParallelGrid shoot_directional(const mesh::Mesh& mesh, const ShotRequest& request, ShotResult& out,
+                               ParallelRaster* raster = nullptr, std::vector<std::int32_t>* owner = nullptr);
+
+// For engines whose batches run hemicubes together: the batch's shots but its directional ones,
+// in order, into `hemicubes`, and per shot its place there (−1: a directional one). False, with
+// nothing filled, when the batch holds no directional shot.
+bool split_directional(const std::vector<ShotRequest>& shots, std::vector<ShotRequest>& hemicubes,
+                       std::vector<long>& place);
 
 }  // namespace hemirad::formfactor

@@ -7,6 +7,7 @@
 
 #include "core/error.h"
 #include "formfactor/clip.h"
+#include "formfactor/parallel.h"
 #include "hemicube_types.h"
 
 namespace hemirad::formfactor {
@@ -93,11 +94,16 @@ std::vector<std::int64_t> fixed_point(const std::vector<double>& table) {
 }
 
 void ReferenceEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    last_batch_ = 1;
+    last_directional_ = request.shooter.kind == Shooter::Kind::directional;
+    if (last_directional_) {
+        shoot_directional(mesh_, request, out, nullptr, &owners_);
+        return;
+    }
     const Frame frame = make_frame(mesh_, request.shooter, settings_.seed, request.shot);
     const bool light = weights_of(request.shooter) == Weights::solid_angle;
     if (light && light_fixed_.empty()) light_fixed_ = fixed_point(DeltaFormFactors(delta_.n(), Weights::solid_angle).table());
     const std::vector<std::int64_t>& weight = light ? light_fixed_ : fixed_;
-    last_batch_ = 1;
     // A cell's own elements, and its twin's, lie in its base plane: skipped. A cluster's are drawn
     // like any other, since the rim of a concave one rises in front of the shooter and must block
     // and receive its light (skipped, they let the inside of a double-sided cylinder light the room).

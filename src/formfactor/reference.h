@@ -42,8 +42,9 @@ public:
         Engine::shoot_batch(shots, out);
         last_batch_ = shots.size();
     }
+    // A directional shooter's shot is the host's parallel shot (parallel.h), its cells' owners kept instead.
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override {
-        return i + 1 == last_batch_ ? &ids_ : nullptr;
+        return i + 1 == last_batch_ ? (last_directional_ ? &owners_ : &ids_) : nullptr;
     }
     const DeltaFormFactors& delta() const { return delta_; }
 
@@ -60,6 +61,8 @@ private:
     std::vector<std::int64_t> light_fixed_;  // per cell, its solid angle over 4π likewise (made when a light first shoots)
     std::vector<std::int64_t> sums_;     // per element, then blocked: a shot's sums in those units
     std::size_t last_batch_ = 1;         // shots in the last batch: ids_ is its last
+    std::vector<std::int32_t> owners_;   // the last shot's grid, when it was a directional light's
+    bool last_directional_ = false;
 
     bool above_base_plane(const mesh::Polygon& poly, const Frame& frame) const;
 };

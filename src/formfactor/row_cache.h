@@ -37,7 +37,6 @@ class RowCacheEngine final : public Engine {
 public:
     RowCacheEngine(std::unique_ptr<Engine> inner, double budget_bytes);
     std::string name() const override { return inner_->name(); }
-    ParallelRaster* parallel_raster() override { return inner_->parallel_raster(); }
     using Engine::shoot;
     void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;

@@ -42,12 +42,6 @@ std::size_t ShardedEngine::live() const {
     return static_cast<std::size_t>(std::count_if(slots_.begin(), slots_.end(), [](const Slot& s) { return s.live; }));
 }
 
-ParallelRaster* ShardedEngine::parallel_raster() {
-    for (Slot& s : slots_)
-        if (s.live) return s.member.engine->parallel_raster();
-    return nullptr;
-}
-
 void ShardedEngine::shoot(const ShotRequest& request, ShotResult& out) {
     shoot_batch({request}, one_);
     out = std::move(one_.front());

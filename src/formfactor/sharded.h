@@ -51,7 +51,6 @@ public:
     std::string name() const override;
     void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
-    ParallelRaster* parallel_raster() override;
 
     std::size_t members() const { return slots_.size(); }
     std::size_t live() const;

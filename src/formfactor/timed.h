@@ -25,7 +25,6 @@ public:
         inner_.shoot_batch(shots, out);
         seconds_ += seconds_since(t0);
     }
-    ParallelRaster* parallel_raster() override { return inner_.parallel_raster(); }
     double seconds() const { return seconds_; }
 
 private:

@@ -12,6 +12,7 @@
 
 #include "core/error.h"
 #include "formfactor/analytic.h"
+#include "formfactor/parallel.h"
 
 namespace hemirad::formfactor {
 
@@ -104,6 +105,11 @@ double cell_mean(const glm::dvec3* v, int n, const glm::dvec3& centroid, int q, 
 }  // namespace
 
 void UnoccludedEngine::shoot(const ShotRequest& request, ShotResult& out) {
+    if (request.shooter.kind == Shooter::Kind::directional) {
+        // A sun's parallel shot, the host's, with its depth test like every engine's.
+        shoot_directional(mesh_, request, out);
+        return;
+    }
     if (request.shooter.kind == Shooter::Kind::light) {
         // A light's hemicube: the exact solid angle of each element facing the light, over its
         // part in the hemicube's half-space, over 4π (Weights::solid_angle).

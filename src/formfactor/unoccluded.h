@@ -21,7 +21,8 @@ public:
     explicit UnoccludedEngine(const mesh::Mesh& mesh);
     std::string name() const override { return "analytic"; }
     // F[j] = 0 for the shooter's own elements, elements coplanar with it, and elements whose
-    // centroid is not in front of its plane. `blocked` = 0. `shot` is ignored.
+    // centroid is not in front of its plane. `blocked` = 0. `shot` is ignored. A directional
+    // light's shot is the host's parallel shot (parallel.h), occluded like any engine's.
     using Engine::shoot;
     void shoot(const ShotRequest& request, ShotResult& out) override;
     // The shots on the machine's hardware threads, a shot to a thread at a time: each row is

@@ -1,6 +1,8 @@
 // --verify: runs the scalar reference beside another engine on every K-th shot and compares
 // the id buffers (mismatched cells counted) and the per-element form factors (absolute near
-// zero, relative elsewhere). A violation throws VerifyError with the numbers.
+// zero, relative elsewhere). Directional lights' shots are checked every one, and exactly: the
+// owner of every cell of the grid (where the engine keeps them: last_ids) and the row's bits
+// must be the host's. A violation throws VerifyError with the numbers.
 #pragma once
 
 #include <cstdint>
@@ -9,7 +11,6 @@
 #include <string>
 
 #include "formfactor/engine.h"
-#include "formfactor/parallel.h"
 
 namespace hemirad::formfactor {
 
@@ -44,17 +45,19 @@ public:
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return engine_->last_ids(i); }
     const VerifySummary& summary() const { return summary_; }
-    // The engine's parallel raster checked against the host's on every parallel shot; null where
-    // the engine has none (the host draws them, which needs no check).
-    ParallelRaster* parallel_raster() override;
 
 private:
-    std::unique_ptr<ParallelRaster> parallel_;
     std::unique_ptr<Engine> engine_, reference_;
     long every_;
     ShotResult expected_;
     std::vector<ShotResult> batch_;
+    std::vector<ShotRequest> hemicubes_;  // a batch's shots but its directional ones
+    std::vector<long> place_;             // per shot its place among them, −1 a directional one
+    std::vector<ShotResult> rows_;        // the hemicubes' rows
     VerifySummary summary_;
+
+    void check_directional(const ShotRequest& request, const ShotResult& got, const std::vector<std::int32_t>* ids,
+                           const std::vector<std::int32_t>* ref_ids);
 };
 
 }  // namespace hemirad::formfactor

@@ -906,6 +906,14 @@ std::vector<mesh::LightShooter> light_shooters(const std::vector<scene::Punctual
     return out;
 }
 
+std::vector<mesh::DirectionalShooter> directional_shooters(const std::vector<scene::PunctualLight>& lights) {
+    std::vector<mesh::DirectionalShooter> out;
+    for (std::size_t i = 0; i < lights.size(); ++i)
+        if (lights[i].type == scene::PunctualLight::Type::directional && lights[i].intensity != glm::dvec3(0.0))
+            out.push_back({lights[i].direction, static_cast<std::uint32_t>(i)});
+    return out;
+}
+
 Mesh build(const scene::Scene& scene, const Settings& settings, const std::function<void(const Counts&)>& before) {
     check_settings(settings);
     Mesh mesh;
@@ -941,6 +949,7 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
     // Patches in face order; a cluster where its first face is, with all of its faces.
     const Texturing texturing(scene);
     mesh.lights = light_shooters(scene.lights);
+    mesh.directions = directional_shooters(scene.lights);
     for (std::size_t f = 0; f < faces.size(); ++f) {
         if (clusters.of[f] < 0) {
             const std::vector<PatchCells> cells = face_cells(grids[f]);

@@ -76,6 +76,14 @@ struct LightShooter {
     std::uint32_t light = 0;  // index of the light in scene::Scene::lights
 };
 
+// A directional light that shines (a sun: KHR_lights_punctual "directional", or --sun, of
+// intensity > 0): a parallel shot along unit `direction`, the way its light travels
+// (formfactor::Shooter::Kind::directional).
+struct DirectionalShooter {
+    glm::dvec3 direction{0.0, -1.0, 0.0};
+    std::uint32_t light = 0;  // index of the light in scene::Scene::lights
+};
+
 // A point a final gather shoots from (formfactor::Shooter::Kind::point): an output vertex, just
 // inside its surface, looking along the surface's normal there.
 struct GatherPoint {
@@ -99,6 +107,7 @@ inline constexpr double kClusterCos = 0.9063077870366499;
 struct Mesh {
     std::vector<Patch> patches;
     std::vector<LightShooter> lights;  // the scene's punctual lights' hemicubes
+    std::vector<DirectionalShooter> directions;  // the scene's shining directional lights, in light order
     std::vector<GatherPoint> gather_points;  // the final gather's points (solve/final_gather.h); set by it
     std::vector<Element> elements;  // elements of patch p are [first_element, first_element + element_count)
     std::size_t dropped_triangles = 0;  // zero or near-zero area
@@ -125,6 +134,10 @@ Mesh build(const scene::Scene& scene, const Settings& settings,
 // The hemicubes of a scene's point and spot lights, for Mesh::lights (directional lights have
 // none): two back to back for a point light, one along a spot light's direction.
 std::vector<LightShooter> light_shooters(const std::vector<scene::PunctualLight>& lights);
+
+// The parallel shots of a scene's directional lights of intensity > 0, for Mesh::directions, in
+// light order.
+std::vector<DirectionalShooter> directional_shooters(const std::vector<scene::PunctualLight>& lights);
 
 // Normal (unit, front side), area centroid and area of a planar convex polygon.
 struct Shape {

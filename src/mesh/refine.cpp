@@ -36,6 +36,7 @@ Refined split_elements(const Mesh& mesh, const std::vector<bool>& split, const T
     Refined out;
     out.mesh.patches = mesh.patches;
     out.mesh.lights = mesh.lights;
+    out.mesh.directions = mesh.directions;
     out.mesh.dropped_triangles = mesh.dropped_triangles;
     out.mesh.quads = mesh.quads;
     out.mesh.clusters = mesh.clusters;

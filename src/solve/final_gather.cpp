@@ -150,6 +150,7 @@ std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity,
 mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {
     mesh::Mesh out;
     out.lights = mesh.lights;
+    out.directions = mesh.directions;
     out.patches.reserve(mesh.patches.size());
     for (const mesh::Patch& p : mesh.patches) {
         mesh::Patch q = p;

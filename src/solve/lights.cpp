@@ -4,9 +4,10 @@
 #include <algorithm>
 #include <cmath>
 
+#include <fmt/format.h>
+
 #include "core/cancel.h"
 #include "core/error.h"
-#include "formfactor/parallel.h"
 
 namespace hemirad::solve {
 
@@ -27,22 +28,36 @@ std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<s
                                      const std::function<void(std::size_t, std::size_t)>& progress) {
     std::vector<glm::dvec3> H(mesh.elements.size(), glm::dvec3(0.0));
     if (landed) *landed = glm::dvec3(0.0);
-    // Directional lights: a parallel shot each, its grid turned by the level and the light.
-    formfactor::ShotResult lit;
-    for (std::size_t l = 0; l < lights.size(); ++l) {
-        if (!shines_in_parallel(lights[l])) continue;
-        formfactor::shoot_parallel(mesh, lights[l].direction, static_cast<std::uint64_t>(level) * lights.size() + l, lit,
-                                   {}, engine.parallel_raster());
-        for (std::size_t i = 0; i < lit.size(); ++i) {
-            const glm::dvec3 irradiance = lights[l].intensity * lit.F[i];
-            H[lit.element[i]] += irradiance;
-            if (landed) *landed += irradiance * mesh.elements[lit.element[i]].area;
+    // Directional lights (the mesh's, which must be the shining ones of `lights`): a parallel shot
+    // each, one batch through the engine like any shots, each grid turned by the level and the light.
+    const auto shining = static_cast<std::size_t>(std::count_if(lights.begin(), lights.end(), shines_in_parallel));
+    if (shining != mesh.directions.size())
+        throw InternalError(fmt::format("direct light: the mesh has {} directional lights, the scene {} that shine",
+                                        mesh.directions.size(), shining));
+    std::vector<formfactor::ShotRequest> requests;
+    std::vector<formfactor::ShotResult> rows;
+    if (!mesh.directions.empty()) {
+        for (std::size_t d = 0; d < mesh.directions.size(); ++d) {
+            const std::size_t l = mesh.directions[d].light;
+            if (l >= lights.size() || !shines_in_parallel(lights[l]) || lights[l].direction != mesh.directions[d].direction)
+                throw InternalError(fmt::format("direct light: the mesh's directional light {} is not the scene's light {}", d, l));
+            requests.push_back(formfactor::ShotRequest::of_directional(
+                static_cast<std::uint32_t>(d), static_cast<std::uint64_t>(level) * lights.size() + l));
+        }
+        engine.shoot_batch(requests, rows);
+        if (rows.size() != requests.size()) throw InternalError("direct light: the engine returned the wrong number of rows");
+        for (std::size_t d = 0; d < mesh.directions.size(); ++d) {
+            const scene::PunctualLight& light = lights[mesh.directions[d].light];
+            const formfactor::ShotResult& lit = rows[d];
+            for (std::size_t i = 0; i < lit.size(); ++i) {
+                const glm::dvec3 irradiance = light.intensity * lit.F[i];
+                H[lit.element[i]] += irradiance;
+                if (landed) *landed += irradiance * mesh.elements[lit.element[i]].area;
+            }
         }
     }
     if (mesh.lights.empty()) return H;
     const std::uint64_t first = kLightShots + static_cast<std::uint64_t>(level) * mesh.lights.size();
-    std::vector<formfactor::ShotRequest> requests;
-    std::vector<formfactor::ShotResult> rows;
     for (std::size_t start = 0; start < mesh.lights.size(); start += kLightBatch) {
         cancel::check();
         const std::size_t end = std::min(mesh.lights.size(), start + kLightBatch);

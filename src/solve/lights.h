@@ -1,9 +1,10 @@
 // Punctual lights' direct light: each point light shoots the two hemicubes of a full cube, each
 // spot light the one along its direction, through the same engines as patches (rows of solid
 // angles, formfactor::Weights); an element receives I × attenuation × Ω / A of each. Each
-// directional light (a KHR_lights_punctual one, or --sun) takes a parallel shot
-// (formfactor/parallel.h): an element receives E × its lit area across the light / A. The solvers
-// start from this light, as if the lights had shot first.
+// directional light (a KHR_lights_punctual one, or --sun: mesh::Mesh::directions) takes a
+// parallel shot (formfactor/parallel.h), through the same engines (Shooter::Kind::directional):
+// an element receives E × its lit area across the light / A. The solvers start from this light,
+// as if the lights had shot first.
 #pragma once
 
 #include <cstdint>
@@ -29,8 +30,10 @@ bool has_direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualL
 // Light hemicubes shot per engine call: a scene of 200,000 point lights held all their rows at once.
 inline constexpr std::size_t kLightBatch = 256;
 
-// Per element, the irradiance of every light hemicube of the mesh, shot in batches of
-// kLightBatch (the sums in the same order whatever the batch), and of every directional light.
+// Per element, the irradiance of every directional light of the mesh, shot first as one batch
+// (shot counter L·lights.size() + the light's index in `lights`, L the level), and of every light
+// hemicube of the mesh, shot in batches of kLightBatch (the sums in the same order whatever the
+// batch). The mesh's directional lights must be the shining ones of `lights` (InternalError).
 // `landed`, if set, receives the flux that reached elements (per channel). Between batches it
 // checks for a stop (core/cancel.h) and reports the hemicubes shot of all (`progress`, if set).
 std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,

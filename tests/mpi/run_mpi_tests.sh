@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # MPI bakes (CTest, tests/CMakeLists.txt): run_mpi_tests.sh CASE HEMIRAD SOURCE_DIR WORK_DIR BUILT_WITH_MPI
-#   ranks   mpirun -n 2 and -n 3 bakes of bundled scenes are byte for byte one process's
+#   ranks   mpirun -n 2 and -n 3 bakes of bundled scenes (a sunlit one too) are byte for byte one process's
 #   resume  a bake killed under 2 ranks (a worker killed) resumes under 3 with one process's bytes
 #   input   bad input under mpirun: one line from rank 0, exit 2, nothing written
 #   scaling bench --scaling under 2 ranks measures both counts, with the same rows
@@ -48,6 +48,24 @@ PY
   mpi 3 "$exe" bake "$lit" -o lit_n3 --solver progressive --batch 8 --quality draft --quiet
   "$exe" bake "$lit" -o lit_one --solver progressive --batch 8 --quality draft --quiet
   same lit_n3 lit_one
+  # Suns (the atrium's, and one from --sun): their parallel shots go to the ranks like any shots
+  # (the worker's mesh carries the suns). Without refinement and the gather every shot is the
+  # solve's: the row cache's requests are the passes and the 2 suns' shots (and up to batch − 1
+  # of a last batch cut short), and what it did not hold went to the members.
+  sun_args=(--solver progressive --batch 2 --gather 0 --refine-levels 0 --sun 135,40,10 --quality draft --quiet)
+  mpi 2 "$exe" bake "$src/scenes/atrium.gltf" -o atrium_n2 "${sun_args[@]}"
+  "$exe" bake "$src/scenes/atrium.gltf" -o atrium_one "${sun_args[@]}"
+  same atrium_n2 atrium_one
+  python3 - atrium_n2/report.json <<'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+members, cache = r["device"]["members"], r["row_cache"]
+assert [m["id"] for m in members][1:] == ["rank 1"], members
+assert sum(m["shots"] for m in members) == cache["shot"], (members, cache)
+extra = cache["requests"] - r["passes"] - 2
+assert 0 <= extra < 2, (cache, r["passes"])
+print("ok: the suns' shots went through the ranks:", [m["shots"] for m in members], "of", cache["shot"])
+PY
   ;;
 resume)
   room=$src/scenes/closed_room.gltf
