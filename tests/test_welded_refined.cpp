@@ -57,6 +57,29 @@ std::vector<mesh::Element> children(const mesh::Element& e) {
     return out;
 }
 
+// A linear congruential step of `state`, its high 24 bits.
+std::uint32_t next_lcg(std::uint32_t& state) {
+    state = state * 1664525u + 1013904223u;
+    return state >> 8;
+}
+
+// A third of the elements split in four, `rounds` times over, by the random stream `state`.
+std::vector<mesh::Element> split_at_random(std::vector<mesh::Element> elements, int rounds, std::uint32_t& state) {
+    for (int round = 0; round < rounds; ++round) {
+        std::vector<mesh::Element> next;
+        for (const mesh::Element& e : elements) {
+            if (next_lcg(state) % 3 == 0) {
+                const auto kids = children(e);
+                next.insert(next.end(), kids.begin(), kids.end());
+            } else {
+                next.push_back(e);
+            }
+        }
+        elements = std::move(next);
+    }
+    return elements;
+}
+
 // Replaces elements[i] by its children (appended at the end).
 void refine(std::vector<mesh::Element>& elements, std::size_t i) {
     const auto kids = children(elements[i]);
@@ -398,22 +421,8 @@ TEST_CASE("welded refined: random refinement of meshed faces stays crack free", 
     const mesh::Mesh built = mesh::build(s, mesh::Settings{0.6, 0.3});
     std::vector<mesh::Element> elements = built.elements;
     std::uint32_t state = 12345;
-    auto next_random = [&state] {
-        state = state * 1664525u + 1013904223u;
-        return state >> 8;
-    };
-    for (int round = 0; round < 3; ++round) {
-        std::vector<mesh::Element> next;
-        for (const mesh::Element& e : elements) {
-            if (next_random() % 3 == 0) {
-                const auto kids = children(e);
-                next.insert(next.end(), kids.begin(), kids.end());
-            } else {
-                next.push_back(e);
-            }
-        }
-        elements = std::move(next);
-    }
+    const auto next_random = [&state] { return next_lcg(state); };
+    elements = split_at_random(std::move(elements), 3, state);
     std::vector<dvec3> radiosity;
     for (std::size_t i = 0; i < elements.size(); ++i) radiosity.emplace_back(double(next_random() % 100) / 100.0);
     mesh::Mesh refined;
@@ -560,22 +569,8 @@ TEST_CASE("welded refined: one weld carries any per-element values to its vertic
     const mesh::Mesh built = mesh::build(s, mesh::Settings{0.6, 0.3});
     std::vector<mesh::Element> elements = built.elements;
     std::uint32_t state = 777;
-    auto next_random = [&state] {
-        state = state * 1664525u + 1013904223u;
-        return state >> 8;
-    };
-    for (int round = 0; round < 4; ++round) {
-        std::vector<mesh::Element> next;
-        for (const mesh::Element& e : elements) {
-            if (next_random() % 3 == 0) {
-                const auto kids = children(e);
-                next.insert(next.end(), kids.begin(), kids.end());
-            } else {
-                next.push_back(e);
-            }
-        }
-        elements = std::move(next);
-    }
+    const auto next_random = [&state] { return next_lcg(state); };
+    elements = split_at_random(std::move(elements), 4, state);
     elements[elements.size() / 2].area = 0.0;  // a vertex weighed by no area takes the plain mean
     mesh::Mesh refined;
     refined.elements = elements;
