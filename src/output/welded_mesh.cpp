@@ -48,11 +48,11 @@ struct PositionKeyHash {
 // (T-junctions) of finer neighbours added after it.
 class NodeWelder {
 public:
-    void add(const mesh::Element& element, std::uint32_t index, const glm::dvec3& radiosity) {
+    void add(const mesh::Element& element, std::uint32_t index) {
         Placed placed{&element, index, {}};
         for (int i = 0; i < element.poly.n; ++i) {
             placed.ids[i] = vertex(element.poly.v[i], element.normal, element.back);
-            accumulate(placed.ids[i], element, radiosity);
+            normal_sum_[placed.ids[i]] += element.area * element.normal;
             corners_.push_back({placed.ids[i], index});
         }
         placed_.push_back(placed);
@@ -61,17 +61,10 @@ public:
     WeldedNode finish() {
         build_filter();
         for (const Placed& placed : placed_) triangulate(placed);
-        node_.radiosity.resize(node_.positions.size());
         node_.normals.resize(node_.positions.size());
         for (std::size_t v = 0; v < node_.positions.size(); ++v) {
             const double length = glm::length(normal_sum_[v]);
             node_.normals[v] = length > 0.0 ? normal_sum_[v] / length : cluster_normal_[v];
-            // Zero-area elements carry no weight; a vertex touched only by such gets their mean.
-            // (A vertex touched by none was made for a hanging vertex across a crease: its
-            // value is the constraint's, set below.)
-            node_.radiosity[v] = weight_[v] > 0.0 ? weighted_sum_[v] / weight_[v]
-                                 : count_[v] > 0  ? plain_sum_[v] / double(count_[v])
-                                                  : glm::dvec3(0.0);
         }
         apply_constraints();
         record_corners();
@@ -119,10 +112,6 @@ private:
         normal_sum_.emplace_back(0.0);
         next_at_same_position_.push_back(it->second);
         it->second = id;
-        weighted_sum_.emplace_back(0.0);
-        weight_.push_back(0.0);
-        plain_sum_.emplace_back(0.0);
-        count_.push_back(0);
         return id;
     }
 
@@ -164,15 +153,6 @@ private:
         const std::uint64_t h = position_hash(key);
         const std::uint64_t bits = filter_bits(h);
         return (filter_[h & (filter_.size() - 1)] & bits) == bits;
-    }
-
-    void accumulate(std::uint32_t v, const mesh::Element& element, const glm::dvec3& radiosity) {
-        const double area = element.area;
-        normal_sum_[v] += area * element.normal;
-        weighted_sum_[v] += area * radiosity;
-        weight_[v] += area;
-        plain_sum_[v] += radiosity;
-        ++count_[v];
     }
 
     void triangle(std::uint32_t a, std::uint32_t b, std::uint32_t c, bool has_twin) {
@@ -284,9 +264,10 @@ private:
         if (size == 3) triangle(outline_[0].id, outline_[1].id, outline_[2].id, has_twin);
     }
 
-    // Sets each hanging vertex's radiosity to the mean of its edge's ends (their normal to the
-    // normalized mean), after the ends' own constraints (a nested hanging vertex's end may be
-    // hanging itself): then the shading is continuous across the T-junction.
+    // Sets each hanging vertex's normal to the normalized mean of its edge's ends', after the ends'
+    // own constraints (a nested hanging vertex's end may be hanging itself), and records it in
+    // `halfway` in that order, so that vertex_values gives it the mean of their values: then the
+    // shading is continuous across the T-junction.
     void apply_constraints() {
         if (constrained_.empty()) return;
         std::vector<std::uint8_t> state(node_.positions.size(), 0);  // 0 to do, 1 in progress, 2 done
@@ -307,8 +288,7 @@ private:
                     if (pending(c.a)) stack.push_back(c.a);
                     if (pending(c.b)) stack.push_back(c.b);
                 } else {
-                    node_.radiosity[v] = 0.5 * (node_.radiosity[c.a] + node_.radiosity[c.b]);
-                    node_.halfway.push_back({v, c.a, c.b});
+                    node_.halfway.push_back({v, c.a, c.b});  // its value: vertex_values
                     const glm::dvec3 normal = node_.normals[c.a] + node_.normals[c.b];
                     const double length = glm::length(normal);
                     if (length > 0.0) node_.normals[v] = normal / length;
@@ -349,10 +329,6 @@ private:
     std::vector<glm::dvec3> cluster_normal_;            // the first element's: what others match
     std::vector<std::uint8_t> back_;                    // the side: part of the position's key
     std::vector<glm::dvec3> normal_sum_;                // Σ area × normal
-    std::vector<glm::dvec3> weighted_sum_;              // Σ area × B
-    std::vector<double> weight_;                        // Σ area
-    std::vector<glm::dvec3> plain_sum_;
-    std::vector<std::uint32_t> count_;
     std::vector<std::uint64_t> filter_;       // see build_filter
     std::vector<Placed> placed_;              // the elements, in order, with their corners' vertices
     std::vector<Corner> corners_;             // every corner, in the order accumulated
@@ -375,12 +351,12 @@ WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vecto
         if (element.node >= node_count) {
             throw InternalError(fmt::format("output: element {} names node {} of {}", i, element.node, node_count));
         }
-        welders[element.node].add(element, static_cast<std::uint32_t>(i), radiosity[i]);
+        welders[element.node].add(element, static_cast<std::uint32_t>(i));
     }
     WeldedMesh welded;
     welded.nodes.reserve(node_count);
     for (NodeWelder& welder : welders) welded.nodes.push_back(welder.finish());
-    if (vertex_values) set_vertex_values(welded, *vertex_values);
+    set_vertex_values(welded, vertex_values ? *vertex_values : output::vertex_values(welded, mesh, radiosity));
     return welded;
 }
 
@@ -393,7 +369,9 @@ VertexValues vertex_values(const WeldedMesh& welded, const mesh::Mesh& mesh, con
         const WeldedNode& node = welded.nodes[n];
         std::vector<glm::dvec3>& at = out[n];
         at.resize(node.positions.size());
-        // As NodeWelder::accumulate and finish do it, operation for operation.
+        // The area-weighted mean of the elements around each vertex. Zero-area elements carry no
+        // weight; a vertex touched only by such gets their mean. (A vertex touched by none was made
+        // for a hanging vertex across a crease: its value is its edge's, set below.)
         for (std::size_t v = 0; v < node.positions.size(); ++v) {
             glm::dvec3 weighted(0.0), plain(0.0);
             double weight = 0.0;
