@@ -382,12 +382,17 @@ double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, L
     const auto& irradiance = lit.solved.solution.irradiance;
     if (!output::all_finite(radiosity) || !output::all_finite(irradiance))
         throw InternalError("the solution has a non-finite value; nothing written");
-    // One weld of the mesh for every output (the gather's, where it made one), its values the
-    // light drawn: the gather's at the vertices, else the elements' means.
+    // One weld of the mesh for every output: the gather's where it made one, its values then the
+    // light drawn (the gather's at the vertices, else the elements' means); else one made here.
     const bool gathered = lit.gathered.points > 0;
-    output::WeldedMesh welded = lit.welded ? std::move(*lit.welded) : output::weld(scene.nodes.size(), lit.mesh, radiosity);
-    output::set_vertex_values(welded, gathered ? lit.gathered.light.radiosity
-                                               : output::vertex_values(welded, lit.mesh, radiosity));
+    output::WeldedMesh welded;
+    if (lit.welded) {
+        welded = std::move(*lit.welded);
+        output::set_vertex_values(welded, gathered ? lit.gathered.light.radiosity
+                                                   : output::vertex_values(welded, lit.mesh, radiosity));
+    } else {
+        welded = output::weld(scene.nodes.size(), lit.mesh, radiosity);  // no gather: no gathered light
+    }
     const output::Image image = output::render(scene, welded, s.view, s.width, s.height);
     if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
     output::write_exr(image, out.staged("render.exr"));

@@ -2,6 +2,7 @@
 #include "bake/gather.h"
 
 #include <algorithm>
+#include <functional>
 
 #include <fmt/core.h>
 
@@ -74,11 +75,17 @@ Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
 
 namespace {
 
-// Every vertex of the output but the sky dome's, through the patches' cells (gather_mesh).
+// The output's nodes a gather takes: every one but the sky dome's (gather_mesh's cells hold them).
+std::function<bool(std::size_t)> gathered_nodes(const scene::Scene& scene) {
+    return [&scene](std::size_t n) { return !scene.nodes[n].synthetic; };
+}
+
+// The vertices of `w` in the nodes a gather takes.
 std::size_t gathered_vertices(const scene::Scene& scene, const output::WeldedMesh& w) {
+    const auto gathered = gathered_nodes(scene);
     std::size_t vertices = 0;
     for (std::size_t n = 0; n < w.nodes.size(); ++n)
-        if (!scene.nodes[n].synthetic) vertices += w.nodes[n].positions.size();
+        if (gathered(n)) vertices += w.nodes[n].positions.size();
     return vertices;
 }
 
@@ -124,8 +131,7 @@ void refine_gather(const LightContext& c, Lit& lit, std::vector<glm::dvec3>& dir
     if (!direct.empty()) r.direct_light = [&](const mesh::Mesh& finer) { return direct_light_on(c, finer, engines); };
     Solution& s = lit.solved.solution;
     solve::GatheredMesh g{lit.mesh, s.radiosity, s.irradiance, direct, welded, lit.gathered.light};
-    const auto gathered_node = [&](std::size_t n) { return !c.scene.nodes[n].synthetic; };
-    const solve::GatherRefined refined = solve::refine_gather(g, gathered_node, gs, r);
+    const solve::GatherRefined refined = solve::refine_gather(g, gathered_nodes(c.scene), gs, r);
     if (refined.cancelled) throw cancel::Interrupted();
     lit.gathered.points += refined.points;
     lit.gathered.gather_split = refined.split;
@@ -140,7 +146,7 @@ void refine_gather(const LightContext& c, Lit& lit, std::vector<glm::dvec3>& dir
 void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded, EngineStack& engines) {
     const Options& o = c.plan.o;
     std::vector<glm::dvec3> direct = direct_light_on(c, lit.mesh, engines);
-    const auto gathered_node = [&](std::size_t n) { return !c.scene.nodes[n].synthetic; };
+    const std::function<bool(std::size_t)> gathered_node = gathered_nodes(c.scene);
     mesh::Mesh drawn = solve::gather_mesh(lit.mesh);
     drawn.gather_points = solve::gather_points(welded, gathered_node);
     std::unique_ptr<formfactor::Engine> gather_engine = engines.gather(drawn, o.gather);
