@@ -12,9 +12,10 @@
 
 namespace hemirad::bake {
 
-Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c) {
+Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c,
+                           const std::vector<glm::dvec3>* direct) {
     const Options& o = c.o;
-    solve::Matrix solver(mesh, engine, c.matrix, c.direct);
+    solve::Matrix solver(mesh, engine, c.matrix, direct);
     Solution solution;
     if (!o.resume.empty()) {
         restore(solver, c.resume_state, o.resume);
@@ -45,13 +46,14 @@ Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, c
     return solution;
 }
 
-Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c) {
+Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c,
+                             const std::vector<glm::dvec3>* direct) {
     const Options& o = c.o;
     solve::Settings settings;
     settings.threshold = c.threshold;
     settings.max_passes = max_passes_for(o, mesh.patches.size());
     settings.batch = o.batch;
-    solve::Progressive solver(mesh, engine, settings, c.direct);
+    solve::Progressive solver(mesh, engine, settings, direct);
     Solution solution;
     if (!o.resume.empty()) {
         restore(solver, c.resume_state, o.resume);
@@ -107,10 +109,9 @@ Solved solve(const mesh::Mesh& mesh, const scene::Scene& scene, const std::strin
     if (solve::has_direct_light(mesh, scene.lights))
         direct = solve::direct_light(mesh, scene.lights, engine, 0, nullptr,
                                      [&](std::size_t done, std::size_t total) { c.progress.lights(done, total); });
-    SolveContext context = c;
-    context.direct = direct.empty() ? nullptr : &direct;
+    const std::vector<glm::dvec3>* lit = direct.empty() ? nullptr : &direct;
     Solved out;
-    out.solution = solver == "matrix" ? solve_with_matrix(mesh, engine, context) : solve_progressively(mesh, engine, context);
+    out.solution = solver == "matrix" ? solve_with_matrix(mesh, engine, c, lit) : solve_progressively(mesh, engine, c, lit);
     c.progress.end_stage();
     const Solution& s = out.solution;
     // Shown, not reported: report.json's `converged` and `error` say it.

@@ -20,12 +20,13 @@ struct SolveContext {
     const std::string& resume_state;       // what --resume read, or empty
     Progress& progress;
     std::function<void(const solve::Progressive&)> preview;  // writes a preview frame of the passes so far
-    const std::vector<glm::dvec3>* direct = nullptr;  // the punctual lights' irradiance per element (set by solve())
 };
 
-// Either solver on `engine`.
-Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c);
-Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c);
+// Either solver on `engine`, from the lights' irradiance per element `direct` (null: none).
+Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c,
+                           const std::vector<glm::dvec3>* direct);
+Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c,
+                             const std::vector<glm::dvec3>* direct);
 
 // The stage: the engine from `engines` (a row cache for the progressive solver), the lights'
 // direct light, then `solver` ("matrix" or "progressive"), timed.

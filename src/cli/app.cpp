@@ -22,13 +22,13 @@
 #include <type_traits>
 #include <vector>
 
-#include "cl/runtime.h"
 #include "bake/bake.h"
-#include "core/quality.h"
-#include "bench/command.h"
 #include "bake/engine_select.h"
+#include "bench/command.h"
+#include "cl/runtime.h"
 #include "cli/progress_line.h"
 #include "core/error.h"
+#include "core/quality.h"
 #include "dist/dist.h"
 #include "formfactor/verify.h"
 #include "gen/content_scenes.h"
