@@ -20,6 +20,7 @@
 #include "bake/report.h"
 #include "bake/solve.h"
 #include "bake/stages.h"
+#include "core/counted.h"
 #include "core/error.h"
 #include "core/memory.h"
 #include "core/timing.h"
@@ -101,6 +102,7 @@ scene::Scene load(const Plan& p) {
     load_options.max_bytes = p.memory_limit.bytes;
     load_options.limit_source = p.memory_limit.source;
     load_options.inputs = [&](const std::vector<fs::path>& inputs) { check_inputs_kept(p.o, inputs); };
+    load_options.strict_textures = p.o.strict_textures;
     scene::Scene scene = scene::load(p.o.scene, load_options);
     if (p.sky && !scene.triangles.empty()) scene::add_sky(scene, *p.sky);
     if (p.sun) scene.lights.push_back(*p.sun);
@@ -256,9 +258,10 @@ Meshed build_mesh(const Plan& p, const Setup& s, scene::Scene& scene) {
     const std::string& file = p.o.scene;
     if (m.mesh.patches.empty()) throw InputError(fmt::format("{}: every triangle has zero area; nothing to bake", file));
     if (m.mesh.dropped_triangles > 0)
-        scene.warnings.push_back(fmt::format("{}: {} of {} triangles have no area (under 1e-12 of their longest edge "
-                                             "squared) and were dropped; report.json counts them",
-                                             file, m.mesh.dropped_triangles, scene.triangles.size()));
+        scene.warnings.push_back(fmt::format("{}: {} dropped (of {}; under 1e-12 of their longest edge squared); "
+                                             "report.json counts them",
+                                             file, counted(m.mesh.dropped_triangles, "zero-area triangle"),
+                                             grouped(scene.triangles.size())));
     check_lamps_seen(scene, m.mesh);
     if (p.o.preview_every > 0 && m.solver == "matrix")
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");

@@ -13,6 +13,7 @@
 
 #include "bake/budget.h"
 #include "cl/runtime.h"
+#include "core/counted.h"
 #include "core/error.h"
 #include "core/memory.h"
 
@@ -61,15 +62,27 @@ void check_scene(const scene::Scene& scene) {
 }
 
 // After the see_through decision: a scene whose only emitters were see-through (faint blended
-// glows) has nothing left to light it, which the user can change.
+// glows) has nothing left to light it. Such glows are decoration beside a light the file does not
+// hold (an interior lit by the sun through its windows, a street by the sky), so the first advice
+// is to add that light; baking the glows as lamps comes second.
 void check_emitters_left(const scene::Scene& scene, const scene::EffectsPlan& plan) {
     if (!plan.see_through.on || shining_lights(scene) > 0) return;
-    if (std::none_of(scene.triangles.begin(), scene.triangles.end(),
-                     [&](const scene::Triangle& t) { return emits(scene, t); }))
-        throw InputError(fmt::format("{}: nothing emits light once see-through surfaces are left out: every emissive "
-                                     "triangle is a faint alpha-blended or transmissive glow; --effects see_through=off "
-                                     "bakes them as opaque emitters",
-                                     scene.path.string()));
+    if (std::any_of(scene.triangles.begin(), scene.triangles.end(), [&](const scene::Triangle& t) { return emits(scene, t); }))
+        return;
+    std::vector<std::string> glows;
+    for (const scene::Material& m : scene.materials)
+        if (m.emission != glm::dvec3(0.0) && !m.see_through.empty()) glows.push_back(m.name);
+    constexpr std::size_t kNamed = 3;
+    std::string names;
+    for (std::size_t i = 0; i < glows.size() && i < kNamed; ++i) names += fmt::format("{}'{}'", i ? ", " : "", glows[i]);
+    if (glows.size() > kNamed) names += fmt::format(" and {} more", grouped(glows.size() - kNamed));
+    throw InputError(fmt::format(
+        "{}: nothing emits light once see-through surfaces are left out: the only emitters are {} ({}), faint "
+        "alpha-blended or transmissive glows that, like glass, neither block nor give light; light the scene with "
+        "--sun AZIMUTH,ELEVATION,LUX (e.g. --sun 135,40,20) and/or --sky RADIANCE (e.g. --sky 0.3), or add "
+        "lamps to the file; only if the glows are the scene's lamps, --effects see_through=off bakes them as opaque "
+        "emitters",
+        scene.path.string(), counted(glows.size(), "glow material"), names));
 }
 
 // After meshing: a material that emits in the file but whose surfaces give the mesh no light
@@ -92,9 +105,19 @@ void check_lamps_seen(scene::Scene& scene, const mesh::Mesh& mesh) {
                                                   mat.alpha_cutoff)
                                 : mat.emissive_texture ? "its emissive texture is black where its surfaces are"
                                                        : "its triangles have no area";
-        unseen.push_back(fmt::format("material '{}' emits, but its {} triangle{} the bake no light: {}", mat.name,
-                                     triangles[m], triangles[m] == 1 ? " gives" : "s give", why));
-        scene.warnings.push_back(scene.path.string() + ": " + unseen.back());
+        unseen.push_back(fmt::format("material '{}' emits, but its {} the bake no light: {}", mat.name,
+                                     counted(triangles[m], "triangle"), triangles[m] == 1 ? "gives" : "give", why));
+    }
+    // One line for them all (a file of many masked lamps would repeat it per material).
+    constexpr std::size_t kNamed = 3;
+    if (unseen.size() == 1) {
+        scene.warnings.push_back(scene.path.string() + ": " + unseen.front());
+    } else if (unseen.size() > 1) {
+        std::string some;
+        for (std::size_t i = 0; i < unseen.size() && i < kNamed; ++i) some += (i ? "; " : "") + unseen[i];
+        if (unseen.size() > kNamed) some += fmt::format("; and {} more", grouped(unseen.size() - kNamed));
+        scene.warnings.push_back(fmt::format("{}: {} emit but give the bake no light: {}", scene.path.string(),
+                                             counted(unseen.size(), "material"), some));
     }
     const bool lit = shining_lights(scene) > 0 ||
                      std::any_of(flux.begin(), flux.end(), [](double f) { return f > 0.0; });

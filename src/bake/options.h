@@ -57,6 +57,7 @@ struct Options {
     long preview_every = 0;
     int image_width = 640;
     std::string max_memory;       // --max-memory SIZE; empty: the memory available (core/memory.h)
+    bool strict_textures = false; // --strict-textures: a texture image missing or undecodable is exit 2, not a warning
     bool quiet = false;
     bool progress = false;                       // report progress (a TTY or --progress, and not --quiet)
     bool progress_tty = false;                   // ... as one line redrawn in place (a TTY), else a line every few seconds

@@ -32,6 +32,7 @@
 #include "dist/dist.h"
 #include "formfactor/verify.h"
 #include "gen/content_scenes.h"
+#include "scene/effects.h"
 #include "scene/writer.h"
 
 namespace hemirad::cli {
@@ -168,9 +169,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->check(CLI::IsMember({"auto", "matrix", "progressive"}))
         ->capture_default_str();
     bake.add_option("--effects", o.effects,
-                    "force effects on or off, e.g. occlusion=off,colour=on (occlusion, colour, interreflection, "
-                    "two_sided, refinement, convergence; on|off|auto); by default each is planned from the scene "
-                    "and report.json says why");
+                    fmt::format("force effects on or off, e.g. occlusion=off,colour=on (effects: {}; each on|off|auto); "
+                                "by default each is planned from the scene and report.json says why",
+                                hemirad::scene::effect_names("and")));
     bake.add_option("--sky", o.sky,
                     "light the scene with a sky dome of this radiance (emission / pi): RADIANCE, or "
                     "HORIZON,ZENITH radiances (between them by the sine of the elevation)");
@@ -224,6 +225,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "memory the bake may use, e.g. 8G or 512M (default: what the machine has available); a bake "
                     "estimated to need more is refused before it starts, --solver auto takes the solver that fits, "
                     "and refinement stops where it would pass it");
+    bake.add_flag("--strict-textures", o.strict_textures,
+                  "a base colour or emissive texture whose image is missing or does not decode stops the bake "
+                  "(exit 2); without it the material bakes with its factors alone, with a warning per image");
     bake.add_flag("--quiet", o.quiet, "no progress line");
     bake.add_flag("--progress", o.progress,
                   "report progress when stderr is not a terminal too (a log): a line every few seconds");

@@ -418,14 +418,23 @@ const char* to_string(Force force) {
     return "auto";
 }
 
+std::string effect_names(const char* last) {
+    std::string out;
+    for (std::size_t i = 0; i < kEffectNames.size(); ++i)
+        out += (i == 0 ? "" : i + 1 == kEffectNames.size() ? fmt::format(" {} ", last) : std::string(", ")) +
+               kEffectNames[i];
+    return out;
+}
+
 EffectOverrides parse_effect_overrides(const std::string& spec) {
     EffectOverrides out;
     if (trim(spec).empty()) return out;
-    const char* const names[] = {"occlusion",  "colour",      "interreflection", "two_sided",
-                                 "refinement", "convergence", "see_through"};
+    // In kEffectNames' order.
     Force* const slots[] = {&out.occlusion,  &out.colour,      &out.interreflection, &out.two_sided,
                             &out.refinement, &out.convergence, &out.see_through};
-    constexpr int kEffects = 7;
+    static_assert(sizeof slots / sizeof slots[0] == kEffectNames.size(), "one slot per name of kEffectNames");
+    constexpr int kEffects = int(kEffectNames.size());
+    const auto& names = kEffectNames;
     bool seen[kEffects] = {};
     std::size_t start = 0;
     while (true) {
@@ -441,9 +450,8 @@ EffectOverrides parse_effect_overrides(const std::string& spec) {
         for (int i = 0; i < kEffects; ++i)
             if (name == names[i]) index = i;
         if (index < 0)
-            throw std::invalid_argument(fmt::format("effects '{}': unknown effect '{}' in '{}' (expected occlusion, "
-                                                    "colour, interreflection, two_sided, refinement, convergence or see_through)",
-                                                    spec, name, item));
+            throw std::invalid_argument(fmt::format("effects '{}': unknown effect '{}' in '{}' (expected {})", spec,
+                                                    name, item, effect_names()));
         Force force;
         if (value == "on") force = Force::on;
         else if (value == "off") force = Force::off;

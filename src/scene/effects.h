@@ -4,6 +4,7 @@
 // (`--effects occlusion=off,colour=on`).
 #pragma once
 
+#include <array>
 #include <string>
 
 #include "scene/scene.h"
@@ -11,6 +12,15 @@
 namespace hemirad::scene {
 
 enum class Force { automatic, on, off };
+
+// The effects `--effects` names, in the order --help and messages list them: a new effect is
+// added here and to the slots of parse_effect_overrides (a static_assert there counts them).
+inline constexpr std::array<const char*, 7> kEffectNames = {"occlusion",  "colour",      "interreflection", "two_sided",
+                                                            "refinement", "convergence", "see_through"};
+
+// kEffectNames as a list for people: "occlusion, colour, … convergence or see_through" (`last`:
+// the word before the last name).
+std::string effect_names(const char* last = "or");
 
 struct EffectOverrides {
     Force occlusion = Force::automatic;
@@ -23,8 +33,7 @@ struct EffectOverrides {
 };
 
 // Parses a comma-separated list of name=value items, e.g. "occlusion=off,colour=on,refinement=auto"
-// (names: occlusion, colour, interreflection, two_sided, refinement, convergence, see_through; values:
-// on, off, auto). Spaces around items, names and values are ignored; an empty or all-blank
+// (names: kEffectNames; values: on, off, auto). Spaces around items, names and values are ignored; an empty or all-blank
 // spec leaves every effect automatic. Throws std::invalid_argument naming the bad item (an
 // unknown name or value, an item without '=', an empty item, a name given twice).
 EffectOverrides parse_effect_overrides(const std::string& spec);

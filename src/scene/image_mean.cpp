@@ -105,9 +105,11 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels
     if (spec.width < 1 || spec.height < 1 || spec.depth > 1 || spec.nchannels < 1)
         return fail(fmt::format("not a picture ({} × {} × {} pixels, {} channels)", spec.width, spec.height,
                                 spec.depth, spec.nchannels));
-    if (pixels > kMaxImagePixels || spec.width > kMaxImageEdge || spec.height > kMaxImageEdge)
+    if (pixels > kMaxImagePixels || spec.width > kMaxImageEdge || spec.height > kMaxImageEdge) {
+        out.refused = true;
         return fail(fmt::format("{} × {} pixels, above the limits of {} pixels and {} a side", spec.width,
                                 spec.height, kMaxImagePixels, kMaxImageEdge));
+    }
 
     // 8- and 16-bit values are counted per level, then decoded once per level (a histogram:
     // one pow() per distinct level, not per pixel); anything else is read as linear floats.

@@ -24,6 +24,7 @@ inline constexpr std::uint64_t kMaxScenePixels = std::uint64_t{1} << 32;
 struct EncodedImage {
     std::vector<unsigned char> bytes;
     std::string problem;
+    bool refused = false;  // the problem is a broken structure (see ImageMean::refused)
 };
 
 // An image kept for sampling: linear RGBA (sRGB decoded; alpha 1 without an alpha channel; a grey
@@ -40,6 +41,10 @@ struct Texels {
 struct ImageMean {
     bool ok = false;
     std::string problem;    // when !ok: "not an image OpenImageIO can decode (…)", …
+    // When !ok: the image was refused for a limit (kMaxImagePixels, kMaxImageEdge) or a broken
+    // structure (a bufferView past its buffer), not merely missing or undecodable: such a file is
+    // refused whatever --strict-textures says, as every other hostile input is.
+    bool refused = false;
     glm::dvec3 mean{1.0};   // linear RGB; a grey image's one channel in all three
     double alpha = 1.0;     // the mean alpha (linear, as glTF stores it); 1 without an alpha channel
     bool coloured = false;  // some pixel's red, green and blue differ

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "core/cancel.h"
+#include "core/counted.h"
 #include "core/error.h"
 #include "core/memory.h"
 #include "core/regular_file.h"
@@ -71,11 +72,52 @@ struct Loader {
     std::vector<std::array<UvSource, 2>> uv_sources;
     std::map<int, std::size_t> light_of_node;  // glTF node -> its light in Scene::lights
     std::set<std::uint32_t> clamped;  // materials whose reflectance (× COLOR_0) reached 1 somewhere
+    bool strict_textures = false;     // LoadOptions::strict_textures
+    int material = -1;                // the material being converted, for the images' warnings
+    // Texture images that could not be used (missing, undecodable), in the order first met: one
+    // warning each at the end of the load, counting the materials that read them.
+    struct UnusableImage {
+        std::string label, problem;
+        std::set<int> materials;
+    };
+    std::vector<UnusableImage> unusable{};
+    std::map<std::string, std::size_t> unusable_at{};  // label -> index in unusable
+    // Warnings that would repeat per item (a primitive, a material, a node): one line per kind at
+    // the end of the load (warn_grouped), `one` for a single item, else `many`, where "{n}" is
+    // the count and "{names}" the first items.
+    struct Group {
+        std::string one, many;
+        std::vector<std::string> items;
+    };
+    std::vector<Group> groups{};
+    std::map<std::string, std::size_t> group_at{};  // key -> index in groups
 
     [[noreturn]] void fail(const std::string& problem) const { throw InputError(file + ": " + problem); }
     void warn(const std::string& problem) { scene.warnings.push_back(file + ": " + problem); }
     void warn_once(const std::string& key, const std::string& problem) {
         if (warned.insert(key).second) warn(problem);
+    }
+    // `item` for the grouped warning `key` (each item once).
+    void group(const std::string& key, const std::string& one, const std::string& many, const std::string& item) {
+        auto [at, added] = group_at.emplace(key, groups.size());
+        if (added) groups.push_back({one, many, {}});
+        std::vector<std::string>& items = groups[at->second].items;
+        if (std::find(items.begin(), items.end(), item) == items.end()) items.push_back(item);
+    }
+    void warn_grouped() {
+        constexpr std::size_t kNamed = 3;
+        for (const Group& g : groups) {
+            std::string names;
+            for (std::size_t i = 0; i < g.items.size() && i < kNamed; ++i) names += (i ? "; " : "") + g.items[i];
+            if (g.items.size() > kNamed) names += fmt::format("; and {} more", grouped(g.items.size() - kNamed));
+            std::string text = g.items.size() == 1 ? g.one : g.many;
+            for (const auto& [field, value] : {std::pair<std::string, std::string>{"{n}", grouped(g.items.size())},
+                                               {"{names}", names}})
+                for (std::size_t at; (at = text.find(field)) != std::string::npos;) text.replace(at, field.size(), value);
+            warn(text);
+        }
+        groups.clear();
+        group_at.clear();
     }
 };
 
@@ -275,11 +317,72 @@ bool keep_image(tinygltf::Image* image, const int index, std::string*, std::stri
         if (view.byteOffset > buffer_size || view.byteLength > buffer_size - view.byteOffset) {
             kept.problem = fmt::format("bufferView {} (offset {}, length {}) runs past the end of buffer {} ({} bytes)",
                                        image->bufferView, view.byteOffset, view.byteLength, view.buffer, buffer_size);
+            kept.refused = true;
             return true;
         }
     }
     if (size > 0) kept.bytes.assign(bytes, bytes + size);
     return true;
+}
+
+// The bytes of a data URI ("data:[TYPE][;base64],DATA", RFC 2397) and its media type, for the
+// image types tinygltf does not decode itself (it knows only PNG, JPEG, BMP and GIF ones and
+// takes any other, such as image/webp, for a file name). Empty bytes and a problem when the
+// payload does not decode.
+struct DataUri {
+    std::string type;
+    std::vector<unsigned char> bytes;
+    std::string problem;
+};
+
+DataUri decode_data_uri(const std::string& uri) {
+    DataUri out;
+    const std::size_t comma = uri.find(',');
+    if (uri.rfind("data:", 0) != 0 || comma == std::string::npos) {
+        out.problem = "a data URI without the ',' that starts its data";
+        return out;
+    }
+    const std::string header = uri.substr(5, comma - 5);
+    const bool base64 = header.size() >= 7 && lowercase(header.substr(header.size() - 7)) == ";base64";
+    out.type = header.substr(0, header.find(';'));
+    if (!base64) {
+        const std::string text = percent_decoded(uri.substr(comma + 1));
+        out.bytes.assign(text.begin(), text.end());
+        return out;
+    }
+    std::uint32_t bits = 0;
+    int held = 0, padding = 0;
+    out.bytes.reserve((uri.size() - comma) / 4 * 3);
+    for (std::size_t i = comma + 1; i < uri.size(); ++i) {
+        const char c = uri[i];
+        int v;
+        if (c >= 'A' && c <= 'Z') v = c - 'A';
+        else if (c >= 'a' && c <= 'z') v = c - 'a' + 26;
+        else if (c >= '0' && c <= '9') v = c - '0' + 52;
+        else if (c == '+' || c == '-') v = 62;  // '-' and '_': the URL-safe alphabet
+        else if (c == '/' || c == '_') v = 63;
+        else if (c == '=') {
+            ++padding;
+            continue;
+        } else {
+            out.bytes.clear();
+            out.problem = fmt::format("its data URI is not base64 (byte {} is {})", i - comma - 1,
+                                      std::isprint(static_cast<unsigned char>(c)) ? fmt::format("'{}'", c)
+                                                                                  : fmt::format("0x{:02x}", c & 0xff));
+            return out;
+        }
+        if (padding > 0) {
+            out.bytes.clear();
+            out.problem = "its data URI has base64 data after the '=' padding";
+            return out;
+        }
+        bits = bits << 6 | std::uint32_t(v);
+        if ((held += 6) >= 8) {
+            held -= 8;
+            out.bytes.push_back(static_cast<unsigned char>(bits >> held & 0xffu));
+        }
+    }
+    return out;
 }
 
 // The base directory tinygltf resolves uris against, as its LoadASCIIFromFile computes it.
@@ -340,6 +443,20 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
         throw InputError(name + ": " + (why.empty() ? "cannot parse glTF" : why));
     }
     images = std::move(decoder.images);
+    // Data URIs of the image types tinygltf does not decode (image/webp above all): tinygltf kept
+    // them as file names. Decoded here and kept like its own, the uri cleared (its bytes become
+    // GltfSource::embedded_images, as an embedded PNG's do).
+    for (std::size_t i = 0; i < model.images.size(); ++i) {
+        tinygltf::Image& image = model.images[i];
+        if (image.uri.rfind("data:", 0) != 0) continue;
+        DataUri data = decode_data_uri(image.uri);
+        EncodedImage& kept = images[int(i)];
+        kept.bytes = std::move(data.bytes);
+        kept.problem = std::move(data.problem);
+        if (kept.problem.empty() && kept.bytes.empty()) kept.problem = "its data URI holds no data";
+        image.mimeType = data.type;
+        image.uri.clear();
+    }
     // tinygltf only warns for an external image it cannot read; texture_image fails for one a
     // material uses, and one no material uses does not matter.
     const auto about_an_image = [](const std::string& line) {
@@ -363,7 +480,7 @@ tinygltf::Model parse(const fs::path& file, const std::string& name, std::vector
     // silently ignored (those that change geometry are all decoded above).
     static const std::set<std::string> kRead = {"KHR_mesh_quantization", "EXT_meshopt_compression",
                                                 "KHR_draco_mesh_compression", "KHR_materials_emissive_strength",
-                                                "KHR_lights_punctual", "KHR_texture_transform"};
+                                                "KHR_lights_punctual", "KHR_texture_transform", "EXT_texture_webp"};
     for (const std::string& required : model.extensionsRequired)
         if (kRead.count(required) == 0)
             warnings.push_back(fmt::format("{}: required extension {} is not supported; the scene is read without it",
@@ -652,66 +769,162 @@ std::vector<dvec3> read_colors(const Loader& L, int index, const std::string& wh
 // Materials
 
 
+// What a texture image is called in messages: its uri, its bufferView, or its data URI's type.
+std::string image_label(const tinygltf::Model& m, int index) {
+    const tinygltf::Image& img = m.images[std::size_t(index)];
+    if (!img.uri.empty()) return fmt::format("image {} '{}'", index, img.uri);
+    if (img.bufferView >= 0) return fmt::format("image {} (bufferView {})", index, img.bufferView);
+    if (!img.mimeType.empty()) return fmt::format("image {} (embedded, {})", index, img.mimeType);
+    return fmt::format("image {}", index);
+}
+
+// The decoded means of image `index` (decoded once, when a texture first needs it); !ok with the
+// problem when it is missing, cannot be read or does not decode.
+const ImageMean& decoded_image(Loader& L, int index, const std::string& what) {
+    if (const auto done = L.images.find(index); done != L.images.end()) return done->second;
+    ImageMean mean;
+    const auto kept = L.encoded.find(index);
+    if (kept == L.encoded.end()) {
+        // tinygltf could not read the file, so never gave its bytes to the decoder: say why.
+        const tinygltf::Image& img = L.model.images[std::size_t(index)];
+        mean.problem = img.uri.empty() ? std::string("no image data")
+                                       : regular_file_problem(fs::path(L.base_dir) / percent_decoded(img.uri));
+        if (mean.problem.empty()) mean.problem = "cannot be read";
+    } else if (!kept->second.problem.empty()) {
+        mean.problem = kept->second.problem;
+        mean.refused = kept->second.refused;
+    } else {
+        Texels texels;
+        mean = decode_image_mean(kept->second.bytes.data(), kept->second.bytes.size(), &texels);
+        L.decoded_pixels += std::uint64_t(mean.width) * std::uint64_t(mean.height);
+        if (L.decoded_pixels > kMaxScenePixels)
+            L.fail(fmt::format("{}: {}: the textures the scene's materials use hold more than {} pixels in all", what,
+                               image_label(L.model, index), kMaxScenePixels));
+        if (mean.ok) {
+            L.texture_of_image[index] = int(L.scene.textures.size());
+            L.scene.textures.push_back(std::make_shared<const Texture>(texels, mean.mean));
+        }
+    }
+    if (kept != L.encoded.end()) L.encoded.erase(kept);  // decoded once; the bytes are no longer needed
+    return L.images.emplace(index, std::move(mean)).first->second;
+}
+
+// A texture image that cannot be used: with --strict-textures an error naming it; otherwise the
+// material reads the texture as white and opaque (its factors alone), and the image is listed
+// for one warning at the end of the load.
+void unusable_image(Loader& L, const std::string& what, const std::string& label, const std::string& problem) {
+    if (L.strict_textures) L.fail(fmt::format("{}: {}: {}", what, label, problem));
+    auto [at, added] = L.unusable_at.emplace(label, L.unusable.size());
+    if (added) L.unusable.push_back({label, problem, {}});
+    if (L.material >= 0) L.unusable[at->second].materials.insert(L.material);
+}
+
+// The image a texture reads and its decoded means; image -1 and white, opaque means when it has
+// no texture or its image cannot be used (see unusable_image).
+struct TextureImage {
+    const ImageMean* mean = nullptr;
+    int image = -1;  // the glTF image decoded (a key of Loader::texture_of_image), or -1
+};
+
+// The `source` of a texture's extension `name`, or -1 without one; out-of-range or non-integer
+// sources are refused as the plain `source` is.
+int extension_source(const Loader& L, const tinygltf::Texture& tex, const char* name, int texture,
+                     const std::string& what) {
+    const auto it = tex.extensions.find(name);
+    if (it == tex.extensions.end() || !it->second.IsObject() || !it->second.Has("source")) return -1;
+    const tinygltf::Value& v = it->second.Get("source");
+    const int source = v.IsInt() ? v.GetNumberAsInt() : -1;
+    if (!v.IsInt() || source < 0 || std::size_t(source) >= L.model.images.size())
+        L.fail(fmt::format("{}: texture {} {} source must be an image index (0 to {})", what, texture, name,
+                           int(L.model.images.size()) - 1));
+    return source;
+}
+
 // The decoded means (linear colour, alpha) of the image a material's texture names: white and
-// opaque when it has none. A texture whose image is missing, unreadable or does not decode is an
-// error (exit 2, naming the image): a bake that went on with some stand-in colour would be
-// silently wrong.
-const ImageMean& texture_image(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
+// opaque when it has none. Where a texture names its image twice, EXT_texture_webp's source
+// comes first and the plain `source` (a PNG or JPEG fallback for viewers without WebP) second:
+// the extension's image is the one its author meant viewers that read WebP to show, and the
+// fallback is still read when the WebP is missing or does not decode. An image only in
+// KHR_texture_basisu (KTX2) is refused: no Debian library decodes it, and baking every texture
+// of such a file as white would be silently wrong. A texture index or image index out of range
+// is refused; a missing or undecodable image goes to unusable_image.
+TextureImage texture_image(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
     static const ImageMean kWhite = [] {
         ImageMean white;
         white.ok = true;
         return white;
     }();
-    if (info.index < 0) return kWhite;
+    if (info.index < 0) return {&kWhite, -1};
     const tinygltf::Model& m = L.model;
     if (std::size_t(info.index) >= m.textures.size()) {
         L.fail(fmt::format("{}: texture {} out of range ({} textures)", what, info.index, m.textures.size()));
     }
     const tinygltf::Texture& tex = m.textures[std::size_t(info.index)];
-    if (tex.source < 0) {
-        L.fail(fmt::format("{}: texture {} has no 'source' image (one only in an extension, such as "
-                           "KHR_texture_basisu, is not read)",
-                           what, info.index));
-    }
-    if (std::size_t(tex.source) >= m.images.size()) {
+    if (tex.source >= 0 && std::size_t(tex.source) >= m.images.size()) {
         L.fail(fmt::format("{}: texture {} names image {}, out of range", what, info.index, tex.source));
     }
-    const tinygltf::Image& img = m.images[std::size_t(tex.source)];
-    const std::string image = !img.uri.empty()      ? fmt::format("image {} '{}'", tex.source, img.uri)
-                              : img.bufferView >= 0 ? fmt::format("image {} (bufferView {})", tex.source, img.bufferView)
-                                                    : fmt::format("image {}", tex.source);
-    auto decoded = L.images.find(tex.source);
-    if (decoded == L.images.end()) {
-        const auto kept = L.encoded.find(tex.source);
-        if (kept != L.encoded.end()) {
-            ImageMean mean;
-            if (!kept->second.problem.empty()) {
-                mean.problem = kept->second.problem;
-            } else {
-                Texels texels;
-                mean = decode_image_mean(kept->second.bytes.data(), kept->second.bytes.size(), &texels);
-                L.decoded_pixels += std::uint64_t(mean.width) * std::uint64_t(mean.height);
-                if (L.decoded_pixels > kMaxScenePixels)
-                    L.fail(fmt::format("{}: {}: the textures the scene's materials use hold more than {} pixels in all",
-                                       what, image, kMaxScenePixels));
-                if (mean.ok) {
-                    L.texture_of_image[tex.source] = int(L.scene.textures.size());
-                    L.scene.textures.push_back(std::make_shared<const Texture>(texels, mean.mean));
-                }
-            }
-            L.encoded.erase(kept);  // decoded once; the bytes are no longer needed
-            decoded = L.images.emplace(tex.source, mean).first;
+    std::vector<int> sources;
+    if (const int webp = extension_source(L, tex, "EXT_texture_webp", info.index, what); webp >= 0)
+        sources.push_back(webp);
+    if (tex.source >= 0 && (sources.empty() || sources.front() != tex.source)) sources.push_back(tex.source);
+    if (sources.empty()) {
+        std::string others;  // extensions that name an image hemirad does not decode
+        for (const auto& [name, value] : tex.extensions)
+            if (value.IsObject() && value.Has("source")) others += (others.empty() ? "" : ", ") + name;
+        if (tex.extensions.count("KHR_texture_basisu"))
+            L.fail(fmt::format("{}: texture {} has its image only in KHR_texture_basisu (a KTX2 / Basis Universal "
+                               "image), which hemirad cannot decode (no Debian library reads KTX2); re-encode the "
+                               "textures as PNG or WebP, e.g. with glTF-Transform: gltf-transform png IN.glb OUT.glb",
+                               what, info.index));
+        if (!others.empty())
+            L.fail(fmt::format("{}: texture {} has its image only in {}, which hemirad does not decode (it reads PNG, "
+                               "JPEG and WebP: 'source' or EXT_texture_webp)",
+                               what, info.index, others));
+        unusable_image(L, what, fmt::format("texture {}", info.index), "names no image (it has no 'source')");
+        return {&kWhite, -1};
+    }
+    for (const int image : sources) {
+        const ImageMean& mean = decoded_image(L, image, what);
+        if (mean.ok) return {&mean, image};
+        if (mean.refused) L.fail(fmt::format("{}: {}: {}", what, image_label(m, image), mean.problem));
+    }
+    const int first = sources.front();
+    unusable_image(L, what, image_label(m, first), L.images.at(first).problem);
+    return {&kWhite, -1};
+}
+
+// One warning per texture image that could not be used, after the materials are read (the
+// first kNamed images by name, the rest counted on one line).
+void warn_unusable_images(Loader& L) {
+    constexpr std::size_t kNamed = 8;
+    const auto materials = [&](const Loader::UnusableImage& u) {
+        std::string names;
+        std::size_t named = 0;
+        for (const int m : u.materials) {
+            if (named++ == 3) break;
+            names += fmt::format("{}'{}'", names.empty() ? "" : ", ", L.scene.materials[std::size_t(m)].name);
         }
+        if (u.materials.size() > 3) names += fmt::format(" and {} more", grouped(u.materials.size() - 3));
+        return fmt::format("{} ({})", counted(u.materials.size(), "material"), names);
+    };
+    for (std::size_t i = 0; i < L.unusable.size() && i < kNamed; ++i) {
+        const Loader::UnusableImage& u = L.unusable[i];
+        L.warn(fmt::format("{}: {}; the {} reading it bake{} with their factors alone, as under a white texture "
+                           "(--strict-textures makes this an error)",
+                           u.label, u.problem, materials(u), u.materials.size() == 1 ? "s" : ""));
     }
-    if (decoded == L.images.end()) {
-        // tinygltf could not read the file, so never gave its bytes to the decoder: say why.
-        std::string problem = img.uri.empty() ? std::string("no image data")
-                                              : regular_file_problem(fs::path(L.base_dir) / percent_decoded(img.uri));
-        if (problem.empty()) problem = "cannot be read";
-        L.fail(fmt::format("{}: {}: {}", what, image, problem));
+    if (L.unusable.size() > kNamed) {
+        std::set<int> all;
+        std::string labels;
+        for (std::size_t i = kNamed; i < L.unusable.size(); ++i) {
+            all.insert(L.unusable[i].materials.begin(), L.unusable[i].materials.end());
+            if (i < kNamed + 3) labels += (labels.empty() ? "" : ", ") + L.unusable[i].label;
+        }
+        if (L.unusable.size() > kNamed + 3) labels += ", ...";
+        L.warn(fmt::format("{} more texture images cannot be used either ({}); the {} reading them bake with their "
+                           "factors alone (--strict-textures makes this an error)",
+                           grouped(L.unusable.size() - kNamed), labels, counted(all.size(), "material")));
     }
-    if (!decoded->second.ok) L.fail(fmt::format("{}: {}: {}", what, image, decoded->second.problem));
-    return decoded->second;
 }
 
 Wrap wrap_mode(const Loader& L, int mode, const std::string& what) {
@@ -774,10 +987,11 @@ struct MaterialTexture {
 };
 
 MaterialTexture read_texture(Loader& L, const tinygltf::TextureInfo& info, const std::string& what) {
-    MaterialTexture out{&texture_image(L, info, what), {}, {}};
-    if (info.index < 0) return out;
+    const TextureImage image = texture_image(L, info, what);
+    MaterialTexture out{image.mean, {}, {}};
+    if (image.image < 0) return out;  // no texture, or one whose image cannot be used: its factors
     const tinygltf::Texture& tex = L.model.textures[std::size_t(info.index)];
-    out.slot.texture = L.texture_of_image.at(tex.source);
+    out.slot.texture = L.texture_of_image.at(image.image);
     if (tex.sampler >= 0) {
         if (std::size_t(tex.sampler) >= L.model.samplers.size())
             L.fail(fmt::format("{}: texture {} names sampler {}, out of range", what, info.index, tex.sampler));
@@ -828,7 +1042,7 @@ void see_through(Loader& L, const tinygltf::Material& mat, const std::string& la
     std::string why;
     if (mat.alphaMode == "BLEND") {
         const std::vector<double>& base = mat.pbrMetallicRoughness.baseColorFactor;
-        opacity = base[3] * texture_image(L, mat.pbrMetallicRoughness.baseColorTexture, label + " baseColorTexture").alpha;
+        opacity = base[3] * texture_image(L, mat.pbrMetallicRoughness.baseColorTexture, label + " baseColorTexture").mean->alpha;
         why = fmt::format("alphaMode BLEND, mean opacity {:.2f}", opacity);
     }
     if (const auto it = mat.extensions.find("KHR_materials_transmission"); it != mat.extensions.end()) {
@@ -844,9 +1058,10 @@ void see_through(Loader& L, const tinygltf::Material& mat, const std::string& la
     const bool emits = out.emission != dvec3(0.0);
     if (opacity >= (emits ? 0.25 : 0.5)) {
         if (emits && opacity < 0.5)
-            L.warn(fmt::format("{}: see-through ({}) but emitting, and denser than a fake light shaft: baked as an "
-                               "opaque emitter",
-                               label, why));
+            L.group("dense glow", "{names} but emitting, and denser than a fake light shaft: baked as an opaque emitter",
+                    "{n} materials are see-through but emitting, and denser than a fake light shaft: baked as opaque "
+                    "emitters ({names})",
+                    fmt::format("{}: see-through ({})", label, why));
         return;
     }
     out.see_through = why;
@@ -855,6 +1070,7 @@ void see_through(Loader& L, const tinygltf::Material& mat, const std::string& la
 Material convert_material(Loader& L, int index) {
     const tinygltf::Material& mat = L.model.materials[std::size_t(index)];
     const std::string label = material_label(mat, index);
+    L.material = index;
     Material out;
     out.name = mat.name.empty() ? fmt::format("material{}", index) : mat.name;
     out.double_sided = mat.doubleSided;
@@ -1059,14 +1275,14 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
         const char* name = mode_name(prim.mode);
         if (name == nullptr) L.fail(fmt::format("{}: mode {} is not a glTF primitive mode", where, prim.mode));
         ++L.scene.skipped_primitives;
-        L.warn_once(fmt::format("mode {} {}", ref.mesh, prim.mode),
-                    fmt::format("{}: mode {} is not triangles; skipped", where, name));
+        L.group(fmt::format("mode {}", name), fmt::format("{{names}}: mode {} is not triangles; skipped", name),
+                fmt::format("{{n}} primitives of mode {} are not triangles; skipped ({{names}})", name), where);
         return;
     }
     const auto position = prim.attributes.find("POSITION");
     if (position == prim.attributes.end()) {
-        L.warn_once(fmt::format("noposition {} {}", ref.mesh, ref.index),
-                    fmt::format("{}: has no POSITION; skipped", where));
+        L.group("no position", "{names}: has no POSITION; skipped",
+                "{n} primitives have no POSITION; skipped ({names})", where);
         return;
     }
     const std::vector<dvec3> positions = read_positions(L, position->second, where + " POSITION");
@@ -1116,10 +1332,15 @@ void add_primitive(Loader& L, const PrimitiveRef& ref, std::uint32_t& primitive_
         const std::string name = fmt::format("TEXCOORD_{}", src.set);
         const auto a = prim.attributes.find(name);
         if (a == prim.attributes.end()) {  // invalid glTF, but the texture's mean still stands for it
-            L.warn_once(fmt::format("notexcoord {} {}", material, slot),
-                        fmt::format("{}: material '{}' reads its {} texture through {}, which the primitive lacks; "
-                                    "the texture's mean colour is used",
-                                    where, mat.name, slot == 0 ? "base colour" : "emissive", name));
+            if (L.warned.insert(fmt::format("notexcoord {} {}", material, slot)).second)
+                L.group("no " + name,
+                        fmt::format("{{names}} through {}, which the primitive lacks; the texture's mean colour is used",
+                                    name),
+                        fmt::format("{{n}} textures are read through {}, which their primitives lack; each texture's "
+                                    "mean colour is used ({{names}})",
+                                    name),
+                        fmt::format("{}: material '{}' reads its {} texture", where, mat.name,
+                                    slot == 0 ? "base colour" : "emissive"));
             continue;
         }
         uvs[slot] = read_texcoords(L, a->second, where + " " + name);
@@ -1254,9 +1475,12 @@ void leave_out_bulbs(Loader& L) {
                     }
             if (glm::all(glm::greaterThanEqual(l.position, lo)) && glm::all(glm::lessThanEqual(l.position, hi))) {
                 bulb[n] = 1;
-                L.warn(fmt::format("node '{}' lies under light '{}' and encloses it: taken as the light's bulb and "
-                                   "left out, since it would hide the light it stands for",
-                                   scene.nodes[n].name, l.name));
+                L.group("bulb",
+                        "{names} and encloses it: taken as the light's bulb and left out, since it would hide the "
+                        "light it stands for",
+                        "{n} nodes lie under a light and enclose it: taken as the lights' bulbs and left out, since "
+                        "they would hide the lights they stand for ({names})",
+                        fmt::format("node '{}' lies under light '{}'", scene.nodes[n].name, l.name));
             }
             break;
         }
@@ -1264,6 +1488,50 @@ void leave_out_bulbs(Loader& L) {
     scene.triangles.erase(std::remove_if(scene.triangles.begin(), scene.triangles.end(),
                                          [&](const Triangle& t) { return t.node < bulb.size() && bulb[t.node]; }),
                           scene.triangles.end());
+}
+
+// Skinned meshes (a node with a skin, or primitives with JOINTS_0 and WEIGHTS_0) and meshes that
+// an animation moves (a channel targets their node or one above it) are baked as the file places
+// them, in their bind or rest pose: one warning says so, counting them, since their light will not
+// follow them when the file is played.
+void warn_animated(Loader& L, const std::vector<Instance>& instances) {
+    const tinygltf::Model& m = L.model;
+    std::vector<char> targeted(m.nodes.size(), 0);
+    for (const tinygltf::Animation& a : m.animations)
+        for (const tinygltf::AnimationChannel& c : a.channels)
+            if (c.target_node >= 0 && std::size_t(c.target_node) < m.nodes.size()) targeted[std::size_t(c.target_node)] = 1;
+    std::vector<int> parent(m.nodes.size(), -1);
+    for (std::size_t i = 0; i < m.nodes.size(); ++i)
+        for (const int child : m.nodes[i].children)
+            if (child >= 0 && std::size_t(child) < m.nodes.size()) parent[std::size_t(child)] = int(i);
+    std::size_t meshes = 0, skinned = 0, animated = 0;
+    std::string names;  // the first few
+    for (const Instance& inst : instances) {
+        const tinygltf::Node& node = m.nodes[std::size_t(inst.node)];
+        if (node.mesh < 0 || std::size_t(node.mesh) >= m.meshes.size()) continue;
+        bool skin = node.skin >= 0;
+        for (const tinygltf::Primitive& p : m.meshes[std::size_t(node.mesh)].primitives)
+            skin = skin || (p.attributes.count("JOINTS_0") && p.attributes.count("WEIGHTS_0"));
+        bool moved = false;
+        for (int at = inst.node, steps = 0; at >= 0 && !moved && steps <= int(m.nodes.size());
+             at = parent[std::size_t(at)], ++steps)
+            moved = targeted[std::size_t(at)] != 0;
+        if (!skin && !moved) continue;
+        skinned += skin ? 1 : 0;
+        animated += moved ? 1 : 0;
+        if (++meshes <= 3)
+            names += fmt::format("{}'{}'", meshes > 1 ? ", " : "",
+                                 !node.name.empty() ? node.name : m.meshes[std::size_t(node.mesh)].name);
+    }
+    if (meshes == 0) return;
+    std::string what;
+    if (skinned > 0) what = fmt::format("{} skinned", grouped(skinned));
+    if (animated > 0) what += fmt::format("{}{} moved by an animation", what.empty() ? "" : ", ", grouped(animated));
+    L.warn(fmt::format("{} ({}: {}{}) {} baked in {} bind or rest pose, as the file places {}; {} light will not "
+                       "follow the animation",
+                       counted(meshes, "mesh", "meshes"), what, names, meshes > 3 ? ", ..." : "",
+                       meshes == 1 ? "is" : "are",
+                       meshes == 1 ? "its" : "their", meshes == 1 ? "it" : "them", meshes == 1 ? "its" : "their"));
 }
 
 // Cameras carry no scale: keep the position and viewing direction, rebuild orthonormal axes.
@@ -1386,9 +1654,11 @@ Scene load(const std::filesystem::path& file, const LoadOptions& options) {
             source->embedded_images[int(i)] = kept->second.bytes;
     }
     Loader L{model, *source, name, scene, {}, -1, base_dir(name), std::move(images), {}, 0, {}, {}, {}, {}};
+    L.strict_textures = options.strict_textures;
 
     // Converted in file order so a primitive's material index is also its Scene index.
     for (std::size_t i = 0; i < model.materials.size(); ++i) scene.materials.push_back(convert_material(L, int(i)));
+    warn_unusable_images(L);
 
     std::vector<Instance> instances = instantiate(L, root_nodes(L));
     // Scene::nodes is in glTF node order; triangles follow the same order.
@@ -1426,6 +1696,8 @@ Scene load(const std::filesystem::path& file, const LoadOptions& options) {
         }
     }
     leave_out_bulbs(L);
+    L.warn_grouped();
+    warn_animated(L, instances);
     if (!L.clamped.empty()) {  // one line for them all
         constexpr std::size_t kNamed = 5;
         std::string names;

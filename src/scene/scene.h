@@ -138,6 +138,10 @@ struct LoadOptions {
     // Called with the scene file and every file it names (buffers, images) once its JSON is
     // read, before any of them is: the bake refuses outputs that would replace one.
     std::function<void(const std::vector<std::filesystem::path>&)> inputs;
+    // A base colour or emissive texture whose image is missing or does not decode: false, the
+    // material is read with its factors alone (as under a white, opaque texture) and one warning
+    // per image says so; true (--strict-textures), InputError naming the image.
+    bool strict_textures = false;
 };
 
 // Loads a .gltf or .glb. Throws InputError("<file>: <problem>") on bad input.
