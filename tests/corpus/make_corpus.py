@@ -155,7 +155,8 @@ def cases():
         g["scenes"][0]["nodes"].append(2)
         out.append((name, dump(g), key))
 
-    # Textures whose image cannot be used: one rule, exit 2 naming the image.
+    # Textures whose image cannot be used: under --strict-textures, exit 2 naming the image (without
+    # it they bake with the material's factors and a warning).
     def textured(image):
         g = base_scene()
         g["images"] = [image]
@@ -164,9 +165,11 @@ def cases():
             del g["images"]
         g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
         return dump(g)
-    out.append(("missing_texture.gltf", textured({"uri": "missing_texture.png"}), "missing_texture.png"))
-    out.append(("undecodable_texture.gltf", textured({"uri": "undecodable_texture.png"}), "undecodable_texture.png"))
-    out.append(("texture_without_source.gltf", textured(None), "texture 0"))
+    strict = ["--strict-textures"]
+    out.append(("missing_texture.gltf", textured({"uri": "missing_texture.png"}), "missing_texture.png", strict))
+    out.append(("undecodable_texture.gltf", textured({"uri": "undecodable_texture.png"}), "undecodable_texture.png",
+                strict))
+    out.append(("texture_without_source.gltf", textured(None), "texture 0", strict))
 
     # Compressed geometry whose data does not decode (bytes no encoder writes), or whose
     # extension names what cannot be: exit 2 naming the bufferView or the primitive.
@@ -229,12 +232,12 @@ def main():
     with open(os.path.join(HERE, "undecodable_texture.png"), "w") as f:
         f.write("This is text, not a PNG.\n")
     manifest = []
-    for name, contents, word in cases():
+    for name, contents, word, *args in cases():
         path = os.path.join(HERE, name)
         mode = "wb" if isinstance(contents, bytes) else "w"
         with open(path, mode) as f:
             f.write(contents)
-        manifest.append({"file": name, "error_contains": word})
+        manifest.append({"file": name, "error_contains": word, **({"args": args[0]} if args else {})})
     with open(os.path.join(HERE, "manifest.json"), "w") as f:
         f.write(json.dumps(manifest, indent=1) + "\n")
     print("wrote", len(manifest), "cases to", HERE)
