@@ -105,7 +105,7 @@ void check_lamps_seen(scene::Scene& scene, const mesh::Mesh& mesh) {
                                                   mat.alpha_cutoff)
                                 : mat.emissive_texture ? "its emissive texture is black where its surfaces are"
                                                        : "its triangles have no area";
-        unseen.push_back(fmt::format("material '{}' emits, but its {} the bake no light: {}", mat.name,
+        unseen.push_back(fmt::format("material '{}' emits, but its {} {} the bake no light: {}", mat.name,
                                      counted(triangles[m], "triangle"), triangles[m] == 1 ? "gives" : "give", why));
     }
     // One line for them all (a file of many masked lamps would repeat it per material).
