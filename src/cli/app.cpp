@@ -169,7 +169,7 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->capture_default_str();
     bake.add_option("--effects", o.effects,
                     "force effects on or off, e.g. occlusion=off,colour=on (occlusion, colour, interreflection, "
-                    "two_sided, refinement, convergence; on|off|auto); by default each is planned from the scene "
+                    "two_sided, refinement, convergence, see_through, outlines; on|off|auto); by default each is planned from the scene "
                     "and report.json says why");
     bake.add_option("--sky", o.sky,
                     "light the scene with a sky dome of this radiance (emission / pi): RADIANCE, or "
