@@ -114,7 +114,15 @@ void make_shells(const Scene& scene, Analysis& A) {
     const std::size_t n = scene.triangles.size();
     A.shell.assign(n, -1);
     std::vector<char> eligible(n, 0);
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> corners;  // (hash of node and position, 3 t + k)
+    // Corners keyed by a 64-bit hash of their node and position, sorted (a radix sort: this is
+    // most of the work). Equal keys are taken for one vertex: two distinct positions share a key
+    // with a chance of about n² / 2^65 (1e-7 for a million triangles), and would at worst join
+    // two shells.
+    struct Corner {
+        std::uint64_t key;
+        std::uint32_t corner;  // 3 × triangle + k
+    };
+    std::vector<Corner> corners;
     for (std::size_t i = 0; i < n; ++i) {
         const Triangle& t = scene.triangles[i];
         if (!one_sided(scene, t) || see_through(scene, t) || synthetic(scene, t)) continue;
@@ -124,25 +132,33 @@ void make_shells(const Scene& scene, Analysis& A) {
             corners.push_back({mix(mix(mix(mix(0, t.node), bits(t.p[k].x)), bits(t.p[k].y)), bits(t.p[k].z)),
                                static_cast<std::uint32_t>(3 * i + k)});
     }
-    std::sort(corners.begin(), corners.end());
+    {
+        std::vector<Corner> buffer(corners.size());
+        for (int shift = 0; shift < 64; shift += 16) {
+            std::vector<std::size_t> count((1 << 16) + 1, 0);
+            for (const Corner& c : corners) ++count[((c.key >> shift) & 0xffff) + 1];
+            for (std::size_t d = 0; d < (1 << 16); ++d) count[d + 1] += count[d];
+            for (const Corner& c : corners) buffer[count[(c.key >> shift) & 0xffff]++] = c;
+            corners.swap(buffer);
+        }
+    }
     const auto position = [&](std::uint32_t c) { return scene.triangles[c / 3].p[c % 3]; };
-    const auto node = [&](std::uint32_t c) { return scene.triangles[c / 3].node; };
-    // Distinct vertices: runs of one hash and one position (a hash collision starts a new one).
     std::vector<std::uint32_t> vertex_of(3 * n, 0);
     std::vector<std::uint32_t> first_corner;  // per vertex
     for (std::size_t j = 0; j < corners.size(); ++j) {
-        const std::uint32_t c = corners[j].second;
-        const bool same = j > 0 && corners[j].first == corners[j - 1].first &&
-                          position(c) == position(first_corner.back()) && node(c) == node(first_corner.back());
-        if (!same) first_corner.push_back(c);
-        vertex_of[c] = static_cast<std::uint32_t>(first_corner.size() - 1);
+        if (j == 0 || corners[j].key != corners[j - 1].key) first_corner.push_back(corners[j].corner);
+        vertex_of[corners[j].corner] = static_cast<std::uint32_t>(first_corner.size() - 1);
     }
+    corners = {};
     UnionFind uf(first_corner.size());
     for (std::size_t i = 0; i < n; ++i)
         if (eligible[i]) {
             uf.unite(vertex_of[3 * i], vertex_of[3 * i + 1]);
             uf.unite(vertex_of[3 * i], vertex_of[3 * i + 2]);
         }
+    std::vector<char> named_material(scene.materials.size()), named_node(scene.nodes.size());
+    for (std::size_t m = 0; m < scene.materials.size(); ++m) named_material[m] = names_outline(scene.materials[m].name);
+    for (std::size_t k = 0; k < scene.nodes.size(); ++k) named_node[k] = names_outline(scene.nodes[k].name);
     // Shells numbered in the order of their first triangle.
     std::vector<std::int32_t> shell_of_root(first_corner.size(), -1);
     for (std::size_t i = 0; i < n; ++i) {
@@ -162,10 +178,7 @@ void make_shells(const Scene& scene, Analysis& A) {
         shell.facing.area += area;
         shell.facing.weighted += area * centroid(t);
         for (const glm::dvec3& p : t.p) shell.box.add(p);
-        if (!shell.named) {
-            const Material& m = scene.materials[t.material];
-            shell.named = names_outline(m.name) || (t.node < scene.nodes.size() && names_outline(scene.nodes[t.node].name));
-        }
+        shell.named = shell.named || named_material[t.material] || (t.node < named_node.size() && named_node[t.node]);
     }
     for (std::uint32_t v = 0; v < first_corner.size(); ++v)
         A.shells[shell_of_root[uf.find(v)]].vertices.push_back(position(first_corner[v]));
@@ -432,6 +445,27 @@ std::optional<BackLight> back_light(const Scene& scene) {
     }
     if (lights.empty()) return std::nullopt;
 
+    // The nearest surface in each cell of each light's view; the backs among them.
+    std::vector<LightView> views;
+    double total = 0.0, raw = 0.0;
+    const auto back_of = [&](std::int64_t i, const glm::dvec3& d) {
+        const Triangle& t = scene.triangles[static_cast<std::size_t>(i)];
+        return one_sided(scene, t) && glm::dot(doubled_normal(t), d) > 0.0;
+    };
+    for (const auto& [d, lux] : lights) {
+        views.push_back(view_along(scene, d));
+        const double w = lux * views.back().cell_area;
+        for (const std::int64_t i : views.back().nearest) {
+            if (i < 0) continue;
+            total += w;
+            if (back_of(i, d)) raw += w;
+        }
+    }
+    if (!(total > 0.0)) return std::nullopt;
+    BackLight out;
+    out.share = raw / total;
+    if (out.share < kBackLightWarning) return out;  // the exclusions below only lower it
+
     // Backs that are meant to face away from the viewer: those of inward shells that are not
     // hulls, of inward nodes, or of everything when the whole scene faces inwards (an interior).
     const Analysis A = analyse(scene);
@@ -456,32 +490,28 @@ std::optional<BackLight> back_light(const Scene& scene) {
         if (glm::dot(n, whole.centroid() - centroid(t)) > 0.0) whole.facing += 0.5 * glm::length(n);
     }
     const auto counted = [&](std::size_t i) {
+        if (A.shell[i] < 0) return true;
         const Shell& s = A.shells[A.shell[i]];
         if (s.hull) return true;
         return !(s.facing.inward() || nodes[node_slot(scene.triangles[i])].inward() || whole.inward());
     };
 
-    double total = 0.0, back = 0.0;
+    double back = 0.0;
     std::vector<double> taken(scene.nodes.size() + 1, 0.0);
     std::vector<char> seen(scene.triangles.size(), 0);
-    BackLight out;
-    for (const auto& [d, lux] : lights) {
-        const LightView view = view_along(scene, d);
-        const double w = lux * view.cell_area;
-        for (const std::int64_t i : view.nearest) {
-            if (i < 0) continue;
-            total += w;
-            const Triangle& t = scene.triangles[static_cast<std::size_t>(i)];
-            if (A.shell[i] < 0 || glm::dot(doubled_normal(t), d) < 0.0 || !counted(static_cast<std::size_t>(i))) continue;
+    for (std::size_t l = 0; l < lights.size(); ++l) {
+        const glm::dvec3& d = lights[l].first;
+        const double w = lights[l].second * views[l].cell_area;
+        for (const std::int64_t i : views[l].nearest) {
+            if (i < 0 || !back_of(i, d) || !counted(static_cast<std::size_t>(i))) continue;
             back += w;
-            taken[node_slot(t)] += w;
-            if (!seen[i]) {
-                seen[i] = 1;
+            taken[node_slot(scene.triangles[static_cast<std::size_t>(i)])] += w;
+            if (!seen[static_cast<std::size_t>(i)]) {
+                seen[static_cast<std::size_t>(i)] = 1;
                 ++out.triangles;
             }
         }
     }
-    if (!(total > 0.0)) return std::nullopt;
     out.share = back / total;
     const std::size_t most = static_cast<std::size_t>(std::max_element(taken.begin(), taken.end()) - taken.begin());
     out.example = most < scene.nodes.size() ? scene.nodes[most].name : std::string();

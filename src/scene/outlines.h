@@ -63,15 +63,17 @@ OutlineSearch find_outline_hulls(const Scene& scene);
 // built of one-sided walls facing inwards is meant to be seen from inside: the sun on its outer
 // walls is right to stay out). Inward is judged per shell, per node and over the whole scene.
 // Punctual point and spot lights and emissive surfaces are not counted.
+inline constexpr double kBackLightWarning = 0.3;  // a share worth a warning
 struct BackLight {
-    double share = 0.0;       // of the light that lands on the scene
+    // Of the light that lands on the scene. Below kBackLightWarning the backs that do not count
+    // are not worked out (they could only lower it): it is then the share on all one-sided backs,
+    // and triangles and example are left empty.
+    double share = 0.0;
     std::size_t triangles = 0;  // distinct triangles whose backs take it
-    std::string example;      // the node of the one that takes most
+    std::string example;        // the node whose backs take most
 };
 std::optional<BackLight> back_light(const Scene& scene);
 
-// A back-light share at or above this is worth a warning.
-inline constexpr double kBackLightWarning = 0.3;
 
 // The warning for `scene` (as it will be meshed: after see_through and outlines), or nothing.
 std::optional<std::string> back_light_warning(const Scene& scene);
