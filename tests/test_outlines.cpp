@@ -185,7 +185,7 @@ TEST_CASE("outlines: the plan leaves the hulls out, and judges the other effects
     CHECK(plan.outlines.on);
     CHECK_FALSE(plan.outlines.forced);
     CHECK(plan.outline_triangles.size() == 12);
-    CHECK_THAT(plan.outlines.why, Catch::Contains("1 inverted-hull outline mesh (12 triangles, e.g. node 'shell')"));
+    CHECK_THAT(plan.outlines.why, Catch::Contains("1 inverted-hull outline (12 triangles on 1 node, e.g. 'shell') hugs the object it encloses"));
     CHECK_THAT(plan.outlines.why, Catch::Contains("outlines=off keeps them"));
     // Without the hull the floor and box hold no black: the reflectances are all grey.
     Scene applied = s;
@@ -278,6 +278,12 @@ TEST_CASE("outlines: the share of the sun's light on one-sided backs", "[outline
         CHECK(b->share == Approx(1.05 * 1.05 / 16.0).margin(2.0 * 4.0 * 1.05 / 256.0 / 16.0 * 4.0));
         CHECK_FALSE(hemirad::scene::back_light_warning(s));
     }
+    SECTION("counts grouped by thousands") {
+        CHECK(hemirad::scene::grouped(0) == "0");
+        CHECK(hemirad::scene::grouped(999) == "999");
+        CHECK(hemirad::scene::grouped(52824) == "52,824");
+        CHECK(hemirad::scene::grouped(1234567) == "1,234,567");
+    }
     SECTION("no sun and no sky: nothing to say") {
         CHECK_FALSE(hemirad::scene::back_light(boxes_on_floor(1, true)));
     }
@@ -297,7 +303,7 @@ TEST_CASE("outlines: the warning for light on one-sided backs fires for kept hul
     const json left_out = bake_ok(dir, dir / "hulls.gltf", dir / "auto", kSun);
     CHECK(left_out["effects"]["outlines"]["on"] == true);
     CHECK_THAT(left_out["effects"]["outlines"]["why"].get<std::string>(),
-               Catch::Contains("9 inverted-hull outline meshes (108 triangles"));
+               Catch::Contains("9 inverted-hull outlines (108 triangles on 9 nodes, e.g. 'shell')"));
     CHECK_FALSE(warned_back_light(left_out));
     // The room under the sun and under a sky.
     hemirad::scene::write_gltf(room_with_table(), dir / "room.gltf");

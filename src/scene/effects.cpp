@@ -409,15 +409,6 @@ EffectDecision analyse_see_through(const Scene& scene) {
                                        scene.materials[material].see_through));
 }
 
-std::string thousands(std::size_t n) {
-    std::string digits = std::to_string(n), out;
-    for (std::size_t i = 0; i < digits.size(); ++i) {
-        if (i > 0 && (digits.size() - i) % 3 == 0) out += ',';
-        out += digits[i];
-    }
-    return out;
-}
-
 EffectDecision analyse_outlines(const Scene& scene, const OutlineSearch& found) {
     if (found.hulls.empty()) {
         if (found.inward_shells == 0)
@@ -432,20 +423,25 @@ EffectDecision analyse_outlines(const Scene& scene, const OutlineSearch& found) 
     }
     double gap = 0.0;
     std::size_t named = 0;
+    std::set<std::uint32_t> nodes;
     for (const OutlineHull& h : found.hulls) {
         gap = std::max(gap, h.gap);
         named += h.named;
+        nodes.insert(h.node);
     }
     const std::uint32_t node = found.hulls.front().node;
-    return automatic(true, fmt::format("{} inverted-hull outline mesh{} ({} triangles, e.g. node '{}'{}) hug{} the "
-                                       "objects they enclose (the widest gap {:.3g}% of the hull's size), faces turned "
+    return automatic(true, fmt::format("{} inverted-hull outline{} ({} triangles on {} node{}, e.g. '{}'{}) hug{} the "
+                                       "object{} {} enclose{} (the widest gap {:.3g}% of a hull's size), faces turned "
                                        "inwards, one-sided: left out as viewers cull them; outlines=off keeps them",
-                                       found.hulls.size(), found.hulls.size() == 1 ? "" : "es",
-                                       thousands(found.triangles.size()),
+                                       grouped(found.hulls.size()), found.hulls.size() == 1 ? "" : "s",
+                                       grouped(found.triangles.size()), grouped(nodes.size()), nodes.size() == 1 ? "" : "s",
                                        node < scene.nodes.size() ? scene.nodes[node].name : fmt::format("node{}", node),
                                        named == 0 ? std::string()
-                                                  : fmt::format("; {} named as outlines", named),
-                                       found.hulls.size() == 1 ? "s" : "", 100.0 * gap));
+                                       : named == found.hulls.size() ? std::string("; named as outlines")
+                                                                     : fmt::format("; {} named as outlines", named),
+                                       found.hulls.size() == 1 ? "s" : "", found.hulls.size() == 1 ? "" : "s",
+                                       found.hulls.size() == 1 ? "it" : "they", found.hulls.size() == 1 ? "s" : "",
+                                       100.0 * gap));
 }
 
 // The effects judged on the surfaces that take part (see-through ones and outlines left out).

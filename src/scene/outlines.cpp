@@ -518,6 +518,16 @@ std::optional<BackLight> back_light(const Scene& scene) {
     return out;
 }
 
+std::string grouped(std::size_t n) {
+    const std::string digits = std::to_string(n);
+    std::string out;
+    for (std::size_t i = 0; i < digits.size(); ++i) {
+        if (i > 0 && (digits.size() - i) % 3 == 0) out += ',';
+        out += digits[i];
+    }
+    return out;
+}
+
 std::optional<std::string> back_light_warning(const Scene& scene) {
     const std::optional<BackLight> b = back_light(scene);
     if (!b || b->share < kBackLightWarning) return std::nullopt;
@@ -525,7 +535,7 @@ std::optional<std::string> back_light_warning(const Scene& scene) {
                        "one-sided surfaces ({} triangles, most on node '{}'), which block and absorb it though viewers "
                        "cull those faces: if they are toon outlines (inverted hulls), --effects outlines=on leaves them "
                        "out; if their normals are flipped, --effects two_sided=on makes every surface double-sided",
-                       scene.path.string(), 100.0 * b->share, b->triangles, b->example);
+                       scene.path.string(), 100.0 * b->share, grouped(b->triangles), b->example);
 }
 
 }  // namespace hemirad::scene

@@ -75,6 +75,9 @@ struct BackLight {
 std::optional<BackLight> back_light(const Scene& scene);
 
 
+// A count with its thousands grouped: "52,824".
+std::string grouped(std::size_t n);
+
 // The warning for `scene` (as it will be meshed: after see_through and outlines), or nothing.
 std::optional<std::string> back_light_warning(const Scene& scene);
 
