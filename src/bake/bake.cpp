@@ -27,6 +27,7 @@
 #include "formfactor/hemicube.h"
 #include "formfactor/parallel.h"
 #include "output/finite.h"
+#include "scene/outlines.h"
 
 namespace hemirad::bake {
 
@@ -116,8 +117,10 @@ scene::EffectsPlan plan_effects(const Plan& p, scene::Scene& scene) {
     const Options& o = p.o;
     scene::EffectsPlan effects = scene::plan_effects(scene, p.overrides);
     scene::apply_see_through(scene, effects);
+    scene::apply_outlines(scene, effects);
     check_emitters_left(scene, effects);
     scene::apply_two_sided(scene, effects, p.overrides);
+    if (auto w = scene::back_light_warning(scene)) scene.warnings.push_back(*w);
     scene::apply_colour(scene, effects);
     if (o.verify && !effects.occlusion.on) {
         if (effects.occlusion.forced)

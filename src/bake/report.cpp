@@ -121,6 +121,8 @@ ordered_json effects_json(const Record& r) {
         {"interreflection", effect_json(S.effects.interreflection)},
         {"two_sided", effect_json(S.effects.two_sided)},
         {"see_through", effect_json(S.effects.see_through)},
+        // Inverted-hull toon outlines, left out of the bake where on (scene/outlines.h).
+        {"outlines", effect_json(S.effects.outlines)},
         {"refinement", effect_json({S.effects.refinement.on && !L.levels.empty(), S.effects.refinement.forced, refine_why})},
         {"convergence", effect_json({S.effects.convergence.on, S.effects.convergence.forced,
                                      S.effects.convergence.why + fmt::format(" (solver {}, threshold {:g})", M.solver, S.threshold)})},

@@ -14,6 +14,8 @@
 #include <vector>
 
 #include "core/colour.h"
+#include "core/error.h"
+#include "scene/outlines.h"
 
 namespace hemirad::scene {
 
@@ -407,6 +409,55 @@ EffectDecision analyse_see_through(const Scene& scene) {
                                        scene.materials[material].see_through));
 }
 
+EffectDecision analyse_outlines(const Scene& scene, const OutlineSearch& found) {
+    if (found.hulls.empty()) {
+        if (found.inward_shells == 0)
+            return automatic(false, "no one-sided mesh turns its faces inwards around another object, so there is no "
+                                    "inverted-hull outline to leave out");
+        return automatic(false, fmt::format("{} one-sided mesh{} turn{} {} faces inwards (e.g. node '{}') but none hugs "
+                                            "what it encloses as an outline's hull does (within {:g}% of its size on "
+                                            "every side): rooms, whose backs rightly keep the light out",
+                                            found.inward_shells, found.inward_shells == 1 ? "" : "es",
+                                            found.inward_shells == 1 ? "s" : "", found.inward_shells == 1 ? "its" : "their",
+                                            found.example_shell, 100.0 * kHugFraction));
+    }
+    double gap = 0.0;
+    std::size_t named = 0;
+    std::set<std::uint32_t> nodes;
+    for (const OutlineHull& h : found.hulls) {
+        gap = std::max(gap, h.gap);
+        named += h.named;
+        nodes.insert(h.node);
+    }
+    const std::uint32_t node = found.hulls.front().node;
+    return automatic(true, fmt::format("{} inverted-hull outline{} ({} triangles on {} node{}, e.g. '{}'{}) hug{} the "
+                                       "object{} {} enclose{} (the widest gap {:.3g}% of a hull's size), faces turned "
+                                       "inwards, one-sided: left out as viewers cull them; outlines=off keeps them",
+                                       grouped(found.hulls.size()), found.hulls.size() == 1 ? "" : "s",
+                                       grouped(found.triangles.size()), grouped(nodes.size()), nodes.size() == 1 ? "" : "s",
+                                       node < scene.nodes.size() ? scene.nodes[node].name : fmt::format("node{}", node),
+                                       named == 0 ? std::string()
+                                       : named == found.hulls.size() ? std::string("; named as outlines")
+                                                                     : fmt::format("; {} named as outlines", named),
+                                       found.hulls.size() == 1 ? "s" : "", found.hulls.size() == 1 ? "" : "s",
+                                       found.hulls.size() == 1 ? "it" : "they", found.hulls.size() == 1 ? "s" : "",
+                                       100.0 * gap));
+}
+
+// The effects judged on the surfaces that take part (see-through ones and outlines left out).
+EffectsPlan plan_rest(const Scene& scene, const EffectOverrides& overrides, EffectsPlan plan) {
+    plan.occlusion = decide(overrides.occlusion, analyse_occlusion(scene, overrides.two_sided));
+    plan.colour = decide(overrides.colour, analyse_colour(scene));
+    plan.interreflection = decide(overrides.interreflection, analyse_interreflection(scene));
+    plan.two_sided = decide(overrides.two_sided, analyse_two_sided(scene));
+    plan.refinement = decide(overrides.refinement,
+                             automatic(true, "elements are split where the radiosity contrast with a neighbour exceeds "
+                                             "the threshold"));
+    plan.convergence = decide(overrides.convergence,
+                              automatic(true, "stop when the light left unshot can no longer change the output visibly"));
+    return plan;
+}
+
 }  // namespace
 
 const char* to_string(Force force) {
@@ -431,7 +482,7 @@ EffectOverrides parse_effect_overrides(const std::string& spec) {
     if (trim(spec).empty()) return out;
     // In kEffectNames' order.
     Force* const slots[] = {&out.occlusion,  &out.colour,      &out.interreflection, &out.two_sided,
-                            &out.refinement, &out.convergence, &out.see_through};
+                            &out.refinement, &out.convergence, &out.see_through,     &out.outlines};
     static_assert(sizeof slots / sizeof slots[0] == kEffectNames.size(), "one slot per name of kEffectNames");
     constexpr int kEffects = int(kEffectNames.size());
     const auto& names = kEffectNames;
@@ -483,16 +534,17 @@ EffectsPlan plan_effects(const Scene& scene, const EffectOverrides& overrides) {
         rest.see_through = plan.see_through;
         return rest;
     }
-    plan.occlusion = decide(overrides.occlusion, analyse_occlusion(scene, overrides.two_sided));
-    plan.colour = decide(overrides.colour, analyse_colour(scene));
-    plan.interreflection = decide(overrides.interreflection, analyse_interreflection(scene));
-    plan.two_sided = decide(overrides.two_sided, analyse_two_sided(scene));
-    plan.refinement = decide(overrides.refinement,
-                             automatic(true, "elements are split where the radiosity contrast with a neighbour exceeds "
-                                             "the threshold"));
-    plan.convergence = decide(overrides.convergence,
-                              automatic(true, "stop when the light left unshot can no longer change the output visibly"));
-    return plan;
+    // Outlines are looked for among the surfaces that block light; the other effects are judged
+    // on those left once they are gone.
+    OutlineSearch found = find_outline_hulls(scene);
+    plan.outlines = decide(overrides.outlines, analyse_outlines(scene, found));
+    if (plan.outlines.on && !found.triangles.empty()) {
+        Scene rest = scene;
+        plan.outline_triangles = std::move(found.triangles);
+        apply_outlines(rest, plan);
+        return plan_rest(rest, overrides, std::move(plan));
+    }
+    return plan_rest(scene, overrides, plan);
 }
 
 void apply_two_sided(Scene& scene, const EffectsPlan& plan, const EffectOverrides& overrides) {
@@ -511,6 +563,19 @@ void apply_see_through(Scene& scene, const EffectsPlan& plan) {
                                                     !scene.materials[t.material].see_through.empty();
                                          }),
                           scene.triangles.end());
+}
+
+void apply_outlines(Scene& scene, const EffectsPlan& plan) {
+    if (!plan.outlines.on || plan.outline_triangles.empty()) return;
+    std::vector<char> hull(scene.triangles.size(), 0);
+    for (std::size_t i : plan.outline_triangles) {
+        if (i >= hull.size()) throw InternalError("apply_outlines: a hull triangle beyond the scene's (planned on another scene)");
+        hull[i] = 1;
+    }
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < scene.triangles.size(); ++i)
+        if (!hull[i]) scene.triangles[kept++] = std::move(scene.triangles[i]);
+    scene.triangles.resize(kept);
 }
 
 void apply_colour(Scene& scene, const EffectsPlan& plan) {

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <string>
+#include <vector>
 
 #include "scene/scene.h"
 
@@ -15,10 +16,10 @@ enum class Force { automatic, on, off };
 
 // The effects `--effects` names, in the order --help and messages list them: a new effect is
 // added here and to the slots of parse_effect_overrides (a static_assert there counts them).
-inline constexpr std::array<const char*, 7> kEffectNames = {"occlusion",  "colour",      "interreflection", "two_sided",
-                                                            "refinement", "convergence", "see_through"};
+inline constexpr std::array<const char*, 8> kEffectNames = {"occlusion",  "colour",      "interreflection", "two_sided",
+                                                            "refinement", "convergence", "see_through",     "outlines"};
 
-// kEffectNames as a list for people: "occlusion, colour, … convergence or see_through" (`last`:
+// kEffectNames as a list for people: "occlusion, colour, … see_through or outlines" (`last`:
 // the word before the last name).
 std::string effect_names(const char* last = "or");
 
@@ -30,6 +31,7 @@ struct EffectOverrides {
     Force refinement = Force::automatic;
     Force convergence = Force::automatic;
     Force see_through = Force::automatic;
+    Force outlines = Force::automatic;
 };
 
 // Parses a comma-separated list of name=value items, e.g. "occlusion=off,colour=on,refinement=auto"
@@ -54,6 +56,12 @@ struct EffectsPlan {
     // Alpha-blended and transmissive surfaces (fake light shafts, glass) are seen through: left
     // out, so they neither block, emit nor receive (off: baked as opaque surfaces).
     EffectDecision see_through;
+    // Inverted-hull toon outlines (scene/outlines.h), which every viewer culls, are left out like
+    // see-through surfaces (off: kept, their backs blocking and absorbing the light).
+    EffectDecision outlines;
+    // The hulls' triangles, as indices into the scene once apply_see_through has run; left out
+    // by apply_outlines where outlines is on.
+    std::vector<std::size_t> outline_triangles;
 };
 
 // Decides every effect for `scene` (automatic ones from the scene, forced ones from
@@ -76,12 +84,16 @@ void apply_two_sided(Scene& scene, const EffectsPlan& plan, const EffectOverride
 // see-through materials are removed (their nodes stay, with no surface); off → kept as opaque.
 void apply_see_through(Scene& scene, const EffectsPlan& plan);
 
-// "on", "off" or "auto".
+// Applies the outlines decision (after apply_see_through, on the same copy): on → the hulls'
+// triangles are removed (their nodes stay, with no surface); off → kept.
+void apply_outlines(Scene& scene, const EffectsPlan& plan);
+
 // Applies the colour decision: off (planned for a grey scene, or forced) replaces every
 // reflectance and emission by its luminance, so one channel holds the whole solution; a grey
 // scene is unchanged.
 void apply_colour(Scene& scene, const EffectsPlan& plan);
 
+// "on", "off" or "auto".
 const char* to_string(Force force);
 
 }  // namespace hemirad::scene
