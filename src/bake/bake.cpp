@@ -259,6 +259,7 @@ Meshed build_mesh(const Plan& p, const Setup& s, scene::Scene& scene) {
         scene.warnings.push_back(fmt::format("{}: {} of {} triangles have no area (under 1e-12 of their longest edge "
                                              "squared) and were dropped; report.json counts them",
                                              file, m.mesh.dropped_triangles, scene.triangles.size()));
+    warn_uneven_emitters(scene, m.mesh);
     check_lamps_seen(scene, m.mesh);
     if (p.o.preview_every > 0 && m.solver == "matrix")
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");
