@@ -265,6 +265,7 @@ Meshed build_mesh(const Plan& p, const Setup& s, scene::Scene& scene) {
                                              "report.json counts them",
                                              file, counted(m.mesh.dropped_triangles, "zero-area triangle"),
                                              grouped(scene.triangles.size())));
+    warn_uneven_emitters(scene, m.mesh);
     check_lamps_seen(scene, m.mesh);
     if (p.o.preview_every > 0 && m.solver == "matrix")
         throw InputError("--preview-every shows the passes of the progressive solver; the matrix solver has none");

@@ -89,6 +89,15 @@ void check_emitters_left(const scene::Scene& scene, const scene::EffectsPlan& pl
 // (every texel cut away by alphaMode MASK, an emissive texture black where the surface is, or
 // only triangles of no area) is a lamp the bake cannot see: a warning naming it. With no light
 // left anywhere the bake would be black: exit 2, saying why.
+void warn_uneven_emitters(scene::Scene& scene, const mesh::Mesh& mesh) {
+    if (mesh.emission_unsplit == 0) return;
+    scene.warnings.push_back(fmt::format(
+        "{}: {} emitter patches whose emissive texture changes across them shoot from their centres (the cap "
+        "on extra shooters was reached after {} were split): the light near them is approximate; a --patch-size "
+        "nearer --element-size needs fewer",
+        scene.path.string(), mesh.emission_unsplit, mesh.emission_splits));
+}
+
 void check_lamps_seen(scene::Scene& scene, const mesh::Mesh& mesh) {
     std::vector<double> flux(scene.materials.size(), 0.0);
     for (const mesh::Element& e : mesh.elements)

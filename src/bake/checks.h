@@ -31,6 +31,9 @@ void check_emitters_left(const scene::Scene& scene, const scene::EffectsPlan& pl
 // only triangles of no area) is a lamp the bake cannot see: a warning naming it (added to the
 // scene's warnings). With no light left anywhere the bake would be black: InputError, saying why.
 void check_lamps_seen(scene::Scene& scene, const mesh::Mesh& mesh);
+// After meshing: emitter patches whose emissive texture changes across them but which shoot from
+// their centres, the cap on splitting them (mesh::kMaxEmissionShooters) reached: a warning.
+void warn_uneven_emitters(scene::Scene& scene, const mesh::Mesh& mesh);
 
 // The memory a bake may use, and where that figure comes from (for messages and the report).
 // The solver and refinement are planned by `bytes`, which does not change from run to run (so

@@ -173,6 +173,10 @@ ordered_json make_report(const Record& r) {
                         {"moved_clusters", L.mesh.moved_clusters},
                         {"texture_splits", L.mesh.texture_splits},
                         {"mask_holes", L.mesh.holes},
+                        // Emitter patches an emissive texture's edge crosses, split into a
+                        // shooter per element / left whole over the cap (mesh::Mesh), per side.
+                        {"emission_splits", L.mesh.emission_splits},
+                        {"emission_unsplit", L.mesh.emission_unsplit},
                         {"dropped_triangles", L.mesh.dropped_triangles},
                         {"skipped_primitives", r.scene.skipped_primitives}};
     report["plan"] = plan_json(r);

@@ -402,8 +402,11 @@ std::vector<Piece> pieces_of(const std::vector<Part>& parts, const scene::Scene&
 // Appends one patch of one side, followed by its contiguous elements: a cell of a face's grid
 // (one part, all of its elements), or a cluster of small faces or a cell with holes (poly.n = 0).
 // `from`, where set, is the point a cluster shoots from instead (see split_blocked_clusters).
+// `cell`, where set, is the patch's polygon instead of its part's cell: an element made a patch
+// of its own (split_emitter).
 void append_patch(Mesh& mesh, const std::vector<Part>& parts, const std::vector<Piece>& pieces, bool whole,
-                  const scene::Material& mat, bool back, const std::optional<dvec3>& from) {
+                  const scene::Material& mat, bool back, const std::optional<dvec3>& from,
+                  const Polygon* cell = nullptr) {
     const std::size_t count = pieces.size();
     if (mesh.patches.size() >= std::numeric_limits<std::uint32_t>::max() ||
         mesh.elements.size() + count >= std::numeric_limits<std::uint32_t>::max())
@@ -439,10 +442,10 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const std::vector<
         area += e.area;
         mesh.elements.push_back(e);
     }
-    if (parts.size() == 1 && whole) {
-        const PatchCells& pc = *parts.front().cells;
-        const Shape ps = shape_of(pc.poly);
-        patch.poly = back ? reversed(pc.poly) : pc.poly;
+    if (cell || (parts.size() == 1 && whole)) {
+        const Polygon& poly = cell ? *cell : parts.front().cells->poly;
+        const Shape ps = shape_of(poly);
+        patch.poly = back ? reversed(poly) : poly;
         patch.normal = back ? -ps.normal : ps.normal;
         patch.centroid = ps.centroid;
         patch.area = ps.area;
@@ -467,27 +470,76 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const std::vector<
     mesh.patches.push_back(patch);
 }
 
+// A patch shoots all of its elements' light from one point, so one that an emissive texture's
+// edge crosses would send its lit part's light from its middle (the floor under a half-lit lamp
+// got it 4% off). Its elements' emissions differ when, in some channel, the dimmest falls short
+// of the brightest by more than this share of the brightest channel's.
+constexpr double kShooterContrast = 0.02;
+
+bool uneven_emission(const std::vector<Piece>& pieces) {
+    if (pieces.size() < 2) return false;
+    dvec3 lo = pieces.front().emission, hi = lo;
+    for (const Piece& piece : pieces) {
+        lo = glm::min(lo, piece.emission);
+        hi = glm::max(hi, piece.emission);
+    }
+    const double top = std::max({hi.x, hi.y, hi.z});
+    const dvec3 spread = hi - lo;
+    return top > 0.0 && std::max({spread.x, spread.y, spread.z}) > kShooterContrast * top;
+}
+
+// How many patches splitting emitters may still add (kMaxEmissionShooters).
+struct EmitterBudget {
+    double left = 0.0;
+};
+
+// One patch to append: its parts, its elements, and (an element of a split emitter) its own cell.
+struct Shooting {
+    std::size_t part = 0;
+    std::vector<Piece> pieces;
+    bool whole = true;
+    std::optional<Polygon> cell;
+};
+
 // Appends a face's patches (or a cluster's one patch) on its front and, for a doubleSided
 // material, on its back, each side's patches the other's twins. A patch all of whose elements
-// are MASK holes is left out on both sides.
+// are MASK holes is left out on both sides. A patch whose elements' emissions differ
+// (uneven_emission) is appended as one patch per element, each shooting its own light from its
+// own centroid, while `budget` lasts.
 void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const scene::Scene& scene,
-                  const Texturing& texturing, const std::optional<dvec3>& from = std::nullopt) {
+                  const Texturing& texturing, EmitterBudget& budget, const std::optional<dvec3>& from = std::nullopt) {
     const scene::Material& mat = scene.materials[patches.front().front().face->src[0]->material];
-    std::vector<std::vector<Piece>> pieces;
-    std::vector<char> whole;
-    std::vector<std::size_t> kept;
+    const double sides = mat.double_sided ? 2.0 : 1.0;
+    std::vector<Shooting> shooting;
     for (std::size_t i = 0; i < patches.size(); ++i) {
         bool w = true;
-        pieces.push_back(pieces_of(patches[i], scene, texturing, mesh, w));
-        whole.push_back(w);
-        if (!pieces.back().empty()) kept.push_back(i);
+        std::vector<Piece> pieces = pieces_of(patches[i], scene, texturing, mesh, w);
+        if (pieces.empty()) continue;
+        if (uneven_emission(pieces)) {
+            const double added = sides * double(pieces.size() - 1);
+            if (added <= budget.left) {
+                budget.left -= added;
+                mesh.emission_splits += std::size_t(sides);
+                for (Piece& piece : pieces) {
+                    const Polygon cell = piece.poly;
+                    shooting.push_back({i, {std::move(piece)}, true, cell});
+                }
+                continue;
+            }
+            mesh.emission_unsplit += std::size_t(sides);
+        }
+        shooting.push_back({i, std::move(pieces), w, std::nullopt});
     }
+    const auto append = [&](const Shooting& s, bool back) {
+        const Polygon* cell = s.cell ? &*s.cell : nullptr;
+        append_patch(mesh, patches[s.part], s.pieces, s.whole, mat, back, cell ? std::nullopt : from, cell);
+    };
     const std::size_t front = mesh.patches.size();
-    for (const std::size_t i : kept) append_patch(mesh, patches[i], pieces[i], whole[i], mat, false, from);
+    for (const Shooting& s : shooting) append(s, false);
     if (!mat.double_sided) return;
     const std::size_t back = mesh.patches.size();
-    for (const std::size_t i : kept) append_patch(mesh, patches[i], pieces[i], whole[i], mat, true, from);
-    for (std::size_t i = 0; i < kept.size(); ++i) {
+    for (const Shooting& s : shooting) append(s, true);
+    for (std::size_t i = 0; i < shooting.size(); ++i) {
         mesh.patches[front + i].twin = static_cast<std::uint32_t>(back + i);
         mesh.patches[back + i].twin = static_cast<std::uint32_t>(front + i);
     }
@@ -935,17 +987,16 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
     split_blocked_clusters(faces, scene, settings, clusters);
     mesh.split_clusters = clusters.split;
     mesh.moved_clusters = clusters.moved;
-    if (before) {
-        Counts counts;
-        for (std::size_t f = 0; f < faces.size(); ++f) {
-            const double sides = scene.materials.at(faces[f].src[0]->material).double_sided ? 2.0 : 1.0;
-            const bool clustered = clusters.of[f] >= 0;
-            const bool first = clustered && clusters.faces[std::size_t(clusters.of[f])].front() == f;
-            counts.patches += sides * (clustered ? (first ? 1.0 : 0.0) : grids[f].patches());
-            counts.elements += sides * grids[f].elements();
-        }
-        before(counts);
+    Counts counts;
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+        const double sides = scene.materials.at(faces[f].src[0]->material).double_sided ? 2.0 : 1.0;
+        const bool clustered = clusters.of[f] >= 0;
+        const bool first = clustered && clusters.faces[std::size_t(clusters.of[f])].front() == f;
+        counts.patches += sides * (clustered ? (first ? 1.0 : 0.0) : grids[f].patches());
+        counts.elements += sides * grids[f].elements();
     }
+    if (before) before(counts);
+    EmitterBudget budget{kMaxEmissionShooters + counts.patches / 16.0};
     // Patches in face order; a cluster where its first face is, with all of its faces.
     const Texturing texturing(scene);
     mesh.lights = light_shooters(scene.lights);
@@ -955,7 +1006,7 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
             const std::vector<PatchCells> cells = face_cells(grids[f]);
             std::vector<std::vector<Part>> patches;
             for (const PatchCells& pc : cells) patches.push_back({{&faces[f], &pc}});
-            append_sides(mesh, patches, scene, texturing);
+            append_sides(mesh, patches, scene, texturing, budget);
             continue;
         }
         const std::vector<std::size_t>& members = clusters.faces[std::size_t(clusters.of[f])];
@@ -966,7 +1017,7 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         std::vector<Part> parts;
         for (std::size_t i = 0; i < members.size(); ++i) parts.push_back({&faces[members[i]], &cells[i].front()});
         const std::int64_t from = clusters.from[std::size_t(clusters.of[f])];
-        append_sides(mesh, {parts}, scene, texturing,
+        append_sides(mesh, {parts}, scene, texturing, budget,
                      from >= 0 ? std::optional<dvec3>(shape_of(faces[std::size_t(from)].poly).centroid) : std::nullopt);
     }
     return mesh;

@@ -117,7 +117,17 @@ struct Mesh {
     std::size_t moved_clusters = 0;     // flat clusters that shoot from a face's centroid: see Patch
     std::size_t texture_splits = 0;     // elements split where an emissive texture or MASK coverage changes (once for both sides)
     std::size_t holes = 0;              // elements left out as MASK holes (once for both sides)
+    // Patches whose elements' emission differs (an emissive texture's edge crosses them), each
+    // split into one patch per element so that light leaves from where it is emitted (per side);
+    // and those left whole, shooting from their centroid, once kMaxEmissionShooters was reached.
+    std::size_t emission_splits = 0;
+    std::size_t emission_unsplit = 0;
 };
+
+// Patches that splitting emitters (Mesh::emission_splits) may add, at most: this many plus a
+// sixteenth of the patches the scene would have without them, so that a large emissive atlas
+// adds a bounded share of shooters (and of a matrix solve's rows).
+inline constexpr double kMaxEmissionShooters = 1024.0;
 
 // What a mesh will hold, counted before any of it is built (doubles: any size can be counted).
 struct Counts {

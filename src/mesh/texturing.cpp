@@ -16,7 +16,7 @@ using glm::dvec3;
 constexpr int kMaxSamples = 8;
 // An emission differs across children when the brightest child's luminance exceeds the dimmest's
 // by more than this share of the brightest.
-constexpr double kEmissionContrast = 0.25;
+constexpr double kEmissionContrast = 0.02;
 
 // Barycentric coordinates of p (in the triangle's plane) with respect to triangle t, as ratios
 // of cross products with the triangle's normal. (The Gram determinant d00·d11 − d01² that the
