@@ -633,7 +633,8 @@ TEST_CASE("render: where a view ray escapes, the sky's exitance pi L shows; belo
         const double t = -b + std::sqrt(b * b - (glm::dot(o, o) - R * R));
         const double sin_elevation = (o.y + t * d.y) / R;
         CHECK(sin_elevation > 0.0);
-        CHECK(pixel(graded, 4, 20).x == Approx(M_PI * (1.0 + 2.0 * sin_elevation)).epsilon(1e-5));
+        // (The pixel is the mean of 3 × 3 samples about this ray: equal to a few parts in 10^5.)
+        CHECK(pixel(graded, 4, 20).x == Approx(M_PI * (1.0 + 2.0 * sin_elevation)).epsilon(1e-4));
     }
 }
 
