@@ -530,3 +530,142 @@ TEST_CASE("choose_view: named, first, or framing camera", "[output]") {
                           Contains("test_scene.gltf") && Contains("'nope'") && Contains("a, b"));
     }
 }
+
+// ---- surroundings: see-through surfaces and the sky -----------------------------------------
+
+namespace {
+
+// A see-through triangle pair covering [x0, x1] × [y0, y1] at depth z (facing +Z), material m.
+std::vector<scene::Triangle> pane(double x0, double y0, double x1, double y1, double z, std::uint32_t m,
+                                  glm::dvec3 colour) {
+    const glm::dvec3 a(x0, y0, z), b(x1, y0, z), c(x1, y1, z), d(x0, y1, z);
+    scene::Triangle t1{{a, b, c}, {colour, colour, colour}, m, 0, 0};
+    scene::Triangle t2{{a, c, d}, {colour, colour, colour}, m, 0, 0};
+    return {t1, t2};
+}
+
+}  // namespace
+
+TEST_CASE("render: a see-through pane blends over what lies behind it, tinted as glass or blended as a sprite",
+          "[output][see_through]") {
+    // A wall of radiosity 1 behind the pane (z = −4, x < 0) and one of radiosity 3 beside it
+    // (x > 0), equal areas: the pane's irradiance is taken as their area mean, 2.
+    scene::Scene scene = scene_with_nodes({"left", "right"});
+    mesh::Mesh mesh;
+    mesh.elements = {square_z(-5, -5, 0, 5, -4, 0), square_z(0, -5, 5, 5, -4, 1)};
+    const auto radiosity = grey({1.0, 3.0});
+    const glm::dvec3 c(0.8, 0.2, 0.1);
+    scene::Material glass;
+    glass.name = "glass";
+    output::Surroundings around;
+    around.see_through = pane(-1.5, -1, -0.5, 1, -2, 0, c);  // pixels x 8..23 at z = −2 (16 per unit)
+    const double a = 0.4;
+    glass.opacity = a;
+    glm::dvec3 expected;
+    SECTION("alphaMode BLEND: (1 − a) of the wall, untinted, and a·c·2 of its own") {
+        glass.see_through = "alphaMode BLEND, mean opacity 0.40";
+        expected = (1 - a) * glm::dvec3(1.0) + a * c * 2.0;
+    }
+    SECTION("KHR_materials_transmission: (1 − a) c of the wall, and a·c·2 of its own") {
+        glass.see_through = "KHR_materials_transmission 0.6";
+        expected = (1 - a) * c * 1.0 + a * c * 2.0;
+    }
+    scene.materials = {glass};
+    const output::Image image = output::render(scene, output::weld(2, mesh, radiosity), straight_view(), 64, 64, around);
+    const glm::vec3 behind = pixel(image, 16, 32);
+    CHECK(behind.x == Approx(expected.x).margin(1e-4));
+    CHECK(behind.y == Approx(expected.y).margin(1e-4));
+    CHECK(behind.z == Approx(expected.z).margin(1e-4));
+    CHECK(pixel(image, 28, 32).x == Approx(1.0).margin(1e-5));  // the wall beside the pane
+    CHECK(pixel(image, 40, 32).x == Approx(3.0).margin(1e-5));
+    // Without surroundings the pane is not drawn.
+    CHECK(pixel(output::render(scene, output::weld(2, mesh, radiosity), straight_view(), 64, 64), 16, 32).x ==
+          Approx(1.0).margin(1e-5));
+}
+
+TEST_CASE("render: a see-through pane behind an opaque surface is hidden, two panes multiply", "[output][see_through]") {
+    scene::Scene scene = scene_with_nodes({"wall", "near"});
+    mesh::Mesh mesh;
+    mesh.elements = {square_z(-5, -5, 5, 5, -4, 0), square_z(0, -1, 1, 1, -1, 1)};
+    scene::Material glass;
+    glass.see_through = "alphaMode BLEND, mean opacity 0.50";
+    glass.opacity = 0.5;
+    scene.materials = {glass};
+    output::Surroundings around;
+    // Two black panes (own light 0) over the whole wall at z = −3 and −2, one behind the near quad.
+    around.see_through = pane(-5, -5, 5, 5, -3, 0, glm::dvec3(0.0));
+    for (const scene::Triangle& t : pane(-5, -5, 5, 5, -2, 0, glm::dvec3(0.0))) around.see_through.push_back(t);
+    const output::Image image =
+        output::render(scene, output::weld(2, mesh, grey({1.0, 1.0})), straight_view(), 64, 64, around);
+    CHECK(pixel(image, 10, 10).x == Approx(0.25).margin(1e-5));  // the wall through both panes
+    // The near quad at z = −1 stands in front of both: pixels x 32..63 at z = −1 span 32 per unit
+    CHECK(pixel(image, 40, 28).x == Approx(1.0).margin(1e-5));
+}
+
+TEST_CASE("render: where a view ray escapes, the sky's exitance pi L shows; below the dome's rim and without a sky, black",
+          "[output][sky]") {
+    scene::Scene scene = scene_with_nodes({"quad"});
+    // Bounds [−1, 1] × [−1, 1] × [−3, −1]: the dome's rim is centred at (0, −1, −2), radius 2 √12.
+    scene.bbox_min = {-1, -1, -3};
+    scene.bbox_max = {1, 1, -1};
+    mesh::Mesh mesh;
+    mesh.elements = {square_z(-1, 0, 1, 1, -2, 0)};  // pixels x 16..47, rows 16..31
+    const auto weld = output::weld(1, mesh, grey({0.5}));
+    output::Surroundings around;
+    around.sky = scene::Sky{2.0, 2.0};
+    const output::Image image = output::render(scene, weld, straight_view(), 64, 64, around);
+    CHECK(pixel(image, 20, 20).x == Approx(0.5).margin(1e-5));     // the quad
+    CHECK(pixel(image, 32, 33).x == Approx(2.0 * M_PI).epsilon(1e-6));  // ahead, just below the quad: sky
+    CHECK(pixel(image, 4, 4).y == Approx(2.0 * M_PI).epsilon(1e-6));
+    // Rows further down look down steeply enough that the ray leaves the dome's sphere below its
+    // rim (row 40: 1 − 0.257 t with t ≈ 9.1).
+    CHECK(pixel(image, 32, 40).x == 0.0f);
+    CHECK(pixel(image, 32, 63).x == 0.0f);
+    CHECK(pixel(output::render(scene, weld, straight_view(), 64, 64), 32, 33).x == 0.0f);
+
+    SECTION("a graded sky: the radiance at the elevation where the ray meets the dome") {
+        around.sky = scene::Sky{1.0, 3.0};
+        const output::Image graded = output::render(scene, weld, straight_view(), 64, 64, around);
+        // The ray through pixel (4, 20)'s centre, from the eye 1 above the rim's centre and 2 behind it.
+        const double y_ndc = 1.0 - 2.0 * (20 + 0.5) / 64.0, x_ndc = 2.0 * (4 + 0.5) / 64.0 - 1.0;
+        const glm::dvec3 d = glm::normalize(glm::dvec3(x_ndc, y_ndc, -1.0)), o(0.0, 1.0, 2.0);
+        const double R = 2.0 * std::sqrt(12.0), b = glm::dot(o, d);
+        const double t = -b + std::sqrt(b * b - (glm::dot(o, o) - R * R));
+        const double sin_elevation = (o.y + t * d.y) / R;
+        CHECK(sin_elevation > 0.0);
+        // (The pixel is the mean of 3 × 3 samples about this ray: equal to a few parts in 10^5.)
+        CHECK(pixel(graded, 4, 20).x == Approx(M_PI * (1.0 + 2.0 * sin_elevation)).epsilon(1e-4));
+    }
+}
+
+TEST_CASE("choose_view: a closed room without a camera is framed from inside, an object from outside", "[output][view]") {
+    // A 6 × 3 × 4 box of 12 triangles, its faces turned inwards (a room) or outwards (an object).
+    const bool inwards = GENERATE(true, false);
+    scene::Scene scene = scene_with_nodes({"box"});
+    scene.materials.push_back(scene::Material{});
+    const glm::dvec3 lo(-3, 0, -2), hi(3, 3, 2);
+    scene.bbox_min = lo;
+    scene.bbox_max = hi;
+    const auto corner = [&](int i) { return glm::dvec3(i & 1 ? hi.x : lo.x, i & 2 ? hi.y : lo.y, i & 4 ? hi.z : lo.z); };
+    // Each face's corners counter-clockwise seen from outside.
+    const int faces[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    for (const auto& f : faces) {
+        std::array<glm::dvec3, 4> q = {corner(f[0]), corner(f[1]), corner(f[2]), corner(f[3])};
+        if (inwards) std::swap(q[1], q[3]);
+        scene.triangles.push_back({{q[0], q[1], q[2]}, {}, 0, 0, 0});
+        scene.triangles.push_back({{q[0], q[2], q[3]}, {}, 0, 0, 0});
+    }
+    const output::View view = output::choose_view(scene, "");
+    const glm::dvec3 eye(view.camera_to_world[3]);
+    if (inwards) {
+        CHECK(view.name == "framing (inside)");
+        CHECK(glm::all(glm::greaterThan(eye, lo)));
+        CHECK(glm::all(glm::lessThan(eye, hi)));
+        CHECK(eye.y == Approx(1.5));  // half the room's height, below 1.6 m
+        const glm::dvec3 forward(view.camera_to_world * glm::dvec4(0, 0, -1, 0));
+        CHECK(forward.x == Approx(-1.0));  // along the longer side
+    } else {
+        CHECK(view.name == "framing");
+        CHECK(eye.z > hi.z);
+    }
+}

@@ -178,7 +178,9 @@ BakeShape plan_shape(const Plan& p, const scene::Scene& scene, const Setup& s) {
 Setup set_up(const Plan& p, scene::Scene& scene) {
     const Options& o = p.o;
     Setup s;
+    std::vector<scene::Triangle> see_through = output::see_through_triangles(scene);
     s.effects = plan_effects(p, scene);
+    if (s.effects.see_through.on) s.see_through = std::move(see_through);
     const double diagonal = scene.diagonal();
     if (!(diagonal > 0.0) || !std::isfinite(diagonal))
         throw InputError(fmt::format("{}: the scene has no extent (all vertices coincide)", o.scene));
@@ -400,7 +402,8 @@ double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, L
     } else {
         welded = output::weld(scene.nodes.size(), lit.mesh, radiosity);  // no gather: no gathered light
     }
-    const output::Image image = output::render(scene, welded, s.view, s.width, s.height);
+    const output::Image image =
+        output::render(scene, welded, s.view, s.width, s.height, output::Surroundings{s.see_through, p.sky});
     if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
     output::write_exr(image, out.staged("render.exr"));
     const double exposure = std::isnan(o.exposure) ? output::auto_exposure(image) : std::exp2(o.exposure);

@@ -64,7 +64,7 @@ ordered_json settings_json(const Record& r) {
         {"effects", o.effects},
         {"refine_levels", o.refine_levels},
         {"contrast", o.contrast},
-        {"camera", S.view.name},
+        {"camera", S.view.name},  // the file's camera; "look-from"; "framing" (outside) or "framing (inside)" (a closed room)
         {"exposure", r.exposure},
         {"output_mode", o.output_mode},
         {"image", {S.width, S.height}},

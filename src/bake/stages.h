@@ -74,6 +74,7 @@ struct Setup {
     BakeShape shape;                        // what the memory estimate is made from (no counts yet)
     bool direct_only = false;               // interreflection off
     double threshold = 0.0;                 // the progressive solver stops below it
+    std::vector<scene::Triangle> see_through;  // left out of the mesh (effect see_through): the render shows them
 };
 
 // Stage "mesh": the mesh, and the solver chosen by its counts within the memory limit.

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -10,6 +11,7 @@
 #include "mesh/mesh.h"
 #include "output/welded_mesh.h"
 #include "scene/scene.h"
+#include "scene/sky.h"
 
 namespace hemirad::output {
 
@@ -75,10 +77,12 @@ struct View {
     glm::dmat4 camera_to_world{1.0};  // looks down local −Z, +Y up (glTF)
     double yfov = 0.8;                // radians
     double aspect = 1.0;              // width / height
-    std::string name;                 // camera name, or "framing" for the generated one
+    std::string name;                 // camera name, or "framing" / "framing (inside)" for the generated ones
 };
 
-// The named camera, else the scene's first camera, else one framing the scene's bounds.
+// The named camera, else the scene's first camera, else, for a closed room (rays from its
+// centre meet the faces that show, almost all around), one inside it looking across from near
+// one end at eye height ("framing (inside)"), else one framing the scene's bounds from outside.
 // Throws InputError naming the scene file when `camera_name` is given but not found.
 View choose_view(const scene::Scene& scene, const std::string& camera_name);
 
@@ -95,6 +99,25 @@ Image render(const scene::Scene& scene, const mesh::Mesh& mesh,
              const VertexLight* gathered = nullptr);
 // … of a weld already made (its values the radiosity drawn).
 Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& view, int width, int height);
+
+// What a render shows besides the baked mesh, so that it looks like the scene.
+struct Surroundings {
+    // The see-through triangles the bake left out (scene::apply_see_through), in the scene's
+    // materials: composited over what lies behind them, both faces, farthest first. A surface
+    // of opacity a and colour c (its reflectance) passes (1 − a) of the light behind it (times c
+    // for KHR_materials_transmission, whose glass is tinted; as is for alphaMode BLEND, as
+    // viewers blend) and shows a·c·H of its own, H its irradiance, taken as the area mean of the
+    // drawn radiosity (in a closed room the area means of irradiance and radiosity are equal).
+    std::vector<scene::Triangle> see_through;
+    // The --sky seen where a view ray escapes: the dome's exitance π·L at the elevation (from the
+    // dome's centre) where the ray meets it, in radiosity's units; black below the dome's rim.
+    std::optional<scene::Sky> sky;
+};
+Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& view, int width, int height,
+             const Surroundings& around);
+
+// The see-through triangles of `scene` (Material::see_through), before the effect removes them.
+std::vector<scene::Triangle> see_through_triangles(const scene::Scene& scene);
 
 // Exposure that puts the 90th percentile of lit pixels (emitters are too few to matter) at
 // 0.6 linear, about 0.8 on the display.

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 
@@ -86,6 +87,7 @@ class TriangleSetup {
 public:
     TriangleSetup(const View& view, int width, int height, double znear)
         : world_to_camera_(glm::inverse(view.camera_to_world)),
+          camera_to_world_(view.camera_to_world),
           samples_x_(double(width) * kSupersample),
           samples_y_(double(height) * kSupersample) {
         const double f = 1.0 / std::tan(0.5 * view.yfov);
@@ -116,6 +118,24 @@ public:
         }
         clip_and_emit(v, out);
     }
+
+    // Adds a see-through triangle, both faces alike, its colour `own` (what it shows of its own).
+    void add_glass(const std::array<glm::dvec3, 3>& corners, const glm::dvec3& own, std::vector<ScreenTriangle>& out) const {
+        ClipVertex v[3];
+        for (int k = 0; k < 3; ++k) {
+            const glm::dvec3 p = glm::dvec3(world_to_camera_ * glm::dvec4(corners[k], 1.0));
+            v[k] = {glm::dvec3(scale_.x * p.x, scale_.y * p.y, -p.z), own};
+        }
+        clip_and_emit(v, out);
+    }
+
+    // The world direction of the view ray through sample (i, j) (not of unit length).
+    glm::dvec3 ray(int i, int j) const {
+        const double x = 2.0 * (double(i) + 0.5) / samples_x_ - 1.0;
+        const double y = 1.0 - 2.0 * (double(j) + 0.5) / samples_y_;
+        return glm::dmat3(camera_to_world_) * glm::dvec3(x / scale_.x, y / scale_.y, -1.0);
+    }
+    glm::dvec3 eye() const { return glm::dvec3(camera_to_world_[3]); }
 
 private:
     void clip_and_emit(const ClipVertex (&tri)[3], std::vector<ScreenTriangle>& out) const {
@@ -161,7 +181,7 @@ private:
         if (t.first_row <= t.last_row) out.push_back(t);
     }
 
-    glm::dmat4 world_to_camera_;
+    glm::dmat4 world_to_camera_, camera_to_world_;
     glm::dvec2 scale_{1.0};
     double samples_x_, samples_y_;
     Plane planes_[5];
@@ -182,7 +202,9 @@ struct Strip {
     }
 };
 
-void rasterize(const ScreenTriangle& t, Strip& strip) {
+// Calls shade(sample, 1/w, w0, w1, w2) for each sample of the strip the triangle covers.
+template <class Shade>
+void for_samples(const ScreenTriangle& t, Strip& strip, const Shade& shade) {
     const auto [x_lo, x_hi] = std::minmax({t.x[0], t.x[1], t.x[2]});
     const std::int64_t i0 = std::max<std::int64_t>(0, ceil_div(x_lo - kHalfSample, kSubpixel));
     const std::int64_t i1 = std::min<std::int64_t>(strip.width - 1, floor_div(x_hi - kHalfSample, kSubpixel));
@@ -210,17 +232,72 @@ void rasterize(const ScreenTriangle& t, Strip& strip) {
             if (((e[0] + bias[0]) | (e[1] + bias[1]) | (e[2] + bias[2])) >= 0) {
                 const double w0 = double(e[1]) * inv_area, w1 = double(e[2]) * inv_area, w2 = double(e[0]) * inv_area;
                 const double inv_w = w0 * t.inv_w[0] + w1 * t.inv_w[1] + w2 * t.inv_w[2];
-                const std::size_t s = row + std::size_t(i);
-                if (inv_w > strip.inv_w[s]) {
-                    strip.inv_w[s] = inv_w;
-                    strip.colour[s] =
-                        (w0 * t.colour_over_w[0] + w1 * t.colour_over_w[1] + w2 * t.colour_over_w[2]) / inv_w;
-                }
+                shade(row + std::size_t(i), inv_w, w0, w1, w2);
             }
             for (int k = 0; k < 3; ++k) e[k] += step_x[k];
         }
         for (int k = 0; k < 3; ++k) row_start[k] += step_y[k];
     }
+}
+
+// Draws an opaque triangle: z-buffered.
+void rasterize(const ScreenTriangle& t, Strip& strip) {
+    for_samples(t, strip, [&](std::size_t s, double inv_w, double w0, double w1, double w2) {
+        if (inv_w > strip.inv_w[s]) {
+            strip.inv_w[s] = inv_w;
+            strip.colour[s] = (w0 * t.colour_over_w[0] + w1 * t.colour_over_w[1] + w2 * t.colour_over_w[2]) / inv_w;
+        }
+    });
+}
+
+// Blends a see-through triangle over the samples it is in front of (the z-buffer is left as it is).
+void blend(const ScreenTriangle& t, const glm::dvec3& transmit, Strip& strip) {
+    for_samples(t, strip, [&](std::size_t s, double inv_w, double w0, double w1, double w2) {
+        if (inv_w > strip.inv_w[s])
+            strip.colour[s] = transmit * strip.colour[s] +
+                              (w0 * t.colour_over_w[0] + w1 * t.colour_over_w[1] + w2 * t.colour_over_w[2]) / inv_w;
+    });
+}
+
+// What the strip's samples that hit nothing see of the sky: the dome's exitance where the ray
+// leaves it (the far root: the eye is inside the dome, or the ray meets its far side).
+void fill_sky(const TriangleSetup& setup, const scene::Sky& sky, const scene::Dome& dome, Strip& strip) {
+    const glm::dvec3 o = setup.eye() - dome.centre;
+    for (int j = 0; j < strip.rows; ++j) {
+        for (int i = 0; i < strip.width; ++i) {
+            const std::size_t s = std::size_t(j) * strip.width + std::size_t(i);
+            if (strip.inv_w[s] != 0.0) continue;
+            const glm::dvec3 d = glm::normalize(setup.ray(i, strip.first_row + j));
+            const double b = glm::dot(o, d), c = glm::dot(o, o) - dome.radius * dome.radius;
+            const double disc = b * b - c;
+            if (!(disc >= 0.0)) continue;
+            const double t = -b + std::sqrt(disc);
+            if (!(t > 0.0)) continue;
+            const double height = o.y + t * d.y;
+            if (height < 0.0) continue;  // below the rim: no sky there, and no ground either
+            strip.colour[s] = glm::dvec3(M_PI * scene::sky_radiance(sky, std::min(1.0, height / dome.radius)));
+        }
+    }
+}
+
+// The area mean of the drawn radiosity: a see-through surface's irradiance (Surroundings).
+glm::dvec3 mean_radiosity(const scene::Scene& scene, const WeldedMesh& welded) {
+    glm::dvec3 sum(0.0);
+    double area = 0.0;
+    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+        if (scene.nodes[n].synthetic) continue;
+        const WeldedNode& node = welded.nodes[n];
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+            const glm::dvec3 a = node.positions[node.indices[3 * t]], b = node.positions[node.indices[3 * t + 1]],
+                             c = node.positions[node.indices[3 * t + 2]];
+            const double A = 0.5 * glm::length(glm::cross(b - a, c - a));
+            sum += A / 3.0 *
+                   (node.radiosity[node.indices[3 * t]] + node.radiosity[node.indices[3 * t + 1]] +
+                    node.radiosity[node.indices[3 * t + 2]]);
+            area += A;
+        }
+    }
+    return area > 0.0 ? sum / area : glm::dvec3(0.0);
 }
 
 // Box-filters the strip's samples into its pixel rows of `image`.
@@ -263,15 +340,28 @@ Image render(const scene::Scene& scene, const mesh::Mesh& mesh, const std::vecto
 }
 
 Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& view, int width, int height) {
+    return render(scene, welded, view, width, height, Surroundings{});
+}
+
+std::vector<scene::Triangle> see_through_triangles(const scene::Scene& scene) {
+    std::vector<scene::Triangle> out;
+    for (const scene::Triangle& t : scene.triangles)
+        if (t.material < scene.materials.size() && !scene.materials[t.material].see_through.empty()) out.push_back(t);
+    return out;
+}
+
+Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& view, int width, int height,
+             const Surroundings& around) {
     if (width <= 0 || height <= 0) {
         throw InternalError(fmt::format("output: cannot render a {}x{} image", width, height));
     }
     Image image{width, height, std::vector<float>(std::size_t(width) * height * 3, 0.0f)};
-    std::vector<ScreenTriangle> triangles;
+    std::vector<ScreenTriangle> triangles, glass;
+    std::vector<glm::dvec3> transmits;  // per glass triangle: the share of the light behind it it passes
+    const double diagonal = mesh_diagonal(scene, welded);
+    if (diagonal <= 0.0 && !around.sky) return image;  // nothing (or nothing with extent) to draw
+    const TriangleSetup setup(view, width, height, kNearFraction * std::max(diagonal, 1e-9 * scene.diagonal()));
     {
-        const double diagonal = mesh_diagonal(scene, welded);
-        if (diagonal <= 0.0) return image;  // nothing (or nothing with extent) to draw
-        const TriangleSetup setup(view, width, height, kNearFraction * diagonal);
         std::size_t count = 0;  // (reserved: a vector doubling as it grows holds both copies at once)
         for (std::size_t n = 0; n < welded.nodes.size(); ++n)
             if (!scene.nodes[n].synthetic) count += welded.nodes[n].triangle_count();
@@ -281,21 +371,52 @@ Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& vi
             for (std::size_t t = 0; t < welded.nodes[n].triangle_count(); ++t) setup.add(welded.nodes[n], t, triangles);
         }
     }
+    if (!around.see_through.empty()) {
+        const glm::dvec3 irradiance = mean_radiosity(scene, welded);
+        for (const scene::Triangle& t : around.see_through) {
+            const scene::Material& m = scene.materials.at(t.material);
+            const glm::dvec3 colour = (t.rho[0] + t.rho[1] + t.rho[2]) / 3.0;
+            const bool tinted = m.see_through.rfind("KHR_materials_transmission", 0) == 0;
+            const double a = std::clamp(m.opacity, 0.0, 1.0);
+            setup.add_glass(t.p, a * (colour * irradiance + m.emission), glass);
+            transmits.resize(glass.size(), (1.0 - a) * (tinted ? colour : glm::dvec3(1.0)));
+        }
+        // Farthest first (by the mean of 1/w, ties by order): each blends over what lies behind it.
+        std::vector<std::size_t> order(glass.size());
+        for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+        const auto depth = [&](std::size_t i) { return glass[i].inv_w[0] + glass[i].inv_w[1] + glass[i].inv_w[2]; };
+        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return depth(a) < depth(b); });
+        std::vector<ScreenTriangle> sorted_glass;
+        std::vector<glm::dvec3> sorted_transmits;
+        for (const std::size_t i : order) {
+            sorted_glass.push_back(glass[i]);
+            sorted_transmits.push_back(transmits[i]);
+        }
+        glass = std::move(sorted_glass);
+        transmits = std::move(sorted_transmits);
+    }
+    const scene::Dome dome = scene::dome_of(scene);
 
     // Bin triangles by strip (in order, so z ties resolve the same way in every strip).
     const int strip_samples = kStripRows * kSupersample;
     const int strip_count = (height + kStripRows - 1) / kStripRows;
-    std::vector<std::vector<std::uint32_t>> bins(strip_count);
-    for (std::size_t i = 0; i < triangles.size(); ++i) {
-        for (int s = triangles[i].first_row / strip_samples; s <= triangles[i].last_row / strip_samples; ++s) {
-            bins[s].push_back(static_cast<std::uint32_t>(i));
+    const auto bin = [&](const std::vector<ScreenTriangle>& list) {
+        std::vector<std::vector<std::uint32_t>> bins(strip_count);
+        for (std::size_t i = 0; i < list.size(); ++i) {
+            for (int s = list[i].first_row / strip_samples; s <= list[i].last_row / strip_samples; ++s) {
+                bins[s].push_back(static_cast<std::uint32_t>(i));
+            }
         }
-    }
+        return bins;
+    };
+    const std::vector<std::vector<std::uint32_t>> bins = bin(triangles), glass_bins = bin(glass);
     Strip strip;
     for (int s = 0; s < strip_count; ++s) {
         const int rows = std::min(kStripRows, height - s * kStripRows) * kSupersample;
         strip.reset(s * strip_samples, rows, width * kSupersample);
         for (const std::uint32_t i : bins[s]) rasterize(triangles[i], strip);
+        if (around.sky) fill_sky(setup, *around.sky, dome, strip);
+        for (const std::uint32_t i : glass_bins[s]) blend(glass[i], transmits[i], strip);
         resolve(strip, image);
     }
     return image;

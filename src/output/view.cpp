@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "core/error.h"
@@ -12,6 +13,79 @@ namespace hemirad::output {
 namespace {
 
 constexpr double kFramingYfov = 0.8;  // radians
+
+// A closed interior (interior_view): of kProbeRays rays from the bounds' centre, at least
+// kClosedShare hit the scene, and of those at least kFrontShare hit a face that shows (a front,
+// or either face of a doubleSided surface): a room's walls facing in. An object seen from its
+// own middle shows backs; an open scene lets the rays escape.
+constexpr int kProbeRays = 64;
+constexpr double kClosedShare = 0.8, kFrontShare = 0.8;
+constexpr double kInteriorYfov = 1.2;       // radians (69°); 4:3, about 85° across
+constexpr double kInteriorAspect = 4.0 / 3.0;
+constexpr double kEyeHeight = 1.6;          // scene units (glTF: metres), at most half the room's height
+constexpr double kFromWall = 0.1;           // the eye's distance from the far end's wall, in the room's length
+
+// The nearest hit of the ray o + t d (t > 0) with the scene's own triangles (not the sky dome):
+// its distance (inf: none) and whether the face it meets shows from the ray's side.
+struct Hit {
+    double t = HUGE_VAL;
+    bool shows = false;
+};
+void intersect(const scene::Scene& scene, const glm::dvec3& o, const glm::dvec3* d, int rays, Hit* hits) {
+    for (const scene::Triangle& tri : scene.triangles) {
+        if (tri.node < scene.nodes.size() && scene.nodes[tri.node].synthetic) continue;
+        const glm::dvec3 e1 = tri.p[1] - tri.p[0], e2 = tri.p[2] - tri.p[0], s = o - tri.p[0];
+        const glm::dvec3 normal = glm::cross(e1, e2);
+        const bool double_sided = tri.material < scene.materials.size() && scene.materials[tri.material].double_sided;
+        for (int r = 0; r < rays; ++r) {  // Möller–Trumbore
+            const glm::dvec3 p = glm::cross(d[r], e2);
+            const double det = glm::dot(e1, p);
+            if (det == 0.0) continue;
+            const double inv = 1.0 / det;
+            const double u = glm::dot(s, p) * inv;
+            if (u < 0.0 || u > 1.0) continue;
+            const glm::dvec3 q = glm::cross(s, e1);
+            const double v = glm::dot(d[r], q) * inv;
+            if (v < 0.0 || u + v > 1.0) continue;
+            const double t = glm::dot(e2, q) * inv;
+            if (t > 0.0 && t < hits[r].t) hits[r] = {t, double_sided || glm::dot(normal, d[r]) < 0.0};
+        }
+    }
+}
+
+// Looks across a closed room from near one end, at eye height, when the scene is one (above);
+// else nothing.
+std::optional<View> interior_view(const scene::Scene& scene) {
+    const glm::dvec3 lo = scene.bbox_min, hi = scene.bbox_max, centre = 0.5 * (lo + hi), extent = hi - lo;
+    if (!(glm::length(extent) > 0.0)) return std::nullopt;
+    glm::dvec3 d[kProbeRays];
+    for (int r = 0; r < kProbeRays; ++r) {  // a Fibonacci sphere: even, and the same every time
+        const double y = 1.0 - 2.0 * (r + 0.5) / kProbeRays, ring = std::sqrt(1.0 - y * y);
+        const double phi = r * M_PI * (3.0 - std::sqrt(5.0));
+        d[r] = glm::dvec3(ring * std::cos(phi), y, ring * std::sin(phi));
+    }
+    Hit hits[kProbeRays];
+    intersect(scene, centre, d, kProbeRays, hits);
+    int hit = 0, shows = 0;
+    for (const Hit& h : hits) {
+        hit += h.t < HUGE_VAL;
+        shows += h.t < HUGE_VAL && h.shows;
+    }
+    if (hit < kClosedShare * kProbeRays || shows < kFrontShare * hit) return std::nullopt;
+    // Along the longer horizontal axis, from its + end towards its − end (along −Z, glTF's front,
+    // when the room is square), the eye pulled in front of whatever stands between it and the centre.
+    const bool along_x = extent.x > extent.z;
+    const glm::dvec3 axis = along_x ? glm::dvec3(1.0, 0.0, 0.0) : glm::dvec3(0.0, 0.0, 1.0);
+    const double half = 0.5 * (along_x ? extent.x : extent.z);
+    const glm::dvec3 middle(centre.x, lo.y + std::min(kEyeHeight, 0.5 * extent.y), centre.z);
+    double reach = half * (1.0 - 2.0 * kFromWall);
+    Hit back;
+    intersect(scene, middle, &axis, 1, &back);
+    reach = std::min(reach, 0.8 * back.t);
+    const glm::dvec3 eye = middle + reach * axis;
+    const glm::dmat4 world_to_camera = glm::lookAt(eye, eye - axis, glm::dvec3(0.0, 1.0, 0.0));
+    return View{glm::inverse(world_to_camera), kInteriorYfov, kInteriorAspect, "framing (inside)"};
+}
 
 View from_camera(const scene::Camera& camera) {
     return View{camera.camera_to_world, camera.yfov, camera.aspect > 0.0 ? camera.aspect : 1.0, camera.name};
@@ -61,6 +135,7 @@ View choose_view(const scene::Scene& scene, const std::string& camera_name) {
         return from_camera(*it);
     }
     if (!scene.cameras.empty()) return from_camera(scene.cameras.front());
+    if (std::optional<View> inside = interior_view(scene)) return *inside;
     return framing_view(scene);
 }
 

@@ -1065,6 +1065,7 @@ void see_through(Loader& L, const tinygltf::Material& mat, const std::string& la
         return;
     }
     out.see_through = why;
+    out.opacity = opacity;
 }
 
 Material convert_material(Loader& L, int index) {

@@ -27,6 +27,7 @@ struct Material {
     // Why light passes through this surface ("alphaMode BLEND", "KHR_materials_transmission
     // 0.9"); empty for an opaque one. The see_through effect leaves such surfaces out.
     std::string see_through;
+    double opacity = 1.0;  // of a see-through surface: what the render composites it with
     // Textures, sampled per element by the mesher. base_color and emission above hold the
     // textures' means; an element's own values scale them by its area average over the mean.
     TextureSlot base_texture, emissive_texture;

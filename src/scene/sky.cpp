@@ -71,11 +71,21 @@ PunctualLight parse_sun(const std::string& text, const std::string& option) {
     return sun;
 }
 
-void add_sky(Scene& scene, const Sky& sky) {
+Dome dome_of(const Scene& scene) {
     const double diagonal = std::max(scene.diagonal(), 1e-6);
-    const double radius = kSkyRadius * diagonal;
-    const glm::dvec3 centre(0.5 * (scene.bbox_min.x + scene.bbox_max.x), scene.bbox_min.y,
-                            0.5 * (scene.bbox_min.z + scene.bbox_max.z));
+    return {glm::dvec3(0.5 * (scene.bbox_min.x + scene.bbox_max.x), scene.bbox_min.y,
+                       0.5 * (scene.bbox_min.z + scene.bbox_max.z)),
+            kSkyRadius * diagonal};
+}
+
+double sky_radiance(const Sky& sky, double sin_elevation) {
+    return sky.horizon + (sky.zenith - sky.horizon) * sin_elevation;
+}
+
+void add_sky(Scene& scene, const Sky& sky) {
+    const Dome place = dome_of(scene);
+    const double radius = place.radius;
+    const glm::dvec3 centre = place.centre;
     const auto at = [&](int ring, int segment) {
         const double elevation = 0.5 * M_PI * ring / kSkyRings;
         const double azimuth = 2.0 * M_PI * segment / kSkySegments;
@@ -96,7 +106,7 @@ void add_sky(Scene& scene, const Sky& sky) {
         m.name = fmt::format("sky ring {}", ring);
         m.base_color = zero;
         const double elevation = 0.5 * M_PI * (ring + 0.5) / kSkyRings;
-        m.emission = glm::dvec3(M_PI * (sky.horizon + (sky.zenith - sky.horizon) * std::sin(elevation)));
+        m.emission = glm::dvec3(M_PI * sky_radiance(sky, std::sin(elevation)));
         m.coarse = true;
         const auto material = static_cast<std::uint32_t>(scene.materials.size());
         scene.materials.push_back(m);

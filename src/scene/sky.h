@@ -30,6 +30,16 @@ inline constexpr double kSkyRadius = 2.0;
 // left as it was (the camera still frames the scene).
 void add_sky(Scene& scene, const Sky& sky);
 
+// Where add_sky puts the dome around `scene` (its bounding box): the centre of its rim and its radius.
+struct Dome {
+    glm::dvec3 centre{0.0};
+    double radius = 0.0;
+};
+Dome dome_of(const Scene& scene);
+
+// The sky's radiance at an elevation whose sine is `sin_elevation` (0 at the horizon, 1 overhead).
+double sky_radiance(const Sky& sky, double sin_elevation);
+
 // Parses "AZIMUTH,ELEVATION,ILLUMINANCE" (degrees, degrees, lux) into a white directional light
 // named "sun". Azimuth turns clockwise seen from above, from north (−Z, glTF's forward: Blender's
 // +Y) towards east (+X); elevation rises from the horizon (0 < elevation ≤ 90) towards +Y. The sun

@@ -11,13 +11,9 @@
 
 namespace hemirad::solve {
 
-namespace {
-
 bool shines_in_parallel(const scene::PunctualLight& light) {
     return light.type == scene::PunctualLight::Type::directional && light.intensity != glm::dvec3(0.0);
 }
-
-}  // namespace
 
 bool has_direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights) {
     return !mesh.lights.empty() || std::any_of(lights.begin(), lights.end(), shines_in_parallel);
@@ -25,7 +21,8 @@ bool has_direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualL
 
 std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
                                      formfactor::Engine& engine, int level, glm::dvec3* landed,
-                                     const std::function<void(std::size_t, std::size_t)>& progress) {
+                                     const std::function<void(std::size_t, std::size_t)>& progress,
+                                     std::vector<glm::dvec3>* directional) {
     std::vector<glm::dvec3> H(mesh.elements.size(), glm::dvec3(0.0));
     if (landed) *landed = glm::dvec3(0.0);
     // Directional lights (the mesh's, which must be the shining ones of `lights`): a parallel shot
@@ -56,6 +53,7 @@ std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<s
             }
         }
     }
+    if (directional) *directional = H;
     if (mesh.lights.empty()) return H;
     const std::uint64_t first = kLightShots + static_cast<std::uint64_t>(level) * mesh.lights.size();
     for (std::size_t start = 0; start < mesh.lights.size(); start += kLightBatch) {

@@ -36,8 +36,14 @@ inline constexpr std::size_t kLightBatch = 256;
 // batch). The mesh's directional lights must be the shining ones of `lights` (InternalError).
 // `landed`, if set, receives the flux that reached elements (per channel). Between batches it
 // checks for a stop (core/cancel.h) and reports the hemicubes shot of all (`progress`, if set).
+// `directional`, if set, receives the directional lights' part alone (refinement follows the
+// sun's shadow edges by it).
 std::vector<glm::dvec3> direct_light(const mesh::Mesh& mesh, const std::vector<scene::PunctualLight>& lights,
                                      formfactor::Engine& engine, int level, glm::dvec3* landed = nullptr,
-                                     const std::function<void(std::size_t, std::size_t)>& progress = {});
+                                     const std::function<void(std::size_t, std::size_t)>& progress = {},
+                                     std::vector<glm::dvec3>* directional = nullptr);
+
+// Whether a light is directional and shines (it takes a parallel shot).
+bool shines_in_parallel(const scene::PunctualLight& light);
 
 }  // namespace hemirad::solve

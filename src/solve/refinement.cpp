@@ -110,15 +110,45 @@ std::vector<bool> mark_contrast(const mesh::Mesh& mesh, const std::vector<glm::d
     return split;
 }
 
+void mark_sun_edges(const mesh::Mesh& mesh, const std::vector<glm::dvec3>& sun,
+                    const std::vector<scene::PunctualLight>& lights, const std::vector<int>& level,
+                    const RefineSettings& settings, std::vector<bool>& split) {
+    for (std::size_t k = 0; k < mesh.elements.size() && k < sun.size(); ++k) {
+        const mesh::Element& e = mesh.elements[k];
+        if (split[k] || e.coarse || level[k] >= settings.max_levels + kSunEdgeExtraLevels ||
+            mesh::longest_edge(e.poly) <= settings.min_size)
+            continue;
+        double full = 0.0;
+        for (const scene::PunctualLight& l : lights)
+            if (shines_in_parallel(l)) full += luminance(l.intensity) * std::max(0.0, -glm::dot(e.normal, l.direction));
+        if (!(full > 0.0)) continue;
+        const double share = luminance(sun[k]) / full;
+        if (share > kSunEdgeShare && share < 1.0 - kSunEdgeShare) split[k] = true;
+    }
+}
+
 RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const std::vector<glm::dvec3>& shot,
                     const EngineFactory& make_engine, const RefineSettings& settings) {
     RefineResult result;
     std::vector<int> level(mesh.elements.size(), 0);
     const std::vector<std::uint32_t> shooters = strongest_shooters(mesh, shot, settings);
+    // The directional lights' light on `mesh` (the solve's, shot again on its grid): its shadow
+    // edges are split even where no neighbour shows them.
+    const bool sunlit = settings.lights && settings.max_levels > 0 &&
+                        std::any_of(settings.lights->begin(), settings.lights->end(), shines_in_parallel);
+    std::vector<glm::dvec3> sun;
+    if (sunlit && !(settings.cancelled && settings.cancelled())) {
+        std::unique_ptr<formfactor::Engine> engine = make_engine(mesh, 0);
+        std::vector<mesh::LightShooter> hemicubes = std::move(mesh.lights);  // only the parallel shots are needed
+        mesh.lights.clear();
+        direct_light(mesh, *settings.lights, *engine, 0, nullptr, {}, &sun);
+        mesh.lights = std::move(hemicubes);
+    }
 
-    for (int depth = 0; depth < settings.max_levels; ++depth) {
+    for (int depth = 0; depth < settings.max_levels + (sunlit ? kSunEdgeExtraLevels : 0); ++depth) {
         if (settings.cancelled && settings.cancelled()) break;
-        const std::vector<bool> marked = mark_contrast(mesh, irradiance, level, settings);
+        std::vector<bool> marked = mark_contrast(mesh, irradiance, level, settings);
+        if (sunlit) mark_sun_edges(mesh, sun, *settings.lights, level, settings, marked);
         const std::size_t count = static_cast<std::size_t>(std::count(marked.begin(), marked.end(), true));
         if (count == 0) break;
         if (static_cast<double>(mesh.elements.size()) + 3.0 * static_cast<double>(count) > settings.max_elements) {
@@ -130,12 +160,16 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
 
         // The re-gather: light arriving at the new children from every patch that shot.
         std::vector<glm::dvec3> gathered(m.elements.size(), glm::dvec3(0.0));
-        std::unique_ptr<formfactor::Engine> engine = make_engine(m, depth + 1);
+        // Below max_levels only sun edges are split: the lights alone are shot again, the rest of
+        // the light (a patch's, smooth at this scale) is shared evenly, and the hemicubes stay
+        // at the finest level's resolution.
+        const bool sun_only = depth >= settings.max_levels;
+        std::unique_ptr<formfactor::Engine> engine = make_engine(m, std::min(depth + 1, settings.max_levels));
         std::vector<formfactor::ShotRequest> requests;
         std::vector<formfactor::ShotResult> results;
         long shots = 0;
         const std::size_t batch = static_cast<std::size_t>(std::max(1, settings.batch));
-        for (std::size_t first = 0; first < shooters.size(); first += batch) {
+        for (std::size_t first = 0; !sun_only && first < shooters.size(); first += batch) {
             if (settings.cancelled && settings.cancelled()) break;
             requests.clear();
             for (std::size_t i = first; i < std::min(shooters.size(), first + batch); ++i)
@@ -158,7 +192,8 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
 
         // The lights' direct light, shot again onto the refined mesh: their shadows are the sharpest.
         if (settings.lights && has_direct_light(m, *settings.lights)) {
-            const std::vector<glm::dvec3> direct = direct_light(m, *settings.lights, *engine, depth + 1);
+            const std::vector<glm::dvec3> direct =
+                direct_light(m, *settings.lights, *engine, depth + 1, nullptr, {}, sunlit ? &sun : nullptr);
             for (std::size_t k = 0; k < m.elements.size(); ++k)
                 if (refined.is_new[k]) gathered[k] += direct[k];
             shots += static_cast<long>(m.lights.size());

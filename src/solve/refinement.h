@@ -78,6 +78,24 @@ struct RefineResult {
 std::vector<bool> mark_contrast(const mesh::Mesh& mesh, const std::vector<glm::dvec3>& irradiance,
                                 const std::vector<int>& level, const RefineSettings& settings);
 
+// Elements the sun's shadow edge crosses (adaptive refinement's second rule: a sun pattern finer
+// than the elements, blinds' stripes, shows no contrast between them): `sun` is, per element, the
+// irradiance of the shining directional lights among `lights` (direct_light's `directional`);
+// an element lit by a share of what it would get in full sun (E cos θ, summed over the lights)
+// between kSunEdgeShare and 1 − kSunEdgeShare is marked, if splittable as for mark_contrast (but
+// down to max_levels + kSunEdgeExtraLevels). The
+// parallel shot's share is exact in full light and full shadow, so the bounds need leave no room
+// for noise.
+inline constexpr double kSunEdgeShare = 0.01;
+// Sun edges are split this many levels deeper than max_levels: a stripe of light narrower than an
+// element (blinds) needs children of a few per stripe before the output's per-vertex light, each
+// vertex the mean of the elements around it, shows it at its width. Only the elements an edge
+// crosses are split, a line of them, not an area.
+inline constexpr int kSunEdgeExtraLevels = 2;
+void mark_sun_edges(const mesh::Mesh& mesh, const std::vector<glm::dvec3>& sun,
+                    const std::vector<scene::PunctualLight>& lights, const std::vector<int>& level,
+                    const RefineSettings& settings, std::vector<bool>& split);
+
 // The hemicube resolution for a re-gather onto elements `level` splits deep: the base N doubled
 // per level, so children cover as many cells as their parents did, up to kMaxRegatherHemicube.
 inline constexpr int kMaxRegatherHemicube = 2048;
@@ -87,7 +105,8 @@ inline int regather_hemicube(int hemicube, int level) { return std::min(kMaxRega
 // hemicube engine raises its resolution to regather_hemicube).
 using EngineFactory = std::function<std::unique_ptr<formfactor::Engine>(const mesh::Mesh&, int level)>;
 
-// Refines `mesh` level by level. `irradiance` is the solved incident light per element (with any
+// Refines `mesh` level by level, splitting where mark_contrast and (with shining directional
+// lights) mark_sun_edges say. `irradiance` is the solved incident light per element (with any
 // ambient estimate of the unshot light included); `shot` is, per patch, the radiosity it shot in
 // all (what a progressive solve shot, or a matrix solve's patch radiosity).
 // `make_engine` builds a form-factor engine for each refined mesh.
