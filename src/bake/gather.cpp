@@ -65,6 +65,7 @@ Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
                                        refined.stopped_for_memory.level, refined.stopped_for_memory.split,
                                        format_bytes(c.plan.memory_limit.bytes), c.plan.memory_limit.source));
         lit.mesh = std::move(refined.mesh);
+        c.progress.refined(lit.mesh.elements.size());
         s.irradiance = std::move(refined.irradiance);
         s.radiosity = std::move(refined.radiosity);
         lit.levels = std::move(refined.levels);

@@ -43,6 +43,8 @@ public:
         (void)shots;
         (void)total;
     }
+    // Adaptive refinement is over: the elements it left (the gather's and the output's work).
+    virtual void refined(std::size_t elements) { (void)elements; }
     // The final gather's vertices.
     virtual void gathering(long points, long total) {
         (void)points;

@@ -3,8 +3,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <system_error>
 
@@ -35,18 +33,29 @@ constexpr double kGltfSecondsPerElement = 5e-6, kGltfSecondsPerTriangle = 1e-5;
 // The gather's vertices per element (1.0 on the Cornell box, 1.5 on a city of quads and
 // clusters): the larger decides whether a gather is left out for its size (gather.h), the
 // smaller counts its work.
-constexpr double kGatherVerticesPerElement = 1.0, kGatherMostVerticesPerElement = 1.5;
-// Refinement splits about this share more elements per level (it doubles them in two levels);
-// a level's host work (marking, splitting, the engine for the finer mesh) per element after it.
-constexpr double kRefineGrowth = 1.41;
+constexpr double kGatherVerticesPerElement = 1.3, kGatherMostVerticesPerElement = 1.5;
+// Refinement's growth over two levels: 2.2× at N 256 (the Cornell box 1.8×, a 20k city 2.75×),
+// more where a coarser hemicube leaves noise to split (N 64, draft: cities of 10k–150k triangles
+// 5.0–6.4×, a furniture hall 2.7×): about 2.2 (256/N)^0.6, at most 4× a level. A level's host
+// work (marking, splitting, the engine for the finer mesh) per element after it.
+constexpr double kRefineGrowth256 = 2.2, kRefineGrowthExponent = 0.6;
 constexpr double kRefineSecondsPerElement = 5e-5;
 // Gather refinement's new vertices, as a share of the gather's (at most half again); a vertex's
 // later passes, as a share of its first (they re-use its row where the budget kept it).
 constexpr double kGatherRefineShare = 0.3;
+// A gather vertex's host work besides its hemicube (its row's light, the near-field weights), per
+// element of the mesh: 0.8 ms a vertex on a 9.5k-element city at N 32, 2.1 ms at 28k, 0.62 ms on
+// the Cornell box's 14.7k at N 96 — several times the budget's hemicube alone.
+constexpr double kGatherSecondsPerVertexElement = 4.5e-8;
 constexpr double kLaterPassShare = 0.05;
 // The engines' set-up before the solve (the device's mesh; PoCL's kernels when its cache holds
 // them, else about 10 s more to build them).
 constexpr double kEnginesSeconds = 0.3;
+
+double growth_per_level(int hemicube) {
+    const double two_levels = kRefineGrowth256 * std::pow(256.0 / std::max(8, hemicube), kRefineGrowthExponent);
+    return std::min(4.0, std::sqrt(two_levels));
+}
 
 BakeShape with_elements(BakeShape s, double elements) {
     s.counts.elements = elements;
@@ -68,7 +77,7 @@ double refine_level_seconds(const WorkCounts& w, double shooters) {
     if (s.refine_levels <= 0) return 0.0;
     double seconds = 0.0, refined = s.counts.elements;
     for (int level = 1; level <= s.refine_levels; ++level) {
-        refined *= kRefineGrowth;
+        refined *= growth_per_level(s.hemicube);
         seconds += shooters * batched_shot_seconds(with_elements(s, refined), solve::regather_hemicube(s.hemicube, level)) +
                    refined * kRefineSecondsPerElement;
     }
@@ -99,7 +108,7 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         StagePlan refine{"refine", Cost::hemicube, double(s.refine_levels), refine_level_seconds(w, shooters)};
         refine.evidence = false;
         out.push_back(refine);
-        refined *= std::pow(kRefineGrowth, s.refine_levels);
+        refined *= std::pow(growth_per_level(s.hemicube), s.refine_levels);
     }
     const bool left_out = !w.gather_given && refined * kGatherMostVerticesPerElement > double(w.max_planned_gather);
     if (w.gather > 0 && !left_out) {
@@ -109,7 +118,8 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         const double points = refined * kGatherVerticesPerElement;
         const double units =
             points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
-        out.push_back({"gather", Cost::hemicube, units, batched_shot_seconds(with_elements(s, refined), w.gather)});
+        out.push_back({"gather", Cost::hemicube, units,
+                       batched_shot_seconds(with_elements(s, refined), w.gather) + refined * kGatherSecondsPerVertexElement});
     }
     double output = 0.0;
     for (const auto& step : predict_output(refined, w.triangles, s.pixels)) output += step.second;
@@ -152,7 +162,7 @@ void StageProgress::plan_rest(const WorkCounts& w) {
     gather_extra_ = w.gather_refine ? kGatherRefineShare : 0.0;
     gather_passes_ = std::max(1, w.gather_passes);
     double refined = w.shape.counts.elements;
-    if (w.refine) refined *= std::pow(kRefineGrowth, w.shape.refine_levels);
+    if (w.refine) refined *= std::pow(growth_per_level(w.shape.hemicube), w.shape.refine_levels);
     output_steps_ = predict_output(refined, w.triangles, w.shape.pixels);
     planned_ = true;
 }
@@ -224,7 +234,6 @@ void StageProgress::show(const std::string& detail, bool last) {
 }
 
 void StageProgress::writing(const std::string& what) {
-    if (std::getenv("HEMIRAD_DEBUG_STEPS")) std::fprintf(stderr, "STEP %s %.3f\n", what.c_str(), now());
     into("output");
     double before = 0.0, total = 0.0;
     bool found = false;
@@ -280,6 +289,20 @@ void StageProgress::refining(int level, long shots, long total) {
     }
     eta_.update(now(), double(level - 1) + double(shots) / double(std::max(1L, total)), levels);
     show(fmt::format("level {}: re-gather {} / {} shots", level, shots, total));
+}
+
+// Refinement is over: the gather and the output are predicted again from the elements it left.
+void StageProgress::refined(std::size_t elements) {
+    WorkCounts w = work_;
+    w.refine = false;  // its growth is known: the elements as refined
+    w.shape.counts.elements = double(elements);
+    for (const StagePlan& s : predict_stages(w))
+        if (s.name == "gather" || s.name == "output") eta_.replan(s.name, s.units, s.unit_seconds);
+    if (!eta_.has("gather")) return;
+    bool gather = false;
+    for (const StagePlan& s : predict_stages(w)) gather = gather || s.name == "gather";
+    if (!gather) eta_.replan("gather", 0.0, 0.0);  // it will be left out for its size
+    output_steps_ = predict_output(double(elements), w.triangles, w.shape.pixels);
 }
 
 void StageProgress::gathering(long points, long total) {

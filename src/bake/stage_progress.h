@@ -65,6 +65,7 @@ public:
     void rows(long done, long total) override;
     void refining(int level, long shots, long total) override;
     void gathering(long points, long total) override;
+    void refined(std::size_t elements) override;
 
     double now() const { return seconds_since(start_); }
     const Eta& eta() const { return eta_; }

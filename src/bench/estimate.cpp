@@ -18,7 +18,7 @@ namespace fs = std::filesystem;
 using ordered_json = nlohmann::ordered_json;
 
 std::vector<std::pair<std::string, std::string>> estimate_bench_scenes(bool quick) {
-    if (quick) return {{"procedural:2k", "draft"}, {"city:10k", "draft"}};
+    if (quick) return {{"procedural:2k", "draft"}, {"city:4k", "draft"}};  // about 20 s
     // Small to large: a closed room of furniture, an open city, a courtyard of foliage cards.
     return {{"furniture:20k", "draft"}, {"city:60k", "draft"}, {"foliage:150k", "draft"}};
 }
