@@ -33,7 +33,7 @@ constexpr double kGltfSecondsPerElement = 5e-6, kGltfSecondsPerTriangle = 1e-5;
 // The gather's vertices per element (1.0 on the Cornell box, 1.5 on a city of quads and
 // clusters): the larger decides whether a gather is left out for its size (gather.h), the
 // smaller counts its work.
-constexpr double kGatherVerticesPerElement = 1.3, kGatherMostVerticesPerElement = 1.5;
+constexpr double kGatherVerticesPerElement = 1.15, kGatherMostVerticesPerElement = 1.5;
 // Refinement's growth over two levels: 2.2× at N 256 (the Cornell box 1.8×, a 20k city 2.75×),
 // more where a coarser hemicube leaves noise to split (N 64, draft: cities of 10k–150k triangles
 // 5.0–6.4×, a furniture hall 2.7×): about 2.2 (256/N)^0.6, at most 4× a level. A level's host
@@ -46,7 +46,7 @@ constexpr double kGatherRefineShare = 0.3;
 // A gather vertex's host work besides its hemicube (its row's light, the near-field weights), per
 // element of the mesh: 0.8 ms a vertex on a 9.5k-element city at N 32, 2.1 ms at 28k, 0.62 ms on
 // the Cornell box's 14.7k at N 96 — several times the budget's hemicube alone.
-constexpr double kGatherSecondsPerVertexElement = 4.5e-8;
+constexpr double kGatherSecondsPerVertexElement = 3.5e-8;
 constexpr double kLaterPassShare = 0.05;
 // The engines' set-up before the solve (the device's mesh; PoCL's kernels when its cache holds
 // them, else about 10 s more to build them).
@@ -104,7 +104,8 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         // RefineSettings::max_shooters; the count is known once the level starts) and the lights
         // onto its finer mesh, at a finer hemicube. Its host work besides makes its rate no
         // measure of the gather's.
-        const double shooters = std::min(P, double(solve::RefineSettings{}.max_shooters)) + w.light_hemicubes;
+        // A priori a quarter of the cap (the Cornell box 22, cities of 4k–20k triangles 36–144).
+        const double shooters = std::min(P, double(solve::RefineSettings{}.max_shooters) / 4.0) + w.light_hemicubes;
         StagePlan refine{"refine", Cost::hemicube, double(s.refine_levels), refine_level_seconds(w, shooters)};
         refine.evidence = false;
         out.push_back(refine);

@@ -38,6 +38,7 @@ void ProgressLine::begin_stage(const std::string& stage) {
     finish();
     start_ = Clock::now();
     last_ = -1e9;
+    moved_ = false;
 }
 
 std::string ProgressLine::format(const Status& s) {
@@ -49,7 +50,10 @@ std::string ProgressLine::format(const Status& s) {
 }
 
 void ProgressLine::status(const Status& s) {
-    if (!due(s.last)) return;
+    // The stage's first progress is shown at once too (a log's first batch says the pace).
+    const bool first = !moved_ && s.fraction > 0.0;
+    if (s.fraction > 0.0) moved_ = true;
+    if (!due(s.last || first)) return;
     const std::string line = format(s);
     if (!tty_ && (s.stage == "load" || s.stage == "mesh")) {
         held_.push_back(line);

@@ -44,6 +44,7 @@ private:
     Clock::time_point start_ = Clock::now();
     double last_ = -1e9;
     bool printed_ = false;
+    bool moved_ = false;  // the stage has shown progress
     // In a log, the lines of loading and meshing wait until the bake is past its input's checks
     // (the next stage, or a note or warning): a bad file is then one line.
     std::vector<std::string> held_;
