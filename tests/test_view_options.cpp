@@ -1,6 +1,7 @@
 // Seeing the result: --look-from/--look-at/--fov for a view the file lacks, --exposure, and a
 // progress report in logs (--progress when stderr is not a terminal).
 #include <catch2/catch.hpp>
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -58,7 +59,7 @@ TEST_CASE("the exposure option sets render.png's exposure in stops, and the repo
     CHECK(same.same);
 }
 
-TEST_CASE("the progress option reports progress in a log, a line at a time, through refinement too", "[cli][view]") {
+TEST_CASE("the progress option reports progress in a log, a line at a time, through every stage with the bake's time left", "[cli][view][eta]") {
     TempDir dir;
     // Draft: refinement and the final gather in about a second. (Not --hemicube 32 under the
     // default: its noisy solve refines to 67k elements, and their gather took 40 s.)
@@ -67,14 +68,75 @@ TEST_CASE("the progress option reports progress in a log, a line at a time, thro
     INFO(r.err);
     REQUIRE(r.code == 0);
     CHECK(r.err.find("\r") == std::string::npos);  // not a terminal: no line redrawn in place
-    CHECK(r.err.find("hemirad: form-factor rows") != std::string::npos);
-    CHECK(r.err.find("hemirad: refinement level 1: re-gather") != std::string::npos);
-    CHECK(r.err.find("hemirad: final gather ") != std::string::npos);
+    // Every stage has its line (its first and its last at least), with its own progress.
+    for (const char* stage : {"load", "mesh", "engines", "solve", "refine", "gather", "output"}) {
+        INFO("stage " << stage);
+        CHECK(r.err.find(std::string("hemirad: ") + stage + " ") != std::string::npos);
+        CHECK(r.err.find(std::string("hemirad: ") + stage + " 100%") != std::string::npos);
+    }
+    CHECK(r.err.find("form-factor rows 206 / 206") != std::string::npos);
+    CHECK(r.err.find(": re-gather") != std::string::npos);
+    CHECK(r.err.find(" vertices") != std::string::npos);
+    CHECK(r.err.find("output   0%  weld") != std::string::npos);
+    CHECK(r.err.find("baked.gltf") != std::string::npos);
+    // The bake's time left once the mesh's counts are known; unknown before.
+    CHECK(r.err.find("load   0%  cornell_box.gltf  0.0 s  left ?") != std::string::npos);
+    CHECK(r.err.find("hemirad: solve   0%  0.0 s  left ~") != std::string::npos);
+    // report.json: a prediction and a measurement for every stage that ran, in order, and
+    // the totals; the prediction made at 10% of the bake.
+    const json report = read_json(dir / "out" / "report.json");
+    const json& estimate = report.at("estimate");
+    std::vector<std::string> names;
+    double measured = 0.0, predicted = 0.0;
+    for (const json& stage : estimate.at("stages")) {
+        names.push_back(stage.at("name").get<std::string>());
+        INFO("stage " << names.back());
+        CHECK(stage.at("predicted_s").get<double>() >= 0.0);
+        CHECK(stage.at("refit_s").get<double>() >= 0.0);
+        CHECK(stage.at("measured_s").get<double>() >= 0.0);
+        measured += stage.at("measured_s").get<double>();
+        predicted += stage.at("predicted_s").get<double>();
+    }
+    CHECK(names == std::vector<std::string>{"load", "mesh", "engines", "solve", "refine", "gather", "output"});
+    CHECK(estimate.at("total_predicted_s").get<double>() == Approx(predicted));
+    // The stages follow one another: their sum is the bake's time but for what runs before the
+    // first (the plan) and after the last (this report).
+    CHECK(measured <= estimate.at("total_measured_s").get<double>());
+    CHECK(estimate.at("total_measured_s").get<double>() <= report.at("timings_s").at("total").get<double>() + 1e-3);
+    const json& at = estimate.at("at_10_percent");
+    CHECK(at.at("predicted_total_s").get<double>() > 0.0);
+    CHECK(at.at("ratio").get<double>() == Approx(at.at("predicted_total_s").get<double>() /
+                                                 estimate.at("total_measured_s").get<double>()));
     // Without --progress a log gets none.
     const RunResult quiet = run_hemirad(dir, bake_args(kCornellBox, dir / "quiet", quick));
-    CHECK(quiet.err.find("hemirad: form-factor rows ") == std::string::npos);
+    CHECK(quiet.err.find("form-factor rows ") == std::string::npos);
     CHECK(quiet.err.find("re-gather") == std::string::npos);
-    CHECK(quiet.err.find("final gather") == std::string::npos);
+    CHECK(quiet.err.find("left ~") == std::string::npos);
+}
+
+TEST_CASE("the progress line of a progressive solve with point lights: the lights' hemicubes, then passes of an expected total", "[cli][view][eta]") {
+    TempDir dir;
+    const RunResult r = run_hemirad(dir, {"bake", kClosedRoom.string(), "-o", (dir / "out").string(), "--quality", "draft",
+                                          "--solver", "progressive", "--sun", "30,40,2000", "--image-width", "64",
+                                          "--progress"});
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+    CHECK(r.err.find("hemirad: solve ") != std::string::npos);
+    CHECK(r.err.find("pass ") != std::string::npos);
+    const json report = read_json(dir / "out" / "report.json");
+    bool solve = false;
+    for (const json& stage : report.at("estimate").at("stages")) solve = solve || stage.at("name") == "solve";
+    CHECK(solve);
+}
+
+TEST_CASE("bad input with --progress is still one line on stderr", "[cli][view][eta]") {
+    TempDir dir;
+    write_text(dir / "bad.gltf", "{ not json");
+    const RunResult r = run_hemirad(dir, {"bake", (dir / "bad.gltf").string(), "-o", (dir / "out").string(), "--progress"});
+    INFO(r.err);
+    CHECK(r.code == 2);
+    CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+    CHECK(r.err.find("left") == std::string::npos);
 }
 
 TEST_CASE("view options that cannot be used are refused with one line", "[cli][view]") {

@@ -19,6 +19,7 @@
 #include "bake/outputs.h"
 #include "bake/report.h"
 #include "bake/solve.h"
+#include "bake/stage_progress.h"
 #include "bake/stages.h"
 #include "core/counted.h"
 #include "core/error.h"
@@ -385,7 +386,7 @@ void warn_engine_events(const EngineChoice& choice, Warnings& warnings) {
 // Stage "write outputs": render.exr, render.png and baked.gltf, staged. Returns the exposure of
 // render.png.
 double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, Lit& lit, OutputTransaction& out,
-                     Warnings& warnings) {
+                     Warnings& warnings, Progress& progress) {
     const Options& o = p.o;
     const auto& radiosity = lit.solved.solution.radiosity;
     const auto& irradiance = lit.solved.solution.irradiance;
@@ -394,6 +395,7 @@ double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, L
     // One weld of the mesh for every output: the gather's where it made one, its values then the
     // light drawn (the gather's at the vertices, else the elements' means); else one made here.
     const bool gathered = lit.gathered.points > 0;
+    progress.writing("weld");
     output::WeldedMesh welded;
     if (lit.welded) {
         welded = std::move(*lit.welded);
@@ -402,14 +404,18 @@ double write_outputs(const Plan& p, const Setup& s, const scene::Scene& scene, L
     } else {
         welded = output::weld(scene.nodes.size(), lit.mesh, radiosity);  // no gather: no gathered light
     }
+    progress.writing("render");
     const output::Image image =
         output::render(scene, welded, s.view, s.width, s.height, output::Surroundings{s.see_through, p.sky});
     if (!output::all_finite(image)) throw InternalError("the rendered image has a non-finite pixel; nothing written");
+    progress.writing("render.exr");
     output::write_exr(image, out.staged("render.exr"));
     const double exposure = std::isnan(o.exposure) ? output::auto_exposure(image) : std::exp2(o.exposure);
+    progress.writing("render.png");
     output::write_png(image, out.staged("render.png"), exposure);
     // The user's scene with the light baked in; or (--output-mode radiosity, and scenes not read
     // from a file) the element mesh alone.
+    progress.writing("baked.gltf");
     if (o.output_mode == "scene" && scene.source) {
         const output::VertexValues incident =
             gathered ? lit.gathered.light.irradiance : output::vertex_values(welded, lit.mesh, irradiance);
@@ -432,6 +438,24 @@ std::string summary_line(const Options& o, const Meshed& m, const Lit& lit) {
                        lit.mesh.elements.size(), o.output);
 }
 
+// What the time model predicts the stages after meshing from (stage_progress.h): the counts
+// say_expected_time's estimate is made from.
+WorkCounts work_counts(const Plan& p, const Setup& s, const Meshed& m, const scene::Scene& scene) {
+    WorkCounts w;
+    w.shape = m.shape;
+    w.solver = m.solver;
+    w.triangles = double(scene.triangles.size());
+    w.light_hemicubes = double(m.mesh.lights.size());
+    w.refine = s.effects.refinement.on && p.o.refine_levels > 0;
+    w.gather = p.o.gather;
+    w.gather_given = p.gather_given;
+    w.max_planned_gather = double(kMaxPlannedGather);
+    w.gather_passes = s.direct_only ? 1 : p.o.gather_passes;
+    w.gather_refine = p.o.gather_refine > 0 && !s.direct_only;
+    if (m.solver == "progressive") w.max_passes = double(max_passes_for(p.o, m.mesh.patches.size()));
+    return w;
+}
+
 }  // namespace
 
 int planned_batch(std::size_t members) {
@@ -444,20 +468,29 @@ long max_passes_for(const Options& o, std::size_t patches) {
     return o.max_passes >= 0 ? o.max_passes : std::max<long>(100000, 2 * static_cast<long>(patches));
 }
 
-void run(const Options& options, Progress& progress) {
+void run(const Options& options, Progress& shown) {
+    // One progress line through every stage, with the bake's time left from a model of its
+    // stages re-fitted as it runs (stage_progress.h); report.json's `estimate` records it.
+    StageProgress progress(shown);
     Timings timings;
     timings.start = Clock::now();
     const Plan plan = make_plan(options);
     const Options& o = plan.o;
 
+    progress.plan_load(o.scene);
+    progress.begin_stage("load");
     auto t0 = Clock::now();
     scene::Scene scene = load(plan);
     timings.load = seconds_since(t0);
     const Setup setup = set_up(plan, scene);
 
+    progress.plan_mesh(double(scene.triangles.size()));
+    progress.begin_stage("mesh");
     t0 = Clock::now();
     Meshed meshed = build_mesh(plan, setup, scene);
     timings.mesh = seconds_since(t0);
+    progress.plan_rest(work_counts(plan, setup, meshed, scene));
+    progress.begin_stage("engines");  // until the solve begins: the device's set-up
 
     formfactor::Settings ff;
     ff.hemicube = o.hemicube;
@@ -485,11 +518,12 @@ void run(const Options& options, Progress& progress) {
     warn_engine_events(choice, warnings);
 
     t0 = Clock::now();
-    const double exposure = write_outputs(plan, setup, scene, lit, out, warnings);
+    const double exposure = write_outputs(plan, setup, scene, lit, out, warnings, progress);
     timings.output = seconds_since(t0);
+    progress.end_stage();
 
     write_report({plan, setup, meshed, scene, lit, choice, fallback, elements_before, expected, exposure, warnings.all(),
-                  timings},
+                  timings, &progress},
                  out.staged("report.json"));
     cancel::check();  // a signal while writing: nothing is committed
     out.commit(kOutputNames);

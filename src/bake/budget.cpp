@@ -144,6 +144,8 @@ namespace {
 // gather (N = 96) 0.25 ms a point; --gather 32 on a 300k-element jungle about 2 ms a point.
 constexpr double kBatchedCellSeconds = 1.42e-3, kBatchedSetupSeconds = 1.9e-4;
 
+}  // namespace
+
 double batched_shot_seconds(const BakeShape& s, int hemicube) {
     const double scale = std::max(0.5, std::sqrt(s.counts.elements / 8316.0));
     const double n = double(hemicube) / 256.0;
@@ -158,7 +160,10 @@ double shot_seconds(const BakeShape& s, int hemicube) {
     return s.opencl ? kShotSeconds * scale * std::max(1.0, n) : kReferenceShotSeconds * scale * std::max(1.0, n * n);
 }
 
-}  // namespace
+double expected_passes(const BakeShape& s) {
+    const double P = s.counts.patches;
+    return kProgressiveRounds * std::sqrt(std::min(P, kRoundsPatches) * P);
+}
 
 std::string format_duration(double seconds) {
     if (seconds < 90.0) return fmt::format("{:.0f} s", seconds);
@@ -197,7 +202,7 @@ SolverTimes expected_times(const BakeShape& s) {
     const double E = s.counts.elements, P = s.counts.patches;
     const double channels = s.matrix.grey ? 1.0 : 3.0;
     const double shot = shot_seconds(s, s.hemicube);
-    const double passes = kProgressiveRounds * std::sqrt(std::min(P, kRoundsPatches) * P);
+    const double passes = expected_passes(s);
     SolverTimes t;
     const double sweeps = direct_only(s) ? 0.0 : expected_sweeps(s);
     t.matrix = P * (shot + E * kRowSecondsPerElement) + sweeps * channels * P * P * kSweepSecondsPerEntry;

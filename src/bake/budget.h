@@ -62,6 +62,14 @@ struct SolverTimes {
 };
 SolverTimes expected_times(const BakeShape& shape);
 
+// The model's parts, for the progress line's time model (eta.h): a solver's hemicube of
+// resolution `hemicube` on the mesh of `shape`; a batched one (the lights', refinement's
+// re-gather, the final gather); the progressive passes expected (about three rounds of
+// √(924·P)).
+double shot_seconds(const BakeShape& shape, int hemicube);
+double batched_shot_seconds(const BakeShape& shape, int hemicube);
+double expected_passes(const BakeShape& shape);
+
 // Seconds the counted work of a bake is expected to take, by part, in the model of
 // expected_times (2 CPU cores through PoCL; a GPU is faster): the matrix solve's rows and sweeps
 // (not progressive shooting, whose passes are not known before), the lights' hemicubes

@@ -52,7 +52,7 @@ Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
         const mesh::Texturing texturing(c.scene);
         rs.texturing = &texturing;
         rs.lights = &c.scene.lights;
-        c.progress.begin_stage();
+        c.progress.begin_stage("refine");
         rs.progress = [&](int level, long shots, long total) { c.progress.refining(level, shots, total); };
         Solution& s = lit.solved.solution;
         solve::RefineResult refined = solve::refine(
@@ -65,6 +65,7 @@ Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
                                        refined.stopped_for_memory.level, refined.stopped_for_memory.split,
                                        format_bytes(c.plan.memory_limit.bytes), c.plan.memory_limit.source));
         lit.mesh = std::move(refined.mesh);
+        c.progress.refined(lit.mesh.elements.size());
         s.irradiance = std::move(refined.irradiance);
         s.radiosity = std::move(refined.radiosity);
         lit.levels = std::move(refined.levels);
@@ -181,6 +182,7 @@ Lit gather(const LightContext& c, Lit lit, EngineStack& engines) {
     const auto t0 = Clock::now();
     lit.gathered = Gathered{};
     if (c.plan.o.gather > 0) {
+        c.progress.begin_stage("gather");  // the weld and the grading too: the gather's time
         Solution& s = lit.solved.solution;
         output::WeldedMesh welded = output::weld(c.scene.nodes.size(), lit.mesh, s.radiosity);
         if (!too_many(c, gathered_vertices(c.scene, welded), "")) {
@@ -203,13 +205,10 @@ Lit gather(const LightContext& c, Lit lit, EngineStack& engines) {
                     lit.gathered.contact_split = split;
                 }
             }
-            if (go) {
-                c.progress.begin_stage();
-                gather_vertices(c, lit, welded, engines);
-                c.progress.end_stage();
-            }
+            if (go) gather_vertices(c, lit, welded, engines);
         }
         lit.welded = std::move(welded);  // of lit.mesh, as graded and refined by the gather
+        c.progress.end_stage();
     }
     lit.gather_seconds = seconds_since(t0);
     return lit;

@@ -43,15 +43,33 @@ public:
         (void)shots;
         (void)total;
     }
+    // Adaptive refinement is over: the elements it left (the gather's and the output's work).
+    virtual void refined(std::size_t elements) { (void)elements; }
     // The final gather's vertices.
     virtual void gathering(long points, long total) {
         (void)points;
         (void)total;
     }
-    // A stage with progress to show (solve, refinement, gather) begins: its clock starts; and ends:
-    // its line is closed.
-    virtual void begin_stage() {}
+    // A stage begins (`stage`: load, mesh, solve, refine, gather, output): its clock starts; and
+    // ends: its line is closed.
+    virtual void begin_stage(const std::string& stage) { (void)stage; }
     virtual void end_stage() {}
+    // The output stage's steps as they start: "weld", "render", "render.exr", "render.png",
+    // "baked.gltf".
+    virtual void writing(const std::string& what) { (void)what; }
+
+    // What the progress line shows: the bake as a whole, from the time model (bake/eta.h) that
+    // the calls above feed (bake::run wraps the caller's Progress in a StageProgress that makes
+    // these from them).
+    struct Status {
+        std::string stage;     // load, mesh, lights, solve, refine, gather, output
+        std::string detail;    // the stage's own count ("pass 1,200 of ~3,000, error 2.1e-03")
+        double fraction = -1;  // of the stage, 0..1; < 0 unknown
+        double elapsed = 0;    // seconds in the stage
+        double left = -1;      // seconds left of the bake (this stage's rest and every later one); < 0 unknown
+        bool last = false;     // the stage's final status (always shown)
+    };
+    virtual void status(const Status& s) { (void)s; }
 };
 
 }  // namespace hemirad::bake

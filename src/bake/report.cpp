@@ -1,6 +1,7 @@
 // report.json (see report.h).
 #include "bake/report.h"
 
+#include <algorithm>
 #include <fstream>
 
 #include <fmt/core.h>
@@ -224,7 +225,39 @@ ordered_json make_report(const Record& r) {
                            {"gather", L.gather_seconds},
                            {"output", r.timings.output},
                            {"total", seconds_since(r.timings.start)}};
+    if (r.progress) report["estimate"] = estimate_json(r.progress->eta(), r.progress->now());
     return report;
+}
+
+// `estimate`, beside timings_s: how the progress line's time left (bake/eta.h) fared.
+//   "stages": [{"name", "predicted_s": the model's first prediction, from the work counts before
+//              the stage ran (load, mesh: before each; the rest: once the mesh's counts were
+//              known, before the solve), "refit_s": its prediction as it began, corrected by the
+//              stages before it (the solve's measured/predicted ratio scales refinement's and
+//              the gather's), "measured_s"}] — every stage that ran, in order ("lights": the
+//              punctual lights' hemicubes at the solve's start; "output": the weld, render,
+//              images and baked glTF; report.json itself is not in it);
+//   "total_predicted_s": the sum of the predicted_s, "total_measured_s": seconds from the
+//   bake's start to this report;
+//   "at_10_percent": {"elapsed_s", "predicted_total_s", "ratio"}: the bake's total as the
+//   progress line predicted it (elapsed + left) when 10% of total_measured_s had passed (or
+//   first after, where the mesh's counts were not known yet), and predicted/measured.
+nlohmann::ordered_json estimate_json(const Eta& eta, double now) {
+    ordered_json stages = ordered_json::array();
+    double predicted = 0.0;
+    for (const Eta::Stage& s : eta.stages()) {
+        if (s.state != Eta::Stage::State::done) continue;
+        stages.push_back({{"name", s.plan.name},
+                          {"predicted_s", s.first_predicted},
+                          {"refit_s", std::max(0.0, s.predicted_at_begin)},
+                          {"measured_s", s.measured}});
+        predicted += s.first_predicted;
+    }
+    const Eta::Prediction at = eta.prediction_at(0.1, now);
+    ordered_json out = {{"stages", stages}, {"total_predicted_s", predicted}, {"total_measured_s", now}};
+    if (at.total >= 0.0 && now > 0.0)
+        out["at_10_percent"] = {{"elapsed_s", at.at}, {"predicted_total_s", at.total}, {"ratio", at.total / now}};
+    return out;
 }
 
 void write_report(const Record& r, const std::filesystem::path& file) {

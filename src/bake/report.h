@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bake/engine_select.h"
+#include "bake/stage_progress.h"
 #include "bake/stages.h"
 #include "core/timing.h"
 
@@ -33,7 +34,12 @@ struct Record {
     double exposure;                         // render.png's scale
     const std::vector<std::string>& warnings;
     Timings timings;
+    const StageProgress* progress = nullptr;  // the time model's record (`estimate`); none: not written
 };
+
+// report.json's `estimate`: the time model's prediction per stage against the measurement
+// (`now`: seconds into the bake as the report is made).
+nlohmann::ordered_json estimate_json(const Eta& eta, double now);
 
 nlohmann::ordered_json make_report(const Record& r);
 

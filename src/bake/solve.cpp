@@ -103,7 +103,7 @@ Solved solve(const mesh::Mesh& mesh, const scene::Scene& scene, const std::strin
     }
     formfactor::TimedEngine engine(*base);
     const auto t0 = Clock::now();
-    c.progress.begin_stage();
+    c.progress.begin_stage("solve");
     // The punctual lights shoot first: the solvers start from their direct light.
     std::vector<glm::dvec3> direct;
     if (solve::has_direct_light(mesh, scene.lights))

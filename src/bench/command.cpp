@@ -9,6 +9,7 @@
 #include <system_error>
 
 #include "bench/effects.h"
+#include "bench/estimate.h"
 #include "bench/image.h"
 #include "core/error.h"
 
@@ -55,14 +56,14 @@ private:
 
 void run_bench(const BenchCommand& command, std::ostream& log) {
     JsonFile json(command.json);
-    if (command.accuracy + command.effects + command.scaling > 1)
-        throw InputError("bench: --accuracy, --effects and --scaling are separate runs");
+    if (command.accuracy + command.effects + command.scaling + command.estimate > 1)
+        throw InputError("bench: --accuracy, --effects, --estimate and --scaling are separate runs");
     if (command.accuracy && !command.throughput.scenes.empty())
         throw InputError("bench --accuracy: takes no scenes (it builds its own)");
     if (command.effects && !command.throughput.scenes.empty())
         throw InputError("bench --effects: takes no scenes (it bakes the bundled ones)");
-    if (command.quick && !command.accuracy && !command.effects)
-        throw InputError("bench: --quick goes with --accuracy or --effects");
+    if (command.quick && !command.accuracy && !command.effects && !command.estimate)
+        throw InputError("bench: --quick goes with --accuracy, --effects or --estimate");
     nlohmann::ordered_json doc;
     if (command.accuracy) {
         ImageAccuracyOptions image;
@@ -72,6 +73,12 @@ void run_bench(const BenchCommand& command, std::ostream& log) {
         const ImageReference reference = load_image_reference(image.reference_dir);
         doc = bench::run_accuracy({command.device, command.quick}, log);
         doc["accuracy"]["cornell"] = run_image_accuracy(image, reference, log);
+    } else if (command.estimate) {
+        EstimateBenchOptions options;
+        options.device = command.device;
+        options.quick = command.quick;
+        options.scenes = command.throughput.scenes;
+        doc = run_estimate_bench(options, log);
     } else if (command.scaling) {
         doc = run_scaling_bench(command.scaling_options, log);
     } else if (command.effects) {

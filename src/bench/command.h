@@ -16,9 +16,10 @@ struct BenchCommand {
     bench::ThroughputOptions throughput;
     bool accuracy = false;        // the accuracy-against-time sweep instead of throughput
     bool effects = false;         // each effect as planned against forced, instead of throughput
+    bool estimate = false;        // the progress line's estimate against the bakes' times (bench/estimate.h)
     bool scaling = false;         // throughput and bake time against ranks and devices (bench_scaling.h)
     ScalingOptions scaling_options;
-    bool quick = false;           // with accuracy or effects: a smaller sweep
+    bool quick = false;           // with accuracy, effects or estimate: a smaller sweep
     std::string device = "auto";  // with accuracy or effects: the engine of every run
     std::string json;             // also write the JSON document here (atomically)
 };

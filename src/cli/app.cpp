@@ -272,9 +272,16 @@ void add_bench_options(CLI::App& cmd, bench::BenchCommand& c) {
                  "instead of throughput: shots/s and bake time against MPI ranks (run under mpirun) and devices "
                  "(--device all or a list), on one scene (default city:100k; --hemicube, --shots, --batch, --repeats "
                  "apply)");
-    cmd.add_flag("--quick", c.quick, "with --accuracy or --effects: a smoke test of a few coarse runs (seconds)");
+    cmd.add_flag("--estimate", c.estimate,
+                 "instead of throughput: how good the progress line's time left is: bake generated scenes of a few "
+                 "sizes (or the scenes given) and print each stage's predicted against measured seconds and the "
+                 "bake's total as predicted at 10% of it");
+    cmd.add_flag("--quick", c.quick,
+                 "with --accuracy, --effects or --estimate: a smoke test of a few coarse runs (seconds; --estimate: "
+                 "under a minute)");
     cmd.add_option("--device", c.device,
-                   "with --accuracy, --effects or --scaling: auto, ref or opencl:P.D (--scaling: also all or a list)")
+                   "with --accuracy, --effects, --estimate or --scaling: auto, ref or opencl:P.D (--scaling: also all "
+                   "or a list)")
         ->capture_default_str();
     cmd.add_option("--json", c.json, "also write the results here (JSON)");
 }
@@ -413,8 +420,8 @@ int run(int argc, char** argv) {
         return 2;
     } catch (const cancel::Interrupted&) {
         cancel::reported();
-        std::cerr << (bake_options.progress && bake_options.progress_tty ? "\n" : "")
-                  << "hemirad: " << cancel::describe() << "; no output written\n";
+        // The progress line was erased as the bake unwound (ProgressLine's destructor).
+        std::cerr << "hemirad: " << cancel::describe() << "; no output written\n";
         return cancel::exit_code();
     } catch (const formfactor::VerifyError& e) {
         std::cerr << "hemirad: verification failed: " << printable(e.what()) << "\n";

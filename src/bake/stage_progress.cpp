@@ -1,0 +1,332 @@
+// The bake's one progress line (see stage_progress.h).
+#include "bake/stage_progress.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <system_error>
+
+#include <fmt/core.h>
+
+#include "solve/progressive.h"
+#include "solve/refinement.h"
+
+namespace hemirad::bake {
+
+namespace {
+
+// Host constants, measured on this machine (2 Xeon cores through PoCL, shared with other work;
+// release build) from the stages' own timings on the Cornell box and generated city and
+// furniture scenes of 20k–150k triangles. They are where the progress line starts; each stage's
+// own rate takes over as it runs.
+// Loading (and setting up): a fixed part, and per byte of the scene file (a .gltf's external
+// buffers are not counted).
+constexpr double kLoadSeconds = 0.15, kLoadSecondsPerByte = 2e-7;
+// Meshing: per triangle.
+constexpr double kMeshSecondsPerTriangle = 1.2e-5;
+// Output: the weld per element (none where the gather welded), the render per pixel and per
+// element drawn, the images per pixel, the baked glTF per element and per triangle of the scene.
+constexpr double kWeldSecondsPerElement = 3e-7;
+constexpr double kRenderSecondsPerPixel = 5e-8, kRenderSecondsPerElement = 1e-5;
+constexpr double kExrSecondsPerPixel = 1.3e-6, kPngSecondsPerPixel = 1e-6;
+constexpr double kGltfSecondsPerElement = 5e-6, kGltfSecondsPerTriangle = 1e-5;
+// The gather's vertices per element (1.0 on the Cornell box, 1.5 on a city of quads and
+// clusters): the larger decides whether a gather is left out for its size (gather.h), the
+// smaller counts its work.
+constexpr double kGatherVerticesPerElement = 1.15, kGatherMostVerticesPerElement = 1.5;
+// Refinement's growth over two levels: 2.2× at N 256 (the Cornell box 1.8×, a 20k city 2.75×),
+// more where a coarser hemicube leaves noise to split (N 64, draft: cities of 10k–150k triangles
+// 5.0–6.4×, a furniture hall 2.7×): about 2.2 (256/N)^0.6, at most 4× a level. A level's host
+// work (marking, splitting, the engine for the finer mesh) per element after it.
+constexpr double kRefineGrowth256 = 2.2, kRefineGrowthExponent = 0.6;
+constexpr double kRefineSecondsPerElement = 5e-5;
+// Gather refinement's new vertices, as a share of the gather's (at most half again); a vertex's
+// later passes, as a share of its first (they re-use its row where the budget kept it).
+constexpr double kGatherRefineShare = 0.3;
+// A gather vertex's host work besides its hemicube (its row's light, the near-field weights), per
+// element of the mesh: 0.8 ms a vertex on a 9.5k-element city at N 32, 2.1 ms at 28k, 0.62 ms on
+// the Cornell box's 14.7k at N 96 — several times the budget's hemicube alone.
+constexpr double kGatherSecondsPerVertexElement = 3.5e-8;
+constexpr double kLaterPassShare = 0.05;
+// The engines' set-up before the solve (the device's mesh; PoCL's kernels when its cache holds
+// them, else about 10 s more to build them).
+constexpr double kEnginesSeconds = 0.3;
+
+double growth_per_level(int hemicube) {
+    const double two_levels = kRefineGrowth256 * std::pow(256.0 / std::max(8, hemicube), kRefineGrowthExponent);
+    return std::min(4.0, std::sqrt(two_levels));
+}
+
+BakeShape with_elements(BakeShape s, double elements) {
+    s.counts.elements = elements;
+    return s;
+}
+
+}  // namespace
+
+std::vector<std::pair<std::string, double>> predict_output(double elements, double triangles, double pixels) {
+    return {{"weld", elements * kWeldSecondsPerElement},
+            {"render", pixels * kRenderSecondsPerPixel + elements * kRenderSecondsPerElement},
+            {"render.exr", pixels * kExrSecondsPerPixel},
+            {"render.png", pixels * kPngSecondsPerPixel},
+            {"baked.gltf", elements * kGltfSecondsPerElement + triangles * kGltfSecondsPerTriangle}};
+}
+
+double refine_level_seconds(const WorkCounts& w, double shooters) {
+    const BakeShape& s = w.shape;
+    if (s.refine_levels <= 0) return 0.0;
+    double seconds = 0.0, refined = s.counts.elements;
+    for (int level = 1; level <= s.refine_levels; ++level) {
+        refined *= growth_per_level(s.hemicube);
+        seconds += shooters * batched_shot_seconds(with_elements(s, refined), solve::regather_hemicube(s.hemicube, level)) +
+                   refined * kRefineSecondsPerElement;
+    }
+    return seconds / s.refine_levels;
+}
+
+std::vector<StagePlan> predict_stages(const WorkCounts& w) {
+    const BakeShape& s = w.shape;
+    const double E = s.counts.elements, P = s.counts.patches;
+    std::vector<StagePlan> out;
+    out.push_back({"engines", Cost::own, 1.0, kEnginesSeconds});
+    out.push_back({"lights", Cost::hemicube, w.light_hemicubes, batched_shot_seconds(s, s.hemicube)});
+    if (w.solver == "matrix") {
+        // A row per patch, and the Gauss–Seidel sweeps spread over them.
+        out.push_back({"solve", Cost::hemicube, P, expected_times(s).matrix / std::max(1.0, P)});
+    } else {
+        double passes = expected_passes(s);
+        if (w.max_passes > 0.0) passes = std::min(passes, w.max_passes);
+        out.push_back({"solve", Cost::hemicube, passes, expected_times(s).progressive / std::max(1.0, expected_passes(s))});
+    }
+    double refined = E;
+    if (w.refine && s.refine_levels > 0) {
+        // A unit a level: each re-gathers the strongest shooters (at most
+        // RefineSettings::max_shooters; the count is known once the level starts) and the lights
+        // onto its finer mesh, at a finer hemicube. Its host work besides makes its rate no
+        // measure of the gather's.
+        // A priori a quarter of the cap (the Cornell box 22, cities of 4k–20k triangles 36–144).
+        const double shooters = std::min(P, double(solve::RefineSettings{}.max_shooters) / 4.0) + w.light_hemicubes;
+        StagePlan refine{"refine", Cost::hemicube, double(s.refine_levels), refine_level_seconds(w, shooters)};
+        refine.evidence = false;
+        out.push_back(refine);
+        refined *= std::pow(growth_per_level(s.hemicube), s.refine_levels);
+    }
+    const bool left_out = !w.gather_given && refined * kGatherMostVerticesPerElement > double(w.max_planned_gather);
+    if (w.gather > 0 && !left_out) {
+        // A unit is a vertex's first hemicube; its later passes re-use the row (kLaterPassShare
+        // each); gather refinement's vertices take one hemicube each.
+        const double passes = std::max(1, w.gather_passes);
+        const double points = refined * kGatherVerticesPerElement;
+        const double units =
+            points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
+        out.push_back({"gather", Cost::hemicube, units,
+                       batched_shot_seconds(with_elements(s, refined), w.gather) + refined * kGatherSecondsPerVertexElement});
+    }
+    double output = 0.0;
+    for (const auto& step : predict_output(refined, w.triangles, s.pixels)) output += step.second;
+    out.push_back({"output", Cost::own, 1.0, output});
+    return out;
+}
+
+// The passes expected: the plan's and the decay's fit, in log space, the fit weighted by how
+// far the error has fallen towards the threshold (in log): early on, the fit of a few passes
+// follows the emitters' fast first decay and is short (a 150k-triangle city: a third of the
+// truth a twelfth of the way in).
+double blend_passes(double planned, double fitted, const DecayFit& decay, double threshold) {
+    const auto& samples = decay.samples();
+    if (!(planned > 0.0) || samples.empty()) return fitted;
+    const double first = samples.front().second, now = samples.back().second;
+    if (!(first > threshold) || !(now > 0.0)) return fitted;
+    const double fallen = std::clamp(std::log(first / now) / std::log(first / threshold), 0.0, 1.0);
+    return std::exp((1.0 - fallen) * std::log(planned) + fallen * std::log(std::max(fitted, 1.0)));
+}
+
+void StageProgress::plan_load(const std::string& file) {
+    std::error_code ec;
+    const auto bytes = std::filesystem::file_size(file, ec);
+    eta_.add({"load", Cost::own, 1.0, kLoadSeconds + (ec ? 0.0 : double(bytes)) * kLoadSecondsPerByte});
+    load_detail_ = std::filesystem::path(file).filename().string();
+    eta_.add({"mesh", Cost::own, 1.0, 0.0});
+}
+
+void StageProgress::plan_mesh(double triangles) {
+    eta_.replan("mesh", triangles, kMeshSecondsPerTriangle);
+    mesh_detail_ = fmt::format("{:.0f} triangles", triangles);
+}
+
+void StageProgress::plan_rest(const WorkCounts& w) {
+    if (planned_) return;  // a restart on the reference engine keeps the plan
+    for (const StagePlan& s : predict_stages(w)) eta_.add(s);
+    max_passes_ = w.max_passes;
+    work_ = w;
+    refine_levels_ = w.shape.refine_levels;
+    gather_extra_ = w.gather_refine ? kGatherRefineShare : 0.0;
+    gather_passes_ = std::max(1, w.gather_passes);
+    double refined = w.shape.counts.elements;
+    if (w.refine) refined *= std::pow(growth_per_level(w.shape.hemicube), w.shape.refine_levels);
+    output_steps_ = predict_output(refined, w.triangles, w.shape.pixels);
+    planned_ = true;
+}
+
+// The model's stage `stage` begins, if it is not running: the one before shows its end.
+void StageProgress::into(const std::string& stage) {
+    if (eta_.current() == stage || !eta_.has(stage)) return;
+    if (!eta_.current().empty()) end_stage();
+    last_shown_ = -1e9;
+    shown_.begin_stage(stage);
+    eta_.begin(stage, now());
+}
+
+void StageProgress::begin_stage(const std::string& stage) {
+    std::string model = stage;
+    if (stage == "solve") {
+        const auto& st = eta_.stages();
+        const bool lights = std::any_of(st.begin(), st.end(), [](const Eta::Stage& s) {
+            return s.plan.name == "lights" && s.plan.units > 0.0;
+        });
+        if (lights) model = "lights";
+        decay_ = DecayFit();
+        fitted_at_ = expected_passes_ = -1.0;
+    }
+    if (stage == "gather") {
+        gather_base_ = gather_last_done_ = gather_last_units_ = 0.0;
+        gather_phase_ = 0;
+    }
+    if (stage == "refine") refine_shooters_ = -1;
+    into(model);
+    show(stage == "load" ? load_detail_ : stage == "mesh" ? mesh_detail_ : "");
+}
+
+void StageProgress::end_stage() {
+    const std::string stage = eta_.current();
+    if (!stage.empty()) {
+        eta_.end(now());
+        Status st;
+        st.stage = stage;
+        st.detail = detail_;
+        st.fraction = 1.0;
+        const auto& stages = eta_.stages();
+        for (const Eta::Stage& s : stages)
+            if (s.plan.name == stage) st.elapsed = s.measured;
+        st.left = planned_ ? eta_.left(now()) : -1.0;
+        st.last = true;
+        if (planned_) eta_.sample(now());
+        shown_.status(st);
+    }
+    shown_.end_stage();
+}
+
+void StageProgress::show(const std::string& detail, bool last) {
+    detail_ = detail;
+    const double t = now();
+    if (planned_) eta_.sample(t);
+    if (!last && t - last_shown_ < 0.1) return;
+    last_shown_ = t;
+    Status st;
+    st.stage = eta_.current();
+    if (st.stage.empty()) return;
+    st.detail = detail;
+    st.fraction = eta_.fraction();
+    for (const Eta::Stage& s : eta_.stages())
+        if (s.plan.name == st.stage) st.elapsed = t - s.begun;
+    st.left = planned_ ? eta_.left(t) : -1.0;
+    st.last = last;
+    shown_.status(st);
+}
+
+void StageProgress::writing(const std::string& what) {
+    into("output");
+    double before = 0.0, total = 0.0;
+    bool found = false;
+    for (const auto& [step, seconds] : output_steps_) {
+        if (step == what) found = true;
+        if (!found) before += seconds;
+        total += seconds;
+    }
+    if (found && total > 0.0) eta_.update(now(), before / total, 1.0);
+    show(what);
+}
+
+void StageProgress::lights(std::size_t done, std::size_t total) {
+    into("lights");
+    eta_.update(now(), double(done), double(total));
+    show(fmt::format("lights' hemicubes {} / {}", done, total));
+}
+
+void StageProgress::passes(const solve::Progressive& solver, double threshold) {
+    into("solve");
+    const double done = double(solver.passes());
+    decay_.add(done, solver.error());
+    // The fit is redone when the decay has a new sample (every 2% more passes).
+    double planned = 0.0;  // the plan's passes (budget.h's model)
+    for (const Eta::Stage& s : eta_.stages())
+        if (s.plan.name == "solve") planned = s.plan.units;
+    if (double(decay_.samples().size()) != fitted_at_) {
+        fitted_at_ = double(decay_.samples().size());
+        const double fitted = decay_.total_passes(threshold);
+        expected_passes_ = fitted >= 0.0 ? std::ceil(blend_passes(planned, fitted, decay_, threshold)) : -1.0;
+        if (expected_passes_ >= 0.0 && max_passes_ > 0.0) expected_passes_ = std::min(expected_passes_, max_passes_);
+    }
+    double total = expected_passes_ >= 0.0 ? expected_passes_ : planned;  // no decay seen yet: the plan's
+    if (solver.done()) total = done;
+    eta_.update(now(), done, std::max(total, done));
+    const std::string of = solver.done() ? std::string() : fmt::format(" of ~{:.0f}", std::max(total, done));
+    show(fmt::format("pass {}{}, error {:.2e}", solver.passes(), of, solver.error()), false);
+}
+
+void StageProgress::rows(long done, long total) {
+    into("solve");
+    eta_.update(now(), double(done), double(total));
+    show(fmt::format("form-factor rows {} / {}", done, total));
+}
+
+void StageProgress::refining(int level, long shots, long total) {
+    into("refine");
+    const double levels = std::max(refine_levels_, level);
+    // The level's shooters are known now: the prediction of the levels left is made with them.
+    if (total != refine_shooters_) {
+        refine_shooters_ = total;
+        eta_.replan("refine", levels, refine_level_seconds(work_, double(total)));
+    }
+    eta_.update(now(), double(level - 1) + double(shots) / double(std::max(1L, total)), levels);
+    show(fmt::format("level {}: re-gather {} / {} shots", level, shots, total));
+}
+
+// Refinement is over: the gather and the output are predicted again from the elements it left.
+void StageProgress::refined(std::size_t elements) {
+    WorkCounts w = work_;
+    w.refine = false;  // its growth is known: the elements as refined
+    w.shape.counts.elements = double(elements);
+    for (const StagePlan& s : predict_stages(w))
+        if (s.name == "gather" || s.name == "output") eta_.replan(s.name, s.units, s.unit_seconds);
+    if (!eta_.has("gather")) return;
+    bool gather = false;
+    for (const StagePlan& s : predict_stages(w)) gather = gather || s.name == "gather";
+    if (!gather) eta_.replan("gather", 0.0, 0.0);  // it will be left out for its size
+    output_steps_ = predict_output(double(elements), w.triangles, w.shape.pixels);
+}
+
+void StageProgress::gathering(long points, long total) {
+    into("gather");
+    const double done = double(points), work = double(total);
+    // A count that starts again is the next phase (gather refinement's new vertices, a pass each):
+    // what came before is its base.
+    // In units of a vertex's first hemicube: the first pass's vertices one each, the later
+    // passes' kLaterPassShare; the later phases' vertices one each.
+    const auto units = [&](double count) {
+        if (gather_phase_ > 0) return count;
+        const double first = work / gather_passes_;
+        return std::min(count, first) + kLaterPassShare * std::max(0.0, count - first);
+    };
+    if (done < gather_last_done_) {
+        gather_base_ += gather_last_units_;
+        ++gather_phase_;
+    }
+    gather_last_done_ = done;
+    gather_last_units_ = units(work);
+    const double extra = gather_phase_ == 0 ? gather_extra_ * work / gather_passes_ : 0.0;
+    eta_.update(now(), gather_base_ + units(done), gather_base_ + units(work) + extra);
+    show(fmt::format("{} / {} vertices{}", points, total, gather_phase_ > 0 ? " (refined)" : ""));
+}
+
+}  // namespace hemirad::bake
