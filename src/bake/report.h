@@ -13,6 +13,8 @@
 
 namespace hemirad::bake {
 
+struct StageCheckpoints;  // bake/stage_checkpoint.h
+
 // The stages' clocks that are not in their results.
 struct Timings {
     Clock::time_point start;          // of the bake
@@ -33,6 +35,7 @@ struct Record {
     double exposure;                         // render.png's scale
     const std::vector<std::string>& warnings;
     Timings timings;
+    const StageCheckpoints* checkpoints = nullptr;  // where the bake kept its checkpoint, what it resumed
 };
 
 nlohmann::ordered_json make_report(const Record& r);
