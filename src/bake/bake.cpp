@@ -347,6 +347,7 @@ Lit light(const LightContext& c, mesh::Mesh& mesh, EngineStack& engines, const S
         lit = std::move(resumed.lit);
         if (!resumed.has_mesh) lit.mesh = std::move(mesh);
     } else {
+        fault_point("solve");
         lit.solved = solve(mesh, c.scene, c.meshed.solver, c.meshed.shape, engines, sc);
         lit.mesh = std::move(mesh);  // refinement makes engines of its own: the solve's are gone
         keep(Stage::solved);

@@ -346,7 +346,7 @@ int prune_checkpoints(const fs::path& dir, const fs::path& keep, double max_age_
             ++removed;
             continue;
         }
-        total += e.bytes;
+        if (!temporary) total += e.bytes;
     }
     return removed;
 }

@@ -81,8 +81,9 @@ void save_stage(StageCheckpoints& cp, const Plan& plan, const Setup& setup, cons
 // Once the outputs are committed: the automatic checkpoint is removed.
 void finish_checkpoints(const StageCheckpoints& cp, Progress& progress);
 
-// HEMIRAD_FAULT=stage:NAME (refine, gather or output): the process kills itself (SIGKILL) as the
-// stage begins, as a kill from outside would, for the tests of resuming.
+// HEMIRAD_FAULT=stage:NAME (solve, refine, gather or output): the process kills itself (SIGKILL) as
+// the stage begins (output: once the images and baked.gltf are staged, before anything is
+// committed), as a kill from outside would, for the tests of resuming.
 void fault_point(const char* stage);
 
 }  // namespace hemirad::bake

@@ -293,8 +293,9 @@ OpenCLFault parse_fault(const std::string& text) {
             continue;
         }
         if (name == "stage") {
-            if (count != "refine" && count != "gather" && count != "output")
-                throw std::invalid_argument(fmt::format("'{}': expected stage:refine, stage:gather or stage:output", item));
+            if (count != "solve" && count != "refine" && count != "gather" && count != "output")
+                throw std::invalid_argument(
+                    fmt::format("'{}': expected stage:solve, stage:refine, stage:gather or stage:output", item));
             fault.stage = count;
             continue;
         }

@@ -63,7 +63,7 @@ struct OpenCLFault {
 
 // HEMIRAD_FAULT's value: comma-separated oom-above:K, fail-after:K, wrong-after:K (K >= 0) and
 // device:opencl:P.D (the faults hit that device alone, as one of several sharing a bake), and
-// stage:refine, stage:gather or stage:output (the bake is killed as that stage begins, as by
+// stage:solve, stage:refine, stage:gather or stage:output (the bake is killed as that stage begins, as by
 // SIGKILL, to test that a rerun resumes from its checkpoint).
 // Throws std::invalid_argument for anything else; an empty text is no fault.
 OpenCLFault parse_fault(const std::string& text);
