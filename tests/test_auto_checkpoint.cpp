@@ -115,22 +115,36 @@ TEST_CASE("auto checkpoint: another bake's, or a damaged one, is not resumed; sh
 
     SECTION("a setting that changes the solve: another file, not resumed, left for its own bake") {
         const fs::path other = killed_at_refine();
-        const RunResult r = run_hemirad(dir, room_bake(dir / "out", {"--hemicube", "16"}), automatic(cache));
+        const RunResult r = run_hemirad(dir, room_bake(dir / "out", {"--seed", "7"}), automatic(cache));
         INFO("stderr: " << r.err);
         REQUIRE(r.code == 0);
         CHECK(r.err.find("resuming") == std::string::npos);
         CHECK_FALSE(read_json(dir / "out" / "report.json").contains("resumed"));
         CHECK(checkpoints_in(cache) == std::vector<fs::path>{other});
     }
-    SECTION("a refinement setting: the solved light is of another refinement, ignored with a warning") {
+    SECTION("a refinement setting: the solved light is resumed, the refined light is not (a warning)") {
+        // The reference: --contrast 0.9, never killed.
+        REQUIRE(run_hemirad(dir, room_bake(dir / "full09", {"--no-checkpoint", "--contrast", "0.9"}), automatic(cache))
+                    .code == 0);
+        const std::string full09 = read_text(dir / "full09" / "baked.bin");
+        REQUIRE(full09 != full_bin);
         killed_at_refine();
-        const RunResult r = run_hemirad(dir, room_bake(dir / "out", {"--contrast", "0.9"}), automatic(cache));
-        INFO("stderr: " << r.err);
-        REQUIRE(r.code == 0);
-        CHECK(r.err.find("resuming") == std::string::npos);
+        const RunResult solved = run_hemirad(dir, room_bake(dir / "out", {"--contrast", "0.9"}), automatic(cache));
+        INFO("stderr: " << solved.err);
+        REQUIRE(solved.code == 0);
+        CHECK(read_json(dir / "out" / "report.json").at("resumed").at("from") == "solved");
+        CHECK(read_text(dir / "out" / "baked.bin") == full09);
+
+        REQUIRE(run_hemirad(dir, room_bake(dir / "killed"), automatic(cache, "stage:gather")).code == 137);
+        REQUIRE(checkpoints_in(cache).size() == 1);
+        const RunResult refined = run_hemirad(dir, room_bake(dir / "out", {"--contrast", "0.9"}), automatic(cache));
+        INFO("stderr: " << refined.err);
+        REQUIRE(refined.code == 0);
+        CHECK(refined.err.find("resuming") == std::string::npos);
         const json report = read_json(dir / "out" / "report.json");
         CHECK_FALSE(report.contains("resumed"));
         CHECK(report.at("warnings").dump().find("ignored the automatic checkpoint") != std::string::npos);
+        CHECK(read_text(dir / "out" / "baked.bin") == full09);
         CHECK(checkpoints_in(cache).empty());
     }
     SECTION("damaged: one byte flipped, or cut short, is ignored with a warning and the bake completes") {
