@@ -1308,7 +1308,11 @@ json check_kill_and_resume(const TempDir& dir, const std::string& name, const st
         const json resumed =
             bake_ok(dir, kClosedRoom, out, concat({"--resume", ck, "--checkpoint", ck, "--checkpoint-every", every}, settings));
         CHECK(staging() == 0);
-        const long from = resumed.at("resumed_from_pass").get<long>();
+        // Killed after the solve, the checkpoint holds a later stage (the solved, refined or
+        // gathered light), and the bake goes on from there.
+        const bool part_way = resumed.contains("resumed_from_pass");
+        if (!part_way) CHECK(resumed.at("resumed").at("from") != "solving");
+        const long from = part_way ? resumed.at("resumed_from_pass").get<long>() : full.at("passes").get<long>();
         CAPTURE(killed.code, from);
         CHECK(from > 0);
         CHECK(from <= full.at("passes").get<long>());
@@ -1332,12 +1336,13 @@ TEST_CASE("a bake killed part-way resumes from its checkpoint and ends with the 
     REQUIRE(full.at("passes").get<long>() == 2000);
     const std::string full_bin = read_text(dir / "progressive_full" / "baked.bin");
 
-    // The finished solve is checkpointed too (2000 is no multiple of 300): resumed, it goes
-    // straight to refinement and output.
+    // The finished stages are checkpointed too (2000 is no multiple of 300): the last, the
+    // gathered light, resumed, goes straight to the outputs.
     const std::string ck_full = (dir / "ck_full").string();
     bake_ok(dir, kClosedRoom, dir / "checkpointed", concat({"--checkpoint", ck_full, "--checkpoint-every", "300"}, settings));
     const json finished = bake_ok(dir, kClosedRoom, dir / "finished", concat({"--resume", ck_full}, settings));
-    CHECK(finished.at("resumed_from_pass") == 2000);
+    CHECK(finished.at("resumed").at("from") == "gathered");
+    CHECK(finished.at("passes") == 2000);
     CHECK(read_text(dir / "finished" / "baked.bin") == full_bin);
 
     // The matrix solver's checkpoints hold the rows shot so far (the reference engine, slower,

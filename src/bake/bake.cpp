@@ -20,6 +20,7 @@
 #include "bake/report.h"
 #include "bake/solve.h"
 #include "bake/stage_progress.h"
+#include "bake/stage_checkpoint.h"
 #include "bake/stages.h"
 #include "core/counted.h"
 #include "core/error.h"
@@ -292,10 +293,11 @@ EngineChoice choose_engines(const Plan& p, const Setup& s, const mesh::Mesh& mes
 // A checkpoint resumes only the bake it was made by: the same mesh and the settings that decide
 // its numbers (not the device: every engine gives the reference's bits). The matrix solver's
 // holds its rows, which depend on neither the batch nor the threshold. The lights are not in
-// the mesh: their placement and intensity go into the fingerprint too. Empty without checkpoints.
+// the mesh: their placement and intensity go into the fingerprint too. Empty without checkpoints
+// (--no-checkpoint and neither --checkpoint nor --resume).
 std::string checkpoint_fingerprint(const Plan& p, const Setup& s, const Meshed& m, const scene::Scene& scene) {
     const Options& o = p.o;
-    if (o.checkpoint.empty() && o.resume.empty()) return {};
+    if (o.checkpoint.empty() && o.resume.empty() && o.no_checkpoint) return {};
     std::string lights;
     for (const scene::PunctualLight& l : scene.lights)
         lights += fmt::format("; light {} at {:.17g},{:.17g},{:.17g} along {:.17g},{:.17g},{:.17g} of {:.17g},{:.17g},{:.17g} "
@@ -338,10 +340,39 @@ Lit light(const LightContext& c, mesh::Mesh& mesh, EngineStack& engines, const S
                                     : std::string(),
                                 c.meshed.solver));
     Lit lit;
-    lit.solved = solve(mesh, c.scene, c.meshed.solver, c.meshed.shape, engines, sc);
-    lit.mesh = std::move(mesh);  // refinement makes engines of its own: the solve's are gone
-    lit = refine(c, std::move(lit), engines);
-    return gather(c, std::move(lit), engines);
+    // A rerun goes on after the last stage its checkpoint holds (once: after a device fallback
+    // the bake starts again from the solve); each stage done is kept.
+    StageCheckpoints* cp = sc.checkpoints;
+    const std::size_t warned = c.warnings.all().size();
+    const auto keep = [&](Stage stage) {
+        if (cp)
+            save_stage(*cp, c.plan, c.setup, c.meshed, stage, lit,
+                       std::vector<std::string>(c.warnings.all().begin() + long(warned), c.warnings.all().end()));
+    };
+    const Stage from = cp && cp->light ? *cp->resumed : Stage::solving;
+    if (from != Stage::solving) {
+        StageState resumed = std::move(*cp->light);
+        cp->light.reset();
+        for (const std::string& w : resumed.warnings) c.warnings.add(w);
+        lit = std::move(resumed.lit);
+        if (!resumed.has_mesh) lit.mesh = std::move(mesh);
+    } else {
+        fault_point("solve");
+        lit.solved = solve(mesh, c.scene, c.meshed.solver, c.meshed.shape, engines, sc);
+        lit.mesh = std::move(mesh);  // refinement makes engines of its own: the solve's are gone
+        keep(Stage::solved);
+    }
+    if (from < Stage::refined) {
+        fault_point("refine");
+        lit = refine(c, std::move(lit), engines);
+        keep(Stage::refined);
+    }
+    if (from < Stage::gathered) {
+        fault_point("gather");
+        lit = gather(c, std::move(lit), engines);
+        keep(Stage::gathered);
+    }
+    return lit;
 }
 
 namespace {
@@ -497,7 +528,7 @@ void run(const Options& options, Progress& shown) {
     ff.seed = o.seed;
     EngineChoice choice = choose_engines(plan, setup, meshed.mesh, ff);
     const std::string fingerprint = checkpoint_fingerprint(plan, setup, meshed, scene);
-    const std::string resume_state = o.resume.empty() ? std::string() : read_checkpoint(o.resume, fingerprint);
+    StageCheckpoints checkpoints = read_resume(plan, setup, meshed, fingerprint);
 
     OutputTransaction out(o.output);
     // Only now, so that bad input is always exactly one line on stderr.
@@ -505,28 +536,32 @@ void run(const Options& options, Progress& shown) {
     for (const std::string& w : scene.warnings) warnings.add(w, /*always=*/true);
     if (!choice.warning.empty()) warnings.add(choice.warning, /*always=*/true);
     const TimeEstimate expected = say_expected_time(plan, meshed, warnings);
+    plan_checkpoints(checkpoints, plan, setup, meshed, expected.total(), warnings, progress);
 
     const std::size_t elements_before = meshed.mesh.elements.size();
     const LightContext context{plan, setup, scene, meshed, progress, warnings};
-    const SolveContext solve_context{o, setup.threshold, setup.matrix, fingerprint, resume_state, progress,
+    const SolveContext solve_context{o, setup.threshold, setup.matrix, fingerprint, checkpoints.solver_state, progress,
                                      [&](const solve::Progressive& solver) {
                                          write_png_preview(scene, meshed.mesh, solver, setup.view, setup.width,
                                                            setup.height, out);
-                                     }};
+                                     },
+                                     &checkpoints};
     nlohmann::ordered_json fallback;
     Lit lit = light_with_fallback(context, meshed.mesh, choice, ff, solve_context, fallback);
     warn_engine_events(choice, warnings);
 
     t0 = Clock::now();
     const double exposure = write_outputs(plan, setup, scene, lit, out, warnings, progress);
+    fault_point("output");  // the images and baked.gltf staged, nothing committed
     timings.output = seconds_since(t0);
     progress.end_stage();
 
     write_report({plan, setup, meshed, scene, lit, choice, fallback, elements_before, expected, exposure, warnings.all(),
-                  timings, &progress},
+                  timings, &checkpoints, &progress},
                  out.staged("report.json"));
     cancel::check();  // a signal while writing: nothing is committed
     out.commit(kOutputNames);
+    finish_checkpoints(checkpoints, progress);
     progress.note(summary_line(o, meshed, lit));
 }
 

@@ -1,12 +1,13 @@
 // Checkpoints of a bake (see checkpoint.h). Layout: a magic line, the format version, the
-// fingerprint (hash and settings), then the solver's save() bytes, their FNV-1a hash and an end
-// marker.
+// fingerprint (hash and settings), then the state (its stage's byte, then the solver's save()
+// bytes or the stage's light, stage_checkpoint.h), its FNV-1a hash and an end marker.
 #include "bake/checkpoint.h"
 
 #include <fmt/core.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -15,6 +16,9 @@
 #include <fstream>
 #include <sstream>
 #include <system_error>
+#include <vector>
+
+#include "cl/program_cache.h"
 
 #include "core/durable.h"
 #include "core/error.h"
@@ -26,7 +30,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[] = "hemirad checkpoint\n";
-constexpr std::uint32_t kFormat = 5;  // 2: the state's hash before the end marker; 3: progressive hit shares, round coverage; 4: running sums; 5: progressive shot counters per patch
+constexpr std::uint32_t kFormat = 6;  // 2: the state's hash before the end marker; 3: progressive hit shares, round coverage; 4: running sums; 5: progressive shot counters per patch; 6: the stage's byte first
 constexpr std::uint64_t kEndMarker = 0x444e452d4b504b43ull;  // "CKPK-END"
 
 // FNV-1a, 64 bits, over raw bytes.
@@ -147,7 +151,10 @@ std::string bake_fingerprint(const mesh::Mesh& mesh, const std::string& settings
     return fmt::format("mesh {:016x}, {}", h.value(), settings);
 }
 
-void write_checkpoint(const fs::path& file, const std::string& fingerprint, const solve::Resumable& solver) {
+namespace {
+
+// The checkpoint's bytes around `state`, to `file` through a temporary file and a rename.
+void write_state(const fs::path& file, const std::string& fingerprint, const std::string& bytes) {
     check_checkpoint_target(file);  // again: the file may have changed since the bake began
     fs::path temp = file;
     temp += fmt::format(".tmp-{}", static_cast<long>(getpid()));
@@ -160,9 +167,6 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
         out.write(kMagic, sizeof kMagic - 1);
         out.write(reinterpret_cast<const char*>(&kFormat), sizeof kFormat);
         write_string(out, fingerprint);
-        std::ostringstream state;
-        solver.save(state);
-        const std::string bytes = state.str();
         Hash hash;
         hash.add_bytes(bytes.data(), bytes.size());
         const std::uint64_t sum = hash.value();
@@ -185,6 +189,38 @@ void write_checkpoint(const fs::path& file, const std::string& fingerprint, cons
     // The rename too, so that after a power cut the file is this checkpoint or the one before.
     sync_to_disk(fs::absolute(file, ec).parent_path());
 }
+
+}  // namespace
+
+const char* stage_name(Stage stage) {
+    switch (stage) {
+        case Stage::solving: return "solving";
+        case Stage::solved: return "solved";
+        case Stage::refined: return "refined";
+        case Stage::gathered: return "gathered";
+    }
+    return "unknown";
+}
+
+void write_checkpoint(const fs::path& file, const std::string& fingerprint, const solve::Resumable& solver) {
+    std::ostringstream state;
+    state.put(static_cast<char>(Stage::solving));
+    solver.save(state);
+    write_state(file, fingerprint, state.str());
+}
+
+void write_stage_checkpoint(const fs::path& file, const std::string& fingerprint, Stage stage,
+                            const std::string& state) {
+    std::string bytes(1, static_cast<char>(stage));
+    bytes += state;
+    write_state(file, fingerprint, bytes);
+}
+
+Stage checkpoint_stage(const std::string& state) {
+    return state.empty() ? Stage::solving : static_cast<Stage>(static_cast<std::uint8_t>(state[0]));
+}
+
+std::string stage_state(const std::string& state) { return state.empty() ? state : state.substr(1); }
 
 std::optional<int> checkpoint_batch(const fs::path& file) {
     try {
@@ -244,13 +280,19 @@ std::string read_checkpoint(const fs::path& file, const std::string& fingerprint
     hash.add_bytes(bytes.data() + begin, length);
     if (hash.value() != sum)
         throw InputError(fmt::format("{}: the checkpoint is damaged (its checksum does not match)", file.string()));
+    if (length < 1 || static_cast<std::uint8_t>(bytes[begin]) > static_cast<std::uint8_t>(Stage::gathered))
+        throw InputError(fmt::format("{}: the checkpoint is damaged (no stage)", file.string()));
     bytes.resize(begin + length);  // in place: the state alone
     bytes.erase(0, begin);
     return bytes;
 }
 
 void restore(solve::Resumable& solver, const std::string& state, const fs::path& file) {
+    if (checkpoint_stage(state) != Stage::solving)
+        throw InputError(fmt::format("{}: the checkpoint holds the {} stage, not the solver's", file.string(),
+                                     stage_name(checkpoint_stage(state))));
     std::istringstream in(state);
+    in.get();  // the stage
     try {
         solver.load(in);
     } catch (const std::runtime_error& e) {
@@ -258,6 +300,55 @@ void restore(solve::Resumable& solver, const std::string& state, const fs::path&
     }
     if (in.peek() != std::char_traits<char>::eof())
         throw InputError(fmt::format("{}: the checkpoint is damaged (bytes left over)", file.string()));
+}
+
+std::optional<fs::path> checkpoint_directory() {
+    const std::optional<fs::path> cache = ocl::program_cache_directory();
+    if (!cache) return std::nullopt;
+    return *cache / "checkpoints";
+}
+
+fs::path automatic_checkpoint_file(const fs::path& dir, const std::string& fingerprint) {
+    return dir / fmt::format("{:016x}.ckpt", ocl::fnv1a64(fingerprint.data(), fingerprint.size()));
+}
+
+int prune_checkpoints(const fs::path& dir, const fs::path& keep, double max_age_days, std::uintmax_t max_bytes) {
+    struct Entry {
+        fs::path path;
+        fs::file_time_type written;
+        std::uintmax_t bytes;
+    };
+    std::vector<Entry> entries;
+    std::error_code ec;
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+        const fs::path& path = it->path();
+        const std::string name = path.filename().string();
+        // Ours only: NAME.ckpt, and NAME.ckpt.tmp-PID left by a write that was killed.
+        if (name.size() < 21 || name.compare(16, 5, ".ckpt") != 0 || path == keep) continue;
+        std::error_code e;
+        if (!it->is_regular_file(e)) continue;
+        const auto written = it->last_write_time(e);
+        const auto bytes = it->file_size(e);
+        if (!e) entries.push_back({path, written, bytes});
+    }
+    const auto now = fs::file_time_type::clock::now();
+    const auto max_age = std::chrono::duration_cast<fs::file_time_type::duration>(
+        std::chrono::duration<double>(max_age_days * 86400.0));
+    std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) { return a.written > b.written; });
+    int removed = 0;
+    std::uintmax_t total = 0;
+    for (const Entry& e : entries) {
+        // A temporary file may be another bake's, being written: only age removes it.
+        const bool temporary = e.path.extension() != ".ckpt";
+        const bool stale = now - e.written > max_age, over = !temporary && total + e.bytes > max_bytes;
+        std::error_code ignored;
+        if ((stale || over) && fs::remove(e.path, ignored)) {
+            ++removed;
+            continue;
+        }
+        if (!temporary) total += e.bytes;
+    }
+    return removed;
 }
 
 }  // namespace hemirad::bake

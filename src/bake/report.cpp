@@ -6,6 +6,7 @@
 
 #include <fmt/core.h>
 
+#include "bake/stage_checkpoint.h"
 #include "core/error.h"
 #include "core/memory.h"
 #include "dist/dist.h"
@@ -183,6 +184,20 @@ ordered_json make_report(const Record& r) {
     report["plan"] = plan_json(r);
     report["passes"] = L.solved.solution.passes;
     if (L.solved.solution.resumed_from >= 0) report["resumed_from_pass"] = L.solved.solution.resumed_from;
+    // "checkpoint" (where the bake kept one): {"file", "automatic" (the cache folder's, removed
+    // once the outputs are committed; false: --checkpoint FILE, kept), "why"}. "resumed" (where it
+    // went on from a checkpoint, --resume or the automatic one): {"from": the stage it held,
+    // "solving" (the solver's state part-way; resumed_from_pass says where), "solved", "refined"
+    // or "gathered" (the stages after it were run, those up to it skipped), "file", "written":
+    // when, UTC}. A resumed bake's other numbers are an uninterrupted bake's.
+    if (r.checkpoints && !r.checkpoints->why.empty())
+        report["checkpoint"] = {{"file", r.checkpoints->file.string()},
+                                {"automatic", r.checkpoints->automatic},
+                                {"why", r.checkpoints->why}};
+    if (r.checkpoints && r.checkpoints->resumed)
+        report["resumed"] = {{"from", stage_name(*r.checkpoints->resumed)},
+                             {"file", r.checkpoints->resume_file.string()},
+                             {"written", r.checkpoints->written}};
     report["converged"] = L.solved.solution.converged;
     if (L.solved.solution.converged) report["converged_by"] = L.solved.solution.convergence_rule;
     report["error"] = L.solved.solution.error;

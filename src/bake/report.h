@@ -14,6 +14,8 @@
 
 namespace hemirad::bake {
 
+struct StageCheckpoints;  // bake/stage_checkpoint.h
+
 // The stages' clocks that are not in their results.
 struct Timings {
     Clock::time_point start;          // of the bake
@@ -34,6 +36,7 @@ struct Record {
     double exposure;                         // render.png's scale
     const std::vector<std::string>& warnings;
     Timings timings;
+    const StageCheckpoints* checkpoints = nullptr;  // where the bake kept its checkpoint, what it resumed
     const StageProgress* progress = nullptr;  // the time model's record (`estimate`); none: not written
 };
 

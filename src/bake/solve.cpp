@@ -4,6 +4,7 @@
 #include <fmt/core.h>
 
 #include "bake/checkpoint.h"
+#include "bake/stage_checkpoint.h"
 #include "core/cancel.h"
 #include "core/timing.h"
 #include "formfactor/row_cache.h"
@@ -12,26 +13,60 @@
 
 namespace hemirad::bake {
 
+namespace {
+
+// Whether the solver's state is written to a checkpoint, and where from it resumes.
+bool checkpointing(const SolveContext& c) {
+    return c.checkpoints ? c.checkpoints->writing() : !c.o.checkpoint.empty();
+}
+std::filesystem::path resume_file(const SolveContext& c) {
+    return c.checkpoints ? c.checkpoints->resume_file : std::filesystem::path(c.o.resume);
+}
+
+// A checkpoint of the solver's state; an automatic one only once its interval has passed, or
+// `last` (the solve's end, or a stop asked for). Whether it was written.
+bool save_solver(const SolveContext& c, const solve::Resumable& solver, bool last = false) {
+    if (!c.checkpoints) {
+        write_checkpoint(c.o.checkpoint, c.fingerprint, solver);
+        return true;
+    }
+    return c.checkpoints->save(
+        [&](const std::filesystem::path& file) { write_checkpoint(file, c.fingerprint, solver); }, last);
+}
+
+// Ctrl-C or SIGTERM while solving: the state after the last whole pass or row, kept before the
+// bake stops (a write the watchdog cuts short leaves the previous checkpoint whole).
+void save_if_stopping(const SolveContext& c, const solve::Resumable& solver, long done, long& checkpointed) {
+    if (!cancel::requested() || !checkpointing(c) || done == checkpointed) return;
+    try {
+        if (save_solver(c, solver, /*last=*/true)) checkpointed = done;
+    } catch (const std::exception&) {
+        // Stopping anyway: the interruption is what the user is told.
+    }
+}
+
+}  // namespace
+
 Solution solve_with_matrix(const mesh::Mesh& mesh, formfactor::Engine& engine, const SolveContext& c,
                            const std::vector<glm::dvec3>* direct) {
     const Options& o = c.o;
     solve::Matrix solver(mesh, engine, c.matrix, direct);
     Solution solution;
-    if (!o.resume.empty()) {
-        restore(solver, c.resume_state, o.resume);
+    if (!c.resume_state.empty()) {
+        restore(solver, c.resume_state, resume_file(c));
         solution.resumed_from = solver.rows();
     }
     long checkpointed = solver.rows();  // the rows of the last checkpoint written or resumed
     solver.solve([&](long done, long total) {
+        save_if_stopping(c, solver, done, checkpointed);
         cancel::check();
         c.progress.rows(done, total);
         // Every K rows, and all of them: a bake killed while solving or refining then resumes
         // without shooting a row again.
-        if (!o.checkpoint.empty() && done != checkpointed &&
-            (done / o.checkpoint_every > checkpointed / o.checkpoint_every || done == total)) {
+        if (checkpointing(c) && done != checkpointed &&
+            (done / o.checkpoint_every > checkpointed / o.checkpoint_every || done == total) &&
+            save_solver(c, solver, done == total))
             checkpointed = done;
-            write_checkpoint(o.checkpoint, c.fingerprint, solver);
-        }
     });
     solution.radiosity = solver.radiosity();
     solution.irradiance = solver.irradiance();
@@ -55,27 +90,28 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
     settings.batch = o.batch;
     solve::Progressive solver(mesh, engine, settings, direct);
     Solution solution;
-    if (!o.resume.empty()) {
-        restore(solver, c.resume_state, o.resume);
+    if (!c.resume_state.empty()) {
+        restore(solver, c.resume_state, resume_file(c));
         solution.resumed_from = solver.passes();
     }
     // Preview frames and checkpoints: one each time the passes cross a multiple of K.
     long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
     long checkpointed = solver.passes();  // the passes of the last checkpoint written or resumed
     while (solver.step()) {
+        save_if_stopping(c, solver, solver.passes(), checkpointed);
         cancel::check();
         c.progress.passes(solver, c.threshold);
-        if (!o.checkpoint.empty() && solver.passes() / o.checkpoint_every > checkpointed / o.checkpoint_every) {
+        if (checkpointing(c) && solver.passes() / o.checkpoint_every > checkpointed / o.checkpoint_every &&
+            save_solver(c, solver))
             checkpointed = solver.passes();
-            write_checkpoint(o.checkpoint, c.fingerprint, solver);
-        }
         if (o.preview_every > 0 && solver.passes() / o.preview_every > previews) {
             previews = solver.passes() / o.preview_every;
             c.preview(solver);
         }
     }
-    // The finished solve too: a bake killed while refining resumes straight to refinement.
-    if (!o.checkpoint.empty() && solver.passes() != checkpointed) write_checkpoint(o.checkpoint, c.fingerprint, solver);
+    // The finished solve too: a bake killed while refining resumes straight to refinement. (A bake
+    // with stage checkpoints keeps its solved light instead, bake.cpp.)
+    if (!c.checkpoints && checkpointing(c) && solver.passes() != checkpointed) save_solver(c, solver);
     c.progress.passes(solver, c.threshold);
     solution.radiosity = solver.radiosity(/*ambient=*/true);
     solution.irradiance = solver.irradiance(/*ambient=*/true);

@@ -11,6 +11,8 @@
 
 namespace hemirad::bake {
 
+struct StageCheckpoints;  // bake/stage_checkpoint.h
+
 // What either solver needs of a bake besides the mesh and the engine.
 struct SolveContext {
     const Options& o;                      // the effective options
@@ -20,6 +22,9 @@ struct SolveContext {
     const std::string& resume_state;       // what --resume read, or empty
     Progress& progress;
     std::function<void(const solve::Progressive&)> preview;  // writes a preview frame of the passes so far
+    // The bake's checkpoints (bake.cpp: --checkpoint or the automatic one, and what a rerun
+    // resumes); null: o.checkpoint, o.resume and resume_state as they are.
+    StageCheckpoints* checkpoints = nullptr;
 };
 
 // Either solver on `engine`, from the lights' irradiance per element `direct` (null: none).

@@ -193,13 +193,19 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "(default: the quality's)")
         ->transform(real_in(0.01, 1.0));
     bake.add_option("--checkpoint", o.checkpoint,
-                    "progressive solver: write its state to this file every --checkpoint-every passes (atomically)");
+                    "write the solver's state to this file every --checkpoint-every passes or rows, and the light "
+                    "after the solve, refinement and gather (atomically); --resume goes on from the last");
     bake.add_option("--checkpoint-every", o.checkpoint_every, "passes between checkpoints")
         ->transform(integer_from(1L))
         ->capture_default_str();
     bake.add_option("--resume", o.resume,
                     "progressive solver: go on from this checkpoint of the same scene and settings; the bake ends "
                     "with exactly the numbers of an uninterrupted one");
+    bake.add_flag("--no-checkpoint", o.no_checkpoint,
+                  "no automatic checkpoint (by default a bake expected to take over a minute keeps its solver's "
+                  "state and each finished stage in $HEMIRAD_CACHE_DIR/checkpoints or ~/.cache/hemirad/checkpoints, "
+                  "which the same command run again resumes, and removes it when the bake is done)")
+        ->excludes("--checkpoint");
     bake.add_option("--seed", o.seed, "seed of every random choice (hemicube rotations)")
         ->transform(integer_from(std::uint64_t{0}))
         ->capture_default_str();

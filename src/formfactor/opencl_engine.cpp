@@ -292,12 +292,19 @@ OpenCLFault parse_fault(const std::string& text) {
             fault.device = count;
             continue;
         }
+        if (name == "stage") {
+            if (count != "solve" && count != "refine" && count != "gather" && count != "output")
+                throw std::invalid_argument(
+                    fmt::format("'{}': expected stage:solve, stage:refine, stage:gather or stage:output", item));
+            fault.stage = count;
+            continue;
+        }
         std::size_t* const field = name == "oom-above"     ? &fault.oom_above
                                    : name == "fail-after"  ? &fault.fail_after
                                    : name == "wrong-after" ? &fault.wrong_after
                                                            : nullptr;
         if (!field || count.empty() || count.size() > 9 || count.find_first_not_of("0123456789") != std::string::npos)
-            throw std::invalid_argument(fmt::format("'{}': expected oom-above:K, fail-after:K, wrong-after:K or device:opencl:P.D", item));
+            throw std::invalid_argument(fmt::format("'{}': expected oom-above:K, fail-after:K, wrong-after:K, device:opencl:P.D or stage:NAME", item));
         *field = std::stoul(count);
     }
     return fault;

@@ -58,10 +58,13 @@ struct OpenCLFault {
     std::size_t fail_after = kNever;   // launches after this many fail as the device lost
     std::size_t wrong_after = kNever;  // launches after this many return a wrong form factor
     std::string device;                // only the engines on this device (opencl:P.D); empty: every device
+    std::string stage;                 // the bake kills itself as this stage begins (bake::fault_point)
 };
 
 // HEMIRAD_FAULT's value: comma-separated oom-above:K, fail-after:K, wrong-after:K (K >= 0) and
-// device:opencl:P.D (the faults hit that device alone, as one of several sharing a bake).
+// device:opencl:P.D (the faults hit that device alone, as one of several sharing a bake), and
+// stage:solve, stage:refine, stage:gather or stage:output (the bake is killed as that stage begins, as by
+// SIGKILL, to test that a rerun resumes from its checkpoint).
 // Throws std::invalid_argument for anything else; an empty text is no fault.
 OpenCLFault parse_fault(const std::string& text);
 
