@@ -102,7 +102,7 @@ TEST_CASE("auto checkpoint: a bake killed while refining, gathering or writing r
     }
 }
 
-TEST_CASE("auto checkpoint: another bake's, or a damaged one, is not resumed; short bakes keep none", "[cli][checkpoint]") {
+TEST_CASE("auto checkpoint: another bake's, or a damaged one, is not resumed and short bakes keep none", "[cli][checkpoint]") {
     TempDir dir;
     const fs::path cache = dir / "cache";
     REQUIRE(run_hemirad(dir, room_bake(dir / "full", {"--no-checkpoint"}), automatic(cache)).code == 0);

@@ -231,7 +231,7 @@ TEST_CASE("a baked WebP data URI texture equals the bake of its PNG, and baked.g
     CHECK(!baked["images"][0].contains("uri"));
 }
 
-TEST_CASE("a texture only in KHR_texture_basisu is exit 2 naming that extension; with a PNG fallback it bakes",
+TEST_CASE("a texture only in KHR_texture_basisu is exit 2 naming that extension and with a PNG fallback it bakes",
           "[textures][image_formats][cli]") {
     TempDir dir;
     // The KTX2 file identifier, then nothing a decoder would want: hemirad must not try.
@@ -266,7 +266,7 @@ TEST_CASE("a texture only in KHR_texture_basisu is exit 2 naming that extension;
     CHECK(count_warnings(missing, "basisu") == 0);
 }
 
-TEST_CASE("a missing texture bakes with the material's factors and one warning; --strict-textures makes it exit 2",
+TEST_CASE("a missing texture bakes with the material's factors and one warning and --strict-textures makes it exit 2",
           "[textures][image_formats][cli]") {
     TempDir dir;
     // Two materials read the one missing image: one warning, counting both.

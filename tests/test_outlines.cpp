@@ -209,7 +209,7 @@ TEST_CASE("outlines: the plan leaves the hulls out, and judges the other effects
     CHECK_THAT(room.outlines.why, Catch::Contains("node 'room'"));
 }
 
-TEST_CASE("outlines: a box in its hull under the sun bakes as the box alone; outlines=off leaves it black",
+TEST_CASE("outlines: a box in its hull under the sun bakes as the box alone and outlines=off leaves it black",
           "[outlines][cli]") {
     TempDir dir;
     hemirad::scene::write_gltf(boxes_on_floor(1, false), dir / "bare.gltf");

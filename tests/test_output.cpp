@@ -602,7 +602,7 @@ TEST_CASE("render: a see-through pane behind an opaque surface is hidden, two pa
     CHECK(pixel(image, 40, 28).x == Approx(1.0).margin(1e-5));
 }
 
-TEST_CASE("render: where a view ray escapes, the sky's exitance pi L shows; below the dome's rim and without a sky, black",
+TEST_CASE("render: where a view ray escapes, the sky's exitance pi L shows and below the dome's rim and without a sky, black",
           "[output][sky]") {
     scene::Scene scene = scene_with_nodes({"quad"});
     // Bounds [−1, 1] × [−1, 1] × [−3, −1]: the dome's rim is centred at (0, −1, −2), radius 2 √12.

@@ -322,8 +322,8 @@ TimeEstimate say_expected_time(const Plan& p, const Meshed& m, Warnings& warning
                                                      gathered ? refined : 0.0, p.o.gather);
     if (expected.total() > kSayTimeAbove)
         warnings.add(fmt::format("this bake is expected to take about {} ({}; modelled on 2 CPU cores through PoCL, a "
-                                 "GPU is faster); --progress shows how far it is, and Ctrl-C stops it leaving nothing "
-                                 "behind",
+                                 "GPU is faster); --progress shows how far it is; Ctrl-C stops it leaving the output folder as "
+                                 "it was, and its checkpoint lets the same command go on (unless --no-checkpoint)",
                                  format_duration(expected.total()), expected.describe()));
     return expected;
 }

@@ -199,7 +199,7 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->transform(integer_from(1L))
         ->capture_default_str();
     bake.add_option("--resume", o.resume,
-                    "progressive solver: go on from this checkpoint of the same scene and settings; the bake ends "
+                    "go on from this checkpoint of the same scene and settings (after its last finished stage); the bake ends "
                     "with exactly the numbers of an uninterrupted one");
     bake.add_flag("--no-checkpoint", o.no_checkpoint,
                   "no automatic checkpoint (by default a bake expected to take over a minute keeps its solver's "
