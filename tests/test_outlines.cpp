@@ -154,6 +154,25 @@ TEST_CASE("outlines: a box in its inverted hull is found, a room, a loose shell 
         CHECK(found.inward_shells == 1);
         CHECK(found.example_shell == "room");
     }
+    SECTION("an outline material's other inward pieces go with its hulls, a larger shell of it does not") {
+        // Three hulls of ink (material 1), then a half-size ink shell that encloses nothing: no
+        // hull by what it holds, one by its material (the hulls hold 19.8 m² of its 21.3 m²).
+        Scene s = boxes_on_floor(3, true, 1.05, 3.0);
+        add_hull(s, {2.0, 0.3, 2.0}, {2.5, 0.8, 2.5}, 1.0, 1, add_node(s, "piece"));
+        const hemirad::scene::OutlineSearch found = find_outline_hulls(s);
+        REQUIRE(found.hulls.size() == 4);
+        CHECK(found.triangles.size() == 4 * 12);
+        for (const auto& h : found.hulls) CHECK(h.sibling == (s.nodes[h.node].name == "piece"));
+        // Nine hulls and an ink shell twice a box's size: most of the ink is hulls (59 of 83 m²),
+        // but that shell is larger than any of them.
+        Scene big = boxes_on_floor(9, true, 1.05, 3.0);
+        add_hull(big, {5.0, 0.3, 5.0}, {6.0, 1.3, 6.0}, 2.0, 1, add_node(big, "big"));
+        CHECK(find_outline_hulls(big).hulls.size() == 9);
+        // The same piece in grey, the boxes' material, is no hull.
+        Scene grey = boxes_on_floor(3, true, 1.05, 3.0);
+        add_hull(grey, {2.0, 0.3, 2.0}, {2.5, 0.8, 2.5}, 1.0, 0, add_node(grey, "piece"));
+        CHECK(find_outline_hulls(grey).hulls.size() == 3);
+    }
     SECTION("a room filled wall to wall is still a room when a camera is inside it") {
         Scene s;
         const std::uint32_t grey = hemirad::scene::add_material(s, dvec3(0.5), dvec3(0.0));

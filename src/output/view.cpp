@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <vector>
 #include <glm/gtc/matrix_transform.hpp>
 
 #include "core/error.h"
@@ -17,9 +18,11 @@ constexpr double kFramingYfov = 0.8;  // radians
 // A closed interior (interior_view): of kProbeRays rays from the bounds' centre, at least
 // kClosedShare hit the scene, and of those at least kFrontShare hit a face that shows (a front,
 // or either face of a doubleSided surface): a room's walls facing in. An object seen from its
-// own middle shows backs; an open scene lets the rays escape.
+// own middle shows backs; an open scene lets the rays escape. And the rays that hit travel, by
+// the median, at least kReachShare of the way to the bounds: a room's walls are its bounds, while
+// the middle of a diorama or a city lies inside one of its buildings or under its base.
 constexpr int kProbeRays = 64;
-constexpr double kClosedShare = 0.8, kFrontShare = 0.8;
+constexpr double kClosedShare = 0.8, kFrontShare = 0.8, kReachShare = 0.5;
 constexpr double kInteriorYfov = 1.2;       // radians (69°); 4:3, about 85° across
 constexpr double kInteriorAspect = 4.0 / 3.0;
 constexpr double kEyeHeight = 1.6;          // scene units (glTF: metres), at most half the room's height
@@ -67,11 +70,20 @@ std::optional<View> interior_view(const scene::Scene& scene) {
     Hit hits[kProbeRays];
     intersect(scene, centre, d, kProbeRays, hits);
     int hit = 0, shows = 0;
-    for (const Hit& h : hits) {
-        hit += h.t < HUGE_VAL;
-        shows += h.t < HUGE_VAL && h.shows;
+    std::vector<double> reach_share;  // of the hits: distance ÷ the distance to the bounds along the ray
+    for (int r = 0; r < kProbeRays; ++r) {
+        if (!(hits[r].t < HUGE_VAL)) continue;
+        ++hit;
+        shows += hits[r].shows;
+        double exit = HUGE_VAL;
+        for (int axis = 0; axis < 3; ++axis) {
+            if (d[r][axis] != 0.0) exit = std::min(exit, ((d[r][axis] > 0.0 ? hi[axis] : lo[axis]) - centre[axis]) / d[r][axis]);
+        }
+        reach_share.push_back(exit > 0.0 ? hits[r].t / exit : 1.0);
     }
     if (hit < kClosedShare * kProbeRays || shows < kFrontShare * hit) return std::nullopt;
+    std::nth_element(reach_share.begin(), reach_share.begin() + reach_share.size() / 2, reach_share.end());
+    if (reach_share[reach_share.size() / 2] < kReachShare) return std::nullopt;
     // Along the longer horizontal axis, from its + end towards its − end (along −Z, glTF's front,
     // when the room is square), the eye pulled in front of whatever stands between it and the centre.
     const bool along_x = extent.x > extent.z;

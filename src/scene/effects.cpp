@@ -422,17 +422,18 @@ EffectDecision analyse_outlines(const Scene& scene, const OutlineSearch& found) 
                                             found.example_shell, 100.0 * kHugFraction));
     }
     double gap = 0.0;
-    std::size_t named = 0;
+    std::size_t named = 0, siblings = 0;
     std::set<std::uint32_t> nodes;
     for (const OutlineHull& h : found.hulls) {
-        gap = std::max(gap, h.gap);
+        if (!h.sibling) gap = std::max(gap, h.gap);
+        siblings += h.sibling;
         named += h.named;
         nodes.insert(h.node);
     }
     const std::uint32_t node = found.hulls.front().node;
     return automatic(true, fmt::format("{} inverted-hull outline{} ({} triangles on {} node{}, e.g. '{}'{}) hug{} the "
                                        "object{} {} enclose{} (the widest gap {:.3g}% of a hull's size), faces turned "
-                                       "inwards, one-sided: left out as viewers cull them; outlines=off keeps them",
+                                       "inwards, one-sided{}: left out as viewers cull them; outlines=off keeps them",
                                        grouped(found.hulls.size()), found.hulls.size() == 1 ? "" : "s",
                                        grouped(found.triangles.size()), grouped(nodes.size()), nodes.size() == 1 ? "" : "s",
                                        node < scene.nodes.size() ? scene.nodes[node].name : fmt::format("node{}", node),
@@ -441,7 +442,11 @@ EffectDecision analyse_outlines(const Scene& scene, const OutlineSearch& found) 
                                                                      : fmt::format("; {} named as outlines", named),
                                        found.hulls.size() == 1 ? "s" : "", found.hulls.size() == 1 ? "" : "s",
                                        found.hulls.size() == 1 ? "it" : "they", found.hulls.size() == 1 ? "s" : "",
-                                       100.0 * gap));
+                                       100.0 * gap,
+                                       siblings == 0 ? std::string()
+                                                     : fmt::format(" ({} of them one-sided meshes of a material mostly on "
+                                                                   "such hulls, no larger than they)",
+                                                                   grouped(siblings))));
 }
 
 // The effects judged on the surfaces that take part (see-through ones and outlines left out).

@@ -62,8 +62,11 @@ struct Shell {
     Facing facing;
     Box box;
     bool named = false;
+    std::uint32_t material = 0;  // its first triangle's
+    bool one_material = true;    // all its triangles have that material
     std::vector<glm::dvec3> vertices;  // distinct positions
     bool candidate = false, hull = false;
+    bool sibling = false;  // a hull by its material (mark_siblings)
     double gap = 0.0;
 };
 
@@ -168,6 +171,7 @@ void make_shells(const Scene& scene, Analysis& A) {
             shell_of_root[root] = static_cast<std::int32_t>(A.shells.size());
             A.shells.emplace_back();
             A.shells.back().node = scene.triangles[i].node;
+            A.shells.back().material = scene.triangles[i].material;
         }
         const std::int32_t s = shell_of_root[root];
         A.shell[i] = s;
@@ -179,6 +183,7 @@ void make_shells(const Scene& scene, Analysis& A) {
         shell.facing.weighted += area * centroid(t);
         for (const glm::dvec3& p : t.p) shell.box.add(p);
         shell.named = shell.named || named_material[t.material] || (t.node < named_node.size() && named_node[t.node]);
+        shell.one_material = shell.one_material && t.material == shell.material;
     }
     for (std::uint32_t v = 0; v < first_corner.size(); ++v)
         A.shells[shell_of_root[uf.find(v)]].vertices.push_back(position(first_corner[v]));
@@ -274,6 +279,27 @@ double hugged_share(const std::vector<glm::dvec3>& vertices, const std::vector<g
     return static_cast<double>(hugged) / static_cast<double>(vertices.size());
 }
 
+// An outline material's other shells: pieces of hulls cut open, or around objects the search did
+// not reach (see kSiblingShare). A room's walls never share a material with hulls that make up
+// most of it, and are larger than any of them; what a hull encloses faces outwards.
+void mark_siblings(const Scene& scene, Analysis& A) {
+    std::vector<double> area(scene.materials.size() + 1, 0.0), hull_area(area.size(), 0.0), largest(area.size(), 0.0);
+    const auto slot = [&](const Shell& s) { return std::min<std::size_t>(s.material, scene.materials.size()); };
+    for (const Shell& s : A.shells) {
+        if (!s.one_material) continue;
+        area[slot(s)] += s.facing.area;
+        if (!s.hull) continue;
+        hull_area[slot(s)] += s.facing.area;
+        largest[slot(s)] = std::max(largest[slot(s)], s.box.diagonal());
+    }
+    for (Shell& s : A.shells) {
+        const std::size_t m = slot(s);
+        if (s.hull || !s.one_material || !(s.facing.facing >= 0.5 * s.facing.area) || !(hull_area[m] > kSiblingShare * area[m])) continue;
+        if (s.box.diagonal() > largest[m]) continue;
+        s.hull = s.sibling = true;
+    }
+}
+
 Analysis analyse(const Scene& scene) {
     Analysis A;
     make_shells(scene, A);
@@ -334,6 +360,7 @@ Analysis analyse(const Scene& scene) {
         if (s.gap > reach) continue;
         s.hull = hugged_share(s.vertices, points, s.box, reach * diagonal) >= kHuggedVertices;
     }
+    mark_siblings(scene, A);
     return A;
 }
 
@@ -344,7 +371,7 @@ OutlineSearch find_outline_hulls(const Scene& scene) {
     OutlineSearch out;
     for (const Shell& s : A.shells) {
         if (s.hull) {
-            out.hulls.push_back({s.node, s.triangles, s.gap, s.named});
+            out.hulls.push_back({s.node, s.triangles, s.gap, s.named, s.sibling});
         } else if (s.candidate) {
             if (out.inward_shells++ == 0)
                 out.example_shell = s.node < scene.nodes.size() ? scene.nodes[s.node].name : fmt::format("node{}", s.node);
