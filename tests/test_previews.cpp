@@ -113,6 +113,32 @@ TEST_CASE("a closed room without a camera is framed from inside it, showing its 
     CHECK(black <= image.width * image.height / 50);
 }
 
+TEST_CASE("a diorama whose middle lies inside one of its buildings is framed from outside", "[previews][view][cli]") {
+    TempDir dir;
+    // A 40 × 40 ground, a closed double-sided 6 × 12 × 6 tower on it and a 12-high post in one
+    // corner, under a sky: the bounds' centre (0, 6, 0) is inside the tower, whose double-sided
+    // walls show from within, as a room's would; but the rays meet them at 0.15 of the way to the
+    // bounds sideways (3 of 20), far short of the walls of a room.
+    const json ds = {{"name", "grey"}, {"doubleSided", true}, {"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.5, 0.5, 1.0}}}}};
+    const auto q = [](const std::string& name, glm::dvec3 a, glm::dvec3 b, glm::dvec3 c, glm::dvec3 d) {
+        return Quad{{a, b, c, d}, {}, name, 0};
+    };
+    const double a = 3, h = 12;
+    const std::vector<Quad> quads = {
+        floor_quad("ground", -20, 20, -20, 20, 0.0, 0),
+        q("roof", {-a, h, -a}, {-a, h, a}, {a, h, a}, {a, h, -a}),
+        q("tower floor", {-a, 0.01, -a}, {a, 0.01, -a}, {a, 0.01, a}, {-a, 0.01, a}),
+        wall("north", -a, a, 0, h, -a, 0), wall("south", -a, a, 0, h, a, 0),
+        q("west", {-a, 0, -a}, {-a, 0, a}, {-a, h, a}, {-a, h, -a}),
+        q("east", {a, 0, -a}, {a, h, -a}, {a, h, a}, {a, 0, a}),
+        wall("post", 19, 19.5, 0, h, 19, 0)};
+    write_json(dir / "diorama.gltf", quad_scene(dir, quads, json::array({ds})));
+    std::vector<std::string> args = kFast;
+    args.insert(args.end(), {"--sky", "1"});
+    const json report = bake_ok(dir, dir / "diorama.gltf", dir / "out", args);
+    CHECK(report["settings"]["camera"] == "framing");
+}
+
 namespace {
 
 // Blinds: a grey floor [−1, 1]², black slats 0.5 above it, each `slat` wide along x every
