@@ -53,7 +53,7 @@ struct Facing {
     glm::dvec3 weighted{0.0};
     double area = 0.0, facing = 0.0;
     glm::dvec3 centroid() const { return area > 0.0 ? weighted / area : glm::dvec3(0.0); }
-    bool inward() const { return area > 0.0 && facing >= kInwardShare * area; }
+    bool inward(double share = kInwardShare) const { return area > 0.0 && facing >= share * area; }
 };
 
 struct Shell {
@@ -294,8 +294,8 @@ void mark_siblings(const Scene& scene, Analysis& A) {
     }
     for (Shell& s : A.shells) {
         const std::size_t m = slot(s);
-        if (s.hull || !s.one_material || !(s.facing.facing >= 0.5 * s.facing.area) || !(hull_area[m] > kSiblingShare * area[m])) continue;
-        if (s.box.diagonal() > largest[m]) continue;
+        if (s.hull || !s.one_material || !s.facing.inward(kSiblingInwardShare)) continue;
+        if (!(hull_area[m] > kSiblingShare * area[m]) || s.box.diagonal() > largest[m]) continue;
         s.hull = s.sibling = true;
     }
 }

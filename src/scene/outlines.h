@@ -35,10 +35,10 @@ inline constexpr double kInwardShare = 0.75;
 inline constexpr double kHugFraction = 0.10;
 inline constexpr double kHuggedVertices = 0.90;
 // Then a one-material shell that is no hull by the rule above is one when more than kSiblingShare
-// of its material's one-sided area lies in hulls, one of them at least as large as it, and half
-// or more of its own area faces its centroid (not an object's outward faces): an outline
+// of its material's one-sided area lies in hulls, one of them at least as large as it, and
+// kSiblingInwardShare or more of its own area faces its centroid (not an object's outward faces): an outline
 // material's open pieces, or hulls around objects the rule did not confirm.
-inline constexpr double kSiblingShare = 0.5;
+inline constexpr double kSiblingShare = 0.5, kSiblingInwardShare = 0.5;
 
 struct OutlineHull {
     std::uint32_t node = 0;      // Scene::nodes index
