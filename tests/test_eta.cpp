@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "bake/eta.h"
+#include "bake/stage_progress.h"
 
 using hemirad::bake::Cost;
 using hemirad::bake::DecayFit;
@@ -196,4 +197,21 @@ TEST_CASE("eta: a power-law decay gives its exact pass count, and a slowing deca
     CHECK(hedged == Approx(std::sqrt(exponential * exact)).epsilon(1e-9));
     CHECK(exponential < hedged);
     CHECK(hedged < exact);
+}
+
+TEST_CASE("eta: a progressive solve's expected passes shoot every holder once, then a tail that grows with the reflectance", "[eta]") {
+    hemirad::bake::WorkCounts w;
+    w.shape.counts.patches = 10000;
+    w.reflectance = 0.5;
+    const double dark = [&] { auto d = w; d.reflectance = 0.1; return hemirad::bake::expected_solve_passes(d, 40); }();
+    const double bright = hemirad::bake::expected_solve_passes(w, 40);
+    CHECK(dark > 40);
+    CHECK(bright > dark);
+    // Under a sky dome its faces shoot first, the scene's reflected light among them: a short tail.
+    w.sky = true;
+    const double sky = hemirad::bake::expected_solve_passes(w, 1000);
+    CHECK(sky > 1000);
+    CHECK(sky < 1000 + 0.1 * 10000);
+    w.max_passes = 500;
+    CHECK(hemirad::bake::expected_solve_passes(w, 1000) == 500);
 }

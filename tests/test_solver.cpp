@@ -218,3 +218,36 @@ TEST_CASE("the solver's running sums match the ambient share and unshot flux rec
         REQUIRE_THAT(e.emitted, WithinRel(e.absorbed + e.escaped + e.unshot, 1e-12));
     }
 }
+
+TEST_CASE("holders: the largest fluxes that hold all but a share of the sum", "[solver]") {
+    CHECK(solve::flux_holders({1.0, 4.0, 2.0, 3.0}, 0.0) == 4);
+    CHECK(solve::flux_holders({1.0, 4.0, 2.0, 3.0}, 0.1) == 3);   // 4 + 3 + 2 = 9 of 10
+    CHECK(solve::flux_holders({1.0, 4.0, 2.0, 3.0}, 0.11) == 3);  // 7 of 10 is not 8.9
+    CHECK(solve::flux_holders({1.0, 4.0, 2.0, 3.0}, 0.3) == 2);   // 4 + 3 = 7
+    CHECK(solve::flux_holders({0.0, 0.0, 5.0}, 0.01) == 1);
+    CHECK(solve::flux_holders({0.0, 0.0}, 0.01) == 0);
+    CHECK(solve::flux_holders({}, 0.01) == 0);
+}
+
+TEST_CASE("holders: before the first pass a lit wall's patches hold the light, then the walls it lit too", "[solver]") {
+    scene::Scene s;
+    const auto wall = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    const auto light = test::add_material(s, glm::dvec3(0.5), glm::dvec3(2.0));
+    s = test::closed_box({1.0, 0.8, 1.2}, [&](int face) { return face == 3 ? light : wall; }, s);
+    const mesh::Mesh m = mesh::build(s, {0.2, 0.1});
+    std::vector<double> emitted;
+    for (const mesh::Patch& p : m.patches)
+        if (p.emission.x > 0.0) emitted.push_back(p.area);
+    const double total = [&] { double t = 0.0; for (double a : emitted) t += a; return t; }();
+    const double smallest = *std::min_element(emitted.begin(), emitted.end());
+    REQUIRE(emitted.size() > 4);
+    REQUIRE(smallest > 0.01 * total);  // each lit patch holds more than the share left over
+    formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{64, 1}));
+    solve::Progressive solver(m, engine, {1e-3, 200000});
+    CHECK(solver.holders(0.01) == long(emitted.size()));
+    CHECK(solver.holders(0.0) == long(emitted.size()));
+    REQUIRE(solver.step());
+    // The first shot takes a lit patch's light and sends half of what lands back unshot, spread
+    // over the walls it reached: more patches hold light now.
+    CHECK(solver.holders(0.0) > long(emitted.size()));
+}

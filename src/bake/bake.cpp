@@ -484,6 +484,21 @@ WorkCounts work_counts(const Plan& p, const Setup& s, const Meshed& m, const sce
     w.gather_passes = s.direct_only ? 1 : p.o.gather_passes;
     w.gather_refine = p.o.gather_refine > 0 && !s.direct_only;
     if (m.solver == "progressive") w.max_passes = double(max_passes_for(p.o, m.mesh.patches.size()));
+    // The solve's passes as the progress line first predicts them (stage_progress.h).
+    std::vector<double> emitted;
+    emitted.reserve(m.mesh.patches.size());
+    for (const mesh::Patch& patch : m.mesh.patches)
+        emitted.push_back((patch.emission.x + patch.emission.y + patch.emission.z) * patch.area);
+    w.emitting_holders = double(solve::flux_holders(std::move(emitted), s.threshold));
+    w.sky = p.sky.has_value();
+    double reflected = 0.0, area = 0.0;
+    for (const mesh::Element& e : m.mesh.elements) {
+        const glm::dvec3& emission = m.mesh.patches[e.patch].emission;
+        if (emission.x + emission.y + emission.z > 0.0) continue;
+        reflected += (e.rho.x + e.rho.y + e.rho.z) / 3.0 * e.area;
+        area += e.area;
+    }
+    w.reflectance = area > 0.0 ? reflected / area : 0.0;
     return w;
 }
 

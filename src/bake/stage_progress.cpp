@@ -16,30 +16,54 @@ namespace hemirad::bake {
 namespace {
 
 // Host constants, measured on this machine (2 Xeon cores through PoCL, shared with other work;
-// release build) from the stages' own timings on the Cornell box and generated city and
-// furniture scenes of 20k–150k triangles. They are where the progress line starts; each stage's
-// own rate takes over as it runs.
+// release build) from the stages' own timings: the load and mesh on the Cornell box and generated
+// scenes of 20k–150k triangles; the solve, refinement and output fitted on five bakes (the kitchen,
+// Littlest Tokyo and the sport hall of the README's public exports under --sun and --sky, and
+// furniture:20k and city:60k at draft) and checked on the others. They are where the progress
+// line starts; each stage's own rate takes over as it runs.
 // Loading (and setting up): a fixed part, and per byte of the scene file (a .gltf's external
 // buffers are not counted).
 constexpr double kLoadSeconds = 0.15, kLoadSecondsPerByte = 2e-7;
 // Meshing: per triangle.
 constexpr double kMeshSecondsPerTriangle = 1.2e-5;
-// Output: the weld per element (none where the gather welded), the render per pixel and per
-// element drawn, the images per pixel, the baked glTF per element and per triangle of the scene.
+// Output: a fixed part, per element (the weld, none where the gather welded; the render's
+// elements; the baked glTF), per pixel (the render, render.exr, render.png) and per triangle of the
+// scene (the baked glTF). Fitted (least squares, the fixed part and the pixels' share set) on the
+// kitchen, Littlest Tokyo, the sport hall, furniture:20k and city:60k at draft (0.21–4.3 s); on ten
+// other bakes (public exports, generated scenes, the bundled scenes; 0.16–12 s) the model was
+// 0.86–1.97× the measured output.
+constexpr double kOutputSeconds = 0.05;
 constexpr double kWeldSecondsPerElement = 3e-7;
-constexpr double kRenderSecondsPerPixel = 5e-8, kRenderSecondsPerElement = 1e-5;
-constexpr double kExrSecondsPerPixel = 1.3e-6, kPngSecondsPerPixel = 1e-6;
-constexpr double kGltfSecondsPerElement = 5e-6, kGltfSecondsPerTriangle = 1e-5;
+constexpr double kRenderSecondsPerPixel = 5e-8, kRenderSecondsPerElement = 1e-6;
+constexpr double kExrSecondsPerPixel = 1.5e-7, kPngSecondsPerPixel = 1e-7;
+constexpr double kGltfSecondsPerElement = 1.2e-6, kGltfSecondsPerTriangle = 3.4e-6;
 // The gather's vertices per element (1.0 on the Cornell box, 1.5 on a city of quads and
 // clusters): the larger decides whether a gather is left out for its size (gather.h), the
 // smaller counts its work.
 constexpr double kGatherVerticesPerElement = 1.15, kGatherMostVerticesPerElement = 1.5;
-// Refinement's growth over two levels: 2.2× at N 256 (the Cornell box 1.8×, a 20k city 2.75×),
-// more where a coarser hemicube leaves noise to split (N 64, draft: cities of 10k–150k triangles
-// 5.0–6.4×, a furniture hall 2.7×): about 2.2 (256/N)^0.6, at most 4× a level. A level's host
-// work (marking, splitting, the engine for the finer mesh) per element after it.
-constexpr double kRefineGrowth256 = 2.2, kRefineGrowthExponent = 0.6;
-constexpr double kRefineSecondsPerElement = 5e-5;
+// Refinement's growth over two levels: 3.6×, the geometric mean of the public exports (the
+// kitchen 2.2, the Japanese room 1.9, the workplace corner 3.1, the fantasy inn 3.6, the sport hall
+// 3.9, Littlest Tokyo 4.7, the keyboard 5.6, the sci-fi hall 6.6, the autumn river 8.3: textures
+// give contrast to split) and generated scenes (the Cornell box 1.8, city:20k 2.75; at N 64 over
+// 1.4–6.1), with no clear trend in N; at most 4× a level.
+constexpr double kRefineGrowth = 3.6;
+// Refinement, a level: re-gathering the strongest shooters onto the finer mesh and the host's
+// marking and splitting grow with the elements before it and with the hemicube: 47 µs an element
+// a level at N 256 (from the kitchen and Littlest Tokyo; the sport hall 56), 8–14 µs at N 64
+// (furniture:20k and city:60k at draft), and a fixed part that small scenes show (about a second
+// a level at N 256: the atrium and lit room 2.1–2.2 s over two levels, the keyboard 4.7 s).
+constexpr double kRefineSecondsPerElement256 = 4.7e-5, kRefineNExponent = 1.2, kRefineLevelSeconds256 = 1.0;
+// The progressive solve's passes, before its error has fallen (expected_solve_passes): the tail
+// of passes the reflected light takes, per patch, as measured. Under a sky dome
+// (--sky), 0.017 a patch (the geometric mean of the kitchen 0.008, Littlest Tokyo 0.016 and the
+// sport hall 0.037: the dome's 1,024 faces shoot first and the scene's reflected light with
+// them); without one, 0.56 ρ/(1 − ρ) a patch with ρ the mean reflectance (furniture:20k 0.62,
+// city:60k 0.50 at draft; a closed room of furniture of ρ 0.53 takes 0.7 passes a patch).
+constexpr double kSkyTailPerPatch = 0.017, kTailPerPatch = 0.56;
+// A progressive pass: per element of the mesh, and a hemicube's fixed part at N 256 (its cells
+// grow as N²): fitted on the same five bakes (2.1–12.3 ms a pass at N 256, 0.6–1.5 ms at N 64);
+// on six others 0.55–1.4× the measured.
+constexpr double kPassSecondsPerElement = 3.3e-8, kPassSeconds256 = 5e-4;
 // Gather refinement's new vertices, as a share of the gather's (at most half again); a vertex's
 // later passes, as a share of its first (they re-use its row where the budget kept it).
 constexpr double kGatherRefineShare = 0.3;
@@ -47,15 +71,20 @@ constexpr double kGatherRefineShare = 0.3;
 // element of the mesh: 0.8 ms a vertex on a 9.5k-element city at N 32, 2.1 ms at 28k, 0.62 ms on
 // the Cornell box's 14.7k at N 96 — several times the budget's hemicube alone.
 constexpr double kGatherSecondsPerVertexElement = 3.5e-8;
+// The gather measured against that model (its hemicubes at the budget's batched cost, the host's
+// work besides): 0.11–0.74 on five bakes (the Cornell box, the atrium, the lit room, city:4k and
+// city:10k at draft), 0.34 their geometric mean.
+constexpr double kGatherShare = 0.34;
 constexpr double kLaterPassShare = 0.05;
 // The engines' set-up before the solve (the device's mesh; PoCL's kernels when its cache holds
 // them, else about 10 s more to build them).
 constexpr double kEnginesSeconds = 0.3;
 
-double growth_per_level(int hemicube) {
-    const double two_levels = kRefineGrowth256 * std::pow(256.0 / std::max(8, hemicube), kRefineGrowthExponent);
-    return std::min(4.0, std::sqrt(two_levels));
+double growth_per_level() {
+    return std::min(4.0, std::sqrt(kRefineGrowth));
 }
+
+double n_share(int hemicube) { return double(std::max(8, hemicube)) / 256.0; }
 
 BakeShape with_elements(BakeShape s, double elements) {
     s.counts.elements = elements;
@@ -65,23 +94,32 @@ BakeShape with_elements(BakeShape s, double elements) {
 }  // namespace
 
 std::vector<std::pair<std::string, double>> predict_output(double elements, double triangles, double pixels) {
-    return {{"weld", elements * kWeldSecondsPerElement},
+    return {{"weld", kOutputSeconds + elements * kWeldSecondsPerElement},
             {"render", pixels * kRenderSecondsPerPixel + elements * kRenderSecondsPerElement},
             {"render.exr", pixels * kExrSecondsPerPixel},
             {"render.png", pixels * kPngSecondsPerPixel},
             {"baked.gltf", elements * kGltfSecondsPerElement + triangles * kGltfSecondsPerTriangle}};
 }
 
-double refine_level_seconds(const WorkCounts& w, double shooters) {
+double refine_level_seconds(const WorkCounts& w) {
     const BakeShape& s = w.shape;
     if (s.refine_levels <= 0) return 0.0;
-    double seconds = 0.0, refined = s.counts.elements;
-    for (int level = 1; level <= s.refine_levels; ++level) {
-        refined *= growth_per_level(s.hemicube);
-        seconds += shooters * batched_shot_seconds(with_elements(s, refined), solve::regather_hemicube(s.hemicube, level)) +
-                   refined * kRefineSecondsPerElement;
-    }
-    return seconds / s.refine_levels;
+    const double n = n_share(s.hemicube);
+    return kRefineLevelSeconds256 * n * n + s.counts.elements * kRefineSecondsPerElement256 * std::pow(n, kRefineNExponent);
+}
+
+double expected_solve_passes(const WorkCounts& w, double holders) {
+    const double P = w.shape.counts.patches;
+    const double rho = std::clamp(w.reflectance, 0.0, 0.95);
+    const double tail = w.sky ? kSkyTailPerPatch * P : kTailPerPatch * rho / (1.0 - rho) * P;
+    double passes = std::max(1.0, holders + tail);
+    if (w.max_passes > 0.0) passes = std::min(passes, w.max_passes);
+    return passes;
+}
+
+double expected_pass_seconds(const BakeShape& s) {
+    const double n = n_share(s.hemicube);
+    return kPassSeconds256 * n * n + s.counts.elements * kPassSecondsPerElement;
 }
 
 std::vector<StagePlan> predict_stages(const WorkCounts& w) {
@@ -94,22 +132,15 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         // A row per patch, and the Gauss–Seidel sweeps spread over them.
         out.push_back({"solve", Cost::hemicube, P, expected_times(s).matrix / std::max(1.0, P)});
     } else {
-        double passes = expected_passes(s);
-        if (w.max_passes > 0.0) passes = std::min(passes, w.max_passes);
-        out.push_back({"solve", Cost::hemicube, passes, expected_times(s).progressive / std::max(1.0, expected_passes(s))});
+        out.push_back({"solve", Cost::hemicube, expected_solve_passes(w, w.emitting_holders), expected_pass_seconds(s)});
     }
     double refined = E;
     if (w.refine && s.refine_levels > 0) {
-        // A unit a level: each re-gathers the strongest shooters (at most
-        // RefineSettings::max_shooters; the count is known once the level starts) and the lights
-        // onto its finer mesh, at a finer hemicube. Its host work besides makes its rate no
-        // measure of the gather's.
-        // A priori a quarter of the cap (the Cornell box 22, cities of 4k–20k triangles 36–144).
-        const double shooters = std::min(P, double(solve::RefineSettings{}.max_shooters) / 4.0) + w.light_hemicubes;
-        StagePlan refine{"refine", Cost::hemicube, double(s.refine_levels), refine_level_seconds(w, shooters)};
+        // A unit a level; its host work besides its shots makes its rate no measure of the gather's.
+        StagePlan refine{"refine", Cost::hemicube, double(s.refine_levels), refine_level_seconds(w)};
         refine.evidence = false;
         out.push_back(refine);
-        refined *= std::pow(growth_per_level(s.hemicube), s.refine_levels);
+        refined *= std::pow(growth_per_level(), s.refine_levels);
     }
     const bool left_out = !w.gather_given && refined * kGatherMostVerticesPerElement > double(w.max_planned_gather);
     if (w.gather > 0 && !left_out) {
@@ -120,7 +151,8 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         const double units =
             points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
         out.push_back({"gather", Cost::hemicube, units,
-                       batched_shot_seconds(with_elements(s, refined), w.gather) + refined * kGatherSecondsPerVertexElement});
+                       kGatherShare * (batched_shot_seconds(with_elements(s, refined), w.gather) +
+                                       refined * kGatherSecondsPerVertexElement)});
     }
     double output = 0.0;
     for (const auto& step : predict_output(refined, w.triangles, s.pixels)) output += step.second;
@@ -163,7 +195,7 @@ void StageProgress::plan_rest(const WorkCounts& w) {
     gather_extra_ = w.gather_refine ? kGatherRefineShare : 0.0;
     gather_passes_ = std::max(1, w.gather_passes);
     double refined = w.shape.counts.elements;
-    if (w.refine) refined *= std::pow(growth_per_level(w.shape.hemicube), w.shape.refine_levels);
+    if (w.refine) refined *= std::pow(growth_per_level(), w.shape.refine_levels);
     output_steps_ = predict_output(refined, w.triangles, w.shape.pixels);
     planned_ = true;
 }
@@ -187,12 +219,12 @@ void StageProgress::begin_stage(const std::string& stage) {
         if (lights) model = "lights";
         decay_ = DecayFit();
         fitted_at_ = expected_passes_ = -1.0;
+        solve_replanned_ = false;
     }
     if (stage == "gather") {
         gather_base_ = gather_last_done_ = gather_last_units_ = 0.0;
         gather_phase_ = 0;
     }
-    if (stage == "refine") refine_shooters_ = -1;
     into(model);
     show(stage == "load" ? load_detail_ : stage == "mesh" ? mesh_detail_ : "");
 }
@@ -256,9 +288,18 @@ void StageProgress::lights(std::size_t done, std::size_t total) {
 void StageProgress::passes(const solve::Progressive& solver, double threshold) {
     into("solve");
     const double done = double(solver.passes());
+    if (!solve_replanned_) {
+        // The solve's first pass: the holders of its unshot light are known now (the sun's light
+        // reflected among them), and the passes expected are counted from them.
+        solve_replanned_ = true;
+        for (const Eta::Stage& s : eta_.stages())
+            if (s.plan.name == "solve")
+                eta_.replan("solve", done + expected_solve_passes(work_, double(solver.holders(threshold))),
+                            s.plan.unit_seconds);
+    }
     decay_.add(done, solver.error());
     // The fit is redone when the decay has a new sample (every 2% more passes).
-    double planned = 0.0;  // the plan's passes (budget.h's model)
+    double planned = 0.0;  // the passes expected before the decay (expected_solve_passes)
     for (const Eta::Stage& s : eta_.stages())
         if (s.plan.name == "solve") planned = s.plan.units;
     if (double(decay_.samples().size()) != fitted_at_) {
@@ -283,11 +324,6 @@ void StageProgress::rows(long done, long total) {
 void StageProgress::refining(int level, long shots, long total) {
     into("refine");
     const double levels = std::max(refine_levels_, level);
-    // The level's shooters are known now: the prediction of the levels left is made with them.
-    if (total != refine_shooters_) {
-        refine_shooters_ = total;
-        eta_.replan("refine", levels, refine_level_seconds(work_, double(total)));
-    }
     eta_.update(now(), double(level - 1) + double(shots) / double(std::max(1L, total)), levels);
     show(fmt::format("level {}: re-gather {} / {} shots", level, shots, total));
 }

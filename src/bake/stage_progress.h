@@ -31,17 +31,30 @@ struct WorkCounts {
     int gather_passes = 1;
     bool gather_refine = false;
     double max_passes = 0.0;         // the progressive solve's cap (0: none)
+    // The emitting patches that hold all but the threshold's share of the emitted flux
+    // (solve::flux_holders): the sun's light reflected is not among them before the solve.
+    double emitting_holders = 0.0;
+    bool sky = false;           // a sky dome (--sky) is among the emitters
+    double reflectance = 0.0;   // area-weighted over the elements that do not emit, r g b averaged
 };
 
 // The stages after meshing (lights, solve, refine, gather, output), predicted from `w` with the
 // budget's per-unit costs (bake/budget.h, 2 CPU cores through PoCL) and the host constants
 // measured for the output (stage_progress.cpp).
 std::vector<StagePlan> predict_stages(const WorkCounts& w);
+// The passes a progressive solve is expected to take, before its error has fallen: `holders`, the
+// patches that hold all but the threshold's share of the unshot flux (solve::flux_holders), each
+// shoot about once, and the light they reflect takes a tail of passes in proportion to the
+// patches, longer the more the scene reflects (stage_progress.cpp says how it was measured).
+double expected_solve_passes(const WorkCounts& w, double holders);
+// A progressive pass's seconds on 2 CPU cores through PoCL: per element of the mesh (set up,
+// drawn, received), and a hemicube's fixed part at its N.
+double expected_pass_seconds(const BakeShape& shape);
 // The progressive solve's passes expected from the plan's `planned` and the decay's `fitted`
 // (stage_progress.cpp says how).
 double blend_passes(double planned, double fitted, const DecayFit& decay, double threshold);
-// A refinement level's predicted seconds, with `shooters` re-gather shots a level.
-double refine_level_seconds(const WorkCounts& w, double shooters);
+// A refinement level's predicted seconds.
+double refine_level_seconds(const WorkCounts& w);
 // The output stage's steps and their predicted seconds, for elements and pixels.
 std::vector<std::pair<std::string, double>> predict_output(double elements, double triangles, double pixels);
 
@@ -85,6 +98,7 @@ private:
     // The progressive solve's decay, the cap on its passes.
     DecayFit decay_;
     double fitted_at_ = -1.0, expected_passes_ = -1.0, max_passes_ = 0.0;
+    bool solve_replanned_ = false;  // the solve's passes counted from its holders (passes())
     int refine_levels_ = 0;
     // The gather's phases (the gather, then each refinement level's new vertices): the work of
     // the phases before, and the last count seen.
@@ -92,7 +106,6 @@ private:
     double gather_passes_ = 1.0;
     int gather_phase_ = 0;
     WorkCounts work_;
-    long refine_shooters_ = -1;
     std::string load_detail_, mesh_detail_;
     std::vector<std::pair<std::string, double>> output_steps_;
 };

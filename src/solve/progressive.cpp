@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <stdexcept>
 
@@ -72,6 +73,22 @@ void Progressive::start_round(std::vector<glm::dvec3> snapshot) {
 
 bool Progressive::done() const {
     return converged_ || (settings_.max_passes > 0 && passes_ >= settings_.max_passes);
+}
+
+long flux_holders(std::vector<double> flux, double share) {
+    std::sort(flux.begin(), flux.end(), std::greater<>());
+    double total = 0.0;
+    for (double f : flux) total += f;
+    long count = 0;
+    for (double held = 0.0; count < long(flux.size()) && flux[count] > 0.0 && held < (1.0 - share) * total; ++count)
+        held += flux[count];
+    return count;
+}
+
+long Progressive::holders(double share) const {
+    std::vector<double> keys(unshot_.size());
+    for (std::size_t p = 0; p < unshot_.size(); ++p) keys[p] = flux_key(p);
+    return flux_holders(std::move(keys), share);
 }
 
 double Progressive::flux_key(std::size_t patch) const { return sum(unshot_[patch]) * mesh_.patches[patch].area; }

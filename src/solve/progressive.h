@@ -49,6 +49,10 @@ struct Energy {
     double unshot = 0.0;
 };
 
+// How many of `flux` (one value per patch, ≥ 0), taken largest first, hold all but `share` of
+// their sum: 0 where the sum is 0.
+long flux_holders(std::vector<double> flux, double share);
+
 class Progressive final : public Resumable {
 public:
     // `direct`, if set, is the irradiance per element the punctual lights have already shot
@@ -74,6 +78,9 @@ public:
     // left more than `threshold` of the unshot flux it started with unshot.
     double round_change() const { return round_change_; }
     double unshot_fraction() const;
+    // The patches, taken by most unshot flux first, that hold all but `share` of the unshot flux
+    // now (flux_holders): the passes that shooting it once would take.
+    long holders(double share) const;
     // Which rule ended the solve: "unshot light" (the ambient share, or nothing left to shoot),
     // "a round without change", or "" while not converged.
     std::string convergence_rule() const;
