@@ -76,6 +76,10 @@ constexpr double kGatherSecondsPerVertexElement = 3.5e-8;
 // city:10k at draft), 0.34 their geometric mean.
 constexpr double kGatherShare = 0.34;
 constexpr double kLaterPassShare = 0.05;
+// The matrix solve measured against the budget's model (bake/budget.h, made for choosing a
+// solver): 0.27–0.72 on six generated and bundled bakes (the Cornell box, the atrium, the lit
+// room, city:4k and city:10k at draft, city:20k), 0.48 their geometric mean.
+constexpr double kMatrixShare = 0.48;
 // The engines' set-up before the solve (the device's mesh; PoCL's kernels when its cache holds
 // them, else about 10 s more to build them).
 constexpr double kEnginesSeconds = 0.3;
@@ -130,7 +134,7 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
     out.push_back({"lights", Cost::hemicube, w.light_hemicubes, batched_shot_seconds(s, s.hemicube)});
     if (w.solver == "matrix") {
         // A row per patch, and the Gauss–Seidel sweeps spread over them.
-        out.push_back({"solve", Cost::hemicube, P, expected_times(s).matrix / std::max(1.0, P)});
+        out.push_back({"solve", Cost::hemicube, P, kMatrixShare * expected_times(s).matrix / std::max(1.0, P)});
     } else {
         out.push_back({"solve", Cost::hemicube, expected_solve_passes(w, w.emitting_holders), expected_pass_seconds(s)});
     }
@@ -142,8 +146,16 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         out.push_back(refine);
         refined *= std::pow(growth_per_level(), s.refine_levels);
     }
-    const bool left_out = !w.gather_given && refined * kGatherMostVerticesPerElement > double(w.max_planned_gather);
-    if (w.gather > 0 && !left_out) {
+    // The share of the gather expected to run: a gather is left out for its size (gather.h), and
+    // where refinement comes first its growth is known only to within about 2× (kRefineGrowth):
+    // the share of that range, log-uniform, that keeps the gather.
+    double runs = 1.0;
+    if (!w.gather_given) {
+        const double most = refined * kGatherMostVerticesPerElement / double(w.max_planned_gather);
+        const bool refining = w.refine && s.refine_levels > 0;
+        runs = refining ? std::clamp(std::log(2.0 / most) / std::log(4.0), 0.0, 1.0) : (most > 1.0 ? 0.0 : 1.0);
+    }
+    if (w.gather > 0 && runs > 0.0) {
         // A unit is a vertex's first hemicube; its later passes re-use the row (kLaterPassShare
         // each); gather refinement's vertices take one hemicube each.
         const double passes = std::max(1, w.gather_passes);
@@ -151,7 +163,7 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         const double units =
             points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
         out.push_back({"gather", Cost::hemicube, units,
-                       kGatherShare * (batched_shot_seconds(with_elements(s, refined), w.gather) +
+                       runs * kGatherShare * (batched_shot_seconds(with_elements(s, refined), w.gather) +
                                        refined * kGatherSecondsPerVertexElement)});
     }
     double output = 0.0;
