@@ -499,6 +499,15 @@ WorkCounts work_counts(const Plan& p, const Setup& s, const Meshed& m, const sce
         area += e.area;
     }
     w.reflectance = area > 0.0 ? reflected / area : 0.0;
+    double one_by_one = 0.0;
+    w.gather_planar_patches = 0.0;
+    for (const mesh::Patch& patch : m.mesh.patches) {
+        if (patch.cluster() || patch.element_count <= 1)
+            one_by_one += patch.element_count;
+        else
+            w.gather_planar_patches += 1.0;
+    }
+    w.gather_cluster_share = m.mesh.elements.empty() ? 1.0 : one_by_one / double(m.mesh.elements.size());
     return w;
 }
 

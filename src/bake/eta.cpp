@@ -136,6 +136,7 @@ void Eta::replan(const std::string& name, double units, double unit_seconds) {
     if (!s) return;
     s->plan.units = units;
     s->plan.unit_seconds = unit_seconds;
+    if (s->state == Stage::State::pending) s->first_predicted = s->plan.predicted();  // its counts come late
     if (s->state != Stage::State::running) s->total = units;
 }
 

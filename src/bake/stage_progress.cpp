@@ -37,10 +37,11 @@ constexpr double kWeldSecondsPerElement = 3e-7;
 constexpr double kRenderSecondsPerPixel = 5e-8, kRenderSecondsPerElement = 1e-6;
 constexpr double kExrSecondsPerPixel = 1.5e-7, kPngSecondsPerPixel = 1e-7;
 constexpr double kGltfSecondsPerElement = 1.2e-6, kGltfSecondsPerTriangle = 3.4e-6;
-// The gather's vertices per element (1.0 on the Cornell box, 1.5 on a city of quads and
-// clusters): the larger decides whether a gather is left out for its size (gather.h), the
-// smaller counts its work.
-constexpr double kGatherVerticesPerElement = 1.15, kGatherMostVerticesPerElement = 1.5;
+// The gather's vertices a pass per element of the refined mesh: 0.86–2.44 on six bakes (the Cornell
+// box 0.86, the atrium 0.96, the lit room 1.17, city:4k 1.41 and city:10k 1.58 at draft, furniture:20k
+// at draft 2.44), 1.3 their geometric mean, which counts its work; 1.5 decides whether a gather is
+// expected to be left out for its size (gather.h).
+constexpr double kGatherVerticesPerElement = 1.3, kGatherMostVerticesPerElement = 1.5;
 // Refinement's growth over two levels: 3.6×, the geometric mean of the public exports (the
 // kitchen 2.2, the Japanese room 1.9, the workplace corner 3.1, the fantasy inn 3.6, the sport hall
 // 3.9, Littlest Tokyo 4.7, the keyboard 5.6, the sci-fi hall 6.6, the autumn river 8.3: textures
@@ -67,14 +68,13 @@ constexpr double kPassSecondsPerElement = 3.3e-8, kPassSeconds256 = 5e-4;
 // Gather refinement's new vertices, as a share of the gather's (at most half again); a vertex's
 // later passes, as a share of its first (they re-use its row where the budget kept it).
 constexpr double kGatherRefineShare = 0.3;
-// A gather vertex's host work besides its hemicube (its row's light, the near-field weights), per
-// element of the mesh: 0.8 ms a vertex on a 9.5k-element city at N 32, 2.1 ms at 28k, 0.62 ms on
-// the Cornell box's 14.7k at N 96 — several times the budget's hemicube alone.
-constexpr double kGatherSecondsPerVertexElement = 3.5e-8;
-// The gather measured against that model (its hemicubes at the budget's batched cost, the host's
-// work besides): 0.11–0.74 on five bakes (the Cornell box, the atrium, the lit room, city:4k and
-// city:10k at draft), 0.34 their geometric mean.
-constexpr double kGatherShare = 0.34;
+// A gather vertex's first pass: a fixed part (its hemicube's set-up and drawing, its row's light
+// on the host) and a part per element it draws (solve::gather_mesh: a planar patch one, a
+// cluster's elements each). Fitted on six bakes (the Cornell box, the atrium and the lit room at
+// the default quality, N 96 and four passes; city:4k, city:10k and furniture:20k at draft, N 32 and
+// one pass: 61–751 µs a vertex, 569–26,000 drawn), within 25% of each; the hemicube's N made no
+// clear difference.
+constexpr double kGatherVertexSeconds = 2e-4, kGatherSecondsPerDrawn = 2e-8;
 constexpr double kLaterPassShare = 0.05;
 // The matrix solve measured against the budget's model (bake/budget.h, made for choosing a
 // solver): 0.27–0.72 on six generated and bundled bakes (the Cornell box, the atrium, the lit
@@ -89,11 +89,6 @@ double growth_per_level() {
 }
 
 double n_share(int hemicube) { return double(std::max(8, hemicube)) / 256.0; }
-
-BakeShape with_elements(BakeShape s, double elements) {
-    s.counts.elements = elements;
-    return s;
-}
 
 }  // namespace
 
@@ -162,9 +157,8 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         const double points = refined * kGatherVerticesPerElement;
         const double units =
             points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
-        out.push_back({"gather", Cost::hemicube, units,
-                       runs * kGatherShare * (batched_shot_seconds(with_elements(s, refined), w.gather) +
-                                       refined * kGatherSecondsPerVertexElement)});
+        const double drawn = w.gather_planar_patches + w.gather_cluster_share * refined;
+        out.push_back({"gather", Cost::hemicube, units, runs * (kGatherVertexSeconds + kGatherSecondsPerDrawn * drawn)});
     }
     double output = 0.0;
     for (const auto& step : predict_output(refined, w.triangles, s.pixels)) output += step.second;
