@@ -105,7 +105,8 @@ TEST_CASE("a closed room without a camera is framed from inside it, showing its 
     write_json(dir / "room.gltf", quad_scene(dir, room, json::array({kGrey, lamp})));
     const json report = bake_ok(dir, dir / "room.gltf", dir / "out");
     CHECK(report["settings"]["camera"] == "framing (inside)");
-    // Every wall is lit and seen from its front: hardly a black pixel (a back would be black).
+    // Every wall is lit and seen from its front: hardly a black pixel (a back would be culled,
+    // showing the dark beyond).
     const ImageData image = read_image(dir / "out" / "render.exr");
     int black = 0;
     for (int y = 0; y < image.height; ++y)

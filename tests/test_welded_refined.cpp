@@ -175,7 +175,6 @@ void check_crack_free(const output::WeldedNode& node, const std::function<bool(d
     CHECK(r.clockwise == 0);
     CHECK(r.unused_vertices == 0);
     CHECK(r.area == Approx(expected_area).epsilon(1e-12));
-    CHECK(node.has_twin.size() == node.triangle_count());
 }
 
 // ---- the welder as it was before T-junctions were handled, for the unrefined comparison ----
@@ -237,7 +236,6 @@ output::WeldedMesh old_weld(std::size_t node_count, const mesh::Mesh& mesh, cons
         auto tri = [&](std::uint32_t x, std::uint32_t y, std::uint32_t z) {
             if (x == y || y == z || x == z) return;
             node.indices.insert(node.indices.end(), {x, y, z});
-            node.has_twin.push_back(e.has_twin ? 1 : 0);
         };
         tri(ids[0], ids[1], ids[2]);
         if (e.poly.n == 4) tri(ids[0], ids[2], ids[3]);
@@ -390,7 +388,6 @@ TEST_CASE("welded refined: both sides of a doubleSided strip are mended apart", 
 
     CHECK(node.positions.size() == 2 * 11);
     CHECK(node.triangle_count() == 2 * 11);
-    CHECK(node.has_twin == std::vector<std::uint8_t>(2 * 11, 1));
     const auto hanging = vertices_at(node, {1, 0.5, 0});
     REQUIRE(hanging.size() == 2);
     for (std::size_t v : hanging) {
@@ -543,7 +540,6 @@ TEST_CASE("welded refined: an unrefined mesh welds exactly as before", "[output]
         const output::WeldedNode& want = expected.nodes[n];
         CHECK(got.positions == want.positions);
         CHECK(got.indices == want.indices);
-        CHECK(got.has_twin == want.has_twin);
         CHECK(got.radiosity == want.radiosity);
         CHECK(got.normals == want.normals);
     }

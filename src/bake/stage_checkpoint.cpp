@@ -146,7 +146,6 @@ void node_io(IO& io, N& n) {
     io.item(n.normals);
     io.item(n.radiosity);
     io.item(n.indices);
-    io.item(n.has_twin);
     io.item(n.element);
     io.item(n.corner_start);
     io.item(n.corner_element);

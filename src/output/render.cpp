@@ -100,8 +100,10 @@ public:
         planes_[4] = Plane(0.0, 1.0, kGuardBand, 0.0);
     }
 
-    // Adds the screen triangles of one mesh triangle. A triangle seen from behind is skipped
-    // when its twin is drawn there, else drawn black (a one-sided surface's back is opaque).
+    // Adds the screen triangles of one mesh triangle. A triangle seen from behind is skipped: its
+    // twin draws a double-sided surface's back, and a one-sided surface's back is culled, as glTF
+    // asks of viewers (doubleSided false), so an interior of walls facing in is seen into from
+    // outside as every engine shows it. (The solve still lets such a back block light.)
     void add(const WeldedNode& node, std::size_t triangle, std::vector<ScreenTriangle>& out) const {
         glm::dvec3 p[3];
         ClipVertex v[3];
@@ -112,10 +114,7 @@ public:
         }
         const double facing = glm::dot(glm::cross(p[1] - p[0], p[2] - p[0]), -p[0]);  // eye at 0
         if (facing == 0.0) return;                                                    // edge-on
-        if (facing < 0.0) {
-            if (node.has_twin[triangle]) return;
-            for (ClipVertex& c : v) c.colour = glm::dvec3(0.0);
-        }
+        if (facing < 0.0) return;
         clip_and_emit(v, out);
     }
 

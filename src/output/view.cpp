@@ -25,7 +25,11 @@ constexpr int kProbeRays = 64;
 constexpr double kClosedShare = 0.8, kFrontShare = 0.8, kReachShare = 0.5;
 constexpr double kInteriorYfov = 1.2;       // radians (69°); 4:3, about 85° across
 constexpr double kInteriorAspect = 4.0 / 3.0;
-constexpr double kEyeHeight = 1.6;          // scene units (glTF: metres), at most half the room's height
+constexpr double kEyeHeight = 1.6;          // scene units (glTF: metres), at most kEyeShare of the room's height
+constexpr double kEyeShare = 0.5;
+// A room taller than this is not in metres (a SketchUp export in millimetres, 1,874 units high):
+// the eye at kEyeShare of its height, not 1.6 units above its floor.
+constexpr double kTallestRoom = 10.0;
 constexpr double kFromWall = 0.1;           // the eye's distance from the far end's wall, in the room's length
 
 // The nearest hit of the ray o + t d (t > 0) with the scene's own triangles (not the sky dome):
@@ -89,7 +93,8 @@ std::optional<View> interior_view(const scene::Scene& scene) {
     const bool along_x = extent.x > extent.z;
     const glm::dvec3 axis = along_x ? glm::dvec3(1.0, 0.0, 0.0) : glm::dvec3(0.0, 0.0, 1.0);
     const double half = 0.5 * (along_x ? extent.x : extent.z);
-    const glm::dvec3 middle(centre.x, lo.y + std::min(kEyeHeight, 0.5 * extent.y), centre.z);
+    const double eye_height = extent.y > kTallestRoom ? kEyeShare * extent.y : std::min(kEyeHeight, kEyeShare * extent.y);
+    const glm::dvec3 middle(centre.x, lo.y + eye_height, centre.z);
     double reach = half * (1.0 - 2.0 * kFromWall);
     Hit back;
     intersect(scene, middle, &axis, 1, &back);

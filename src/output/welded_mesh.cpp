@@ -155,10 +155,9 @@ private:
         return (filter_[h & (filter_.size() - 1)] & bits) == bits;
     }
 
-    void triangle(std::uint32_t a, std::uint32_t b, std::uint32_t c, bool has_twin) {
+    void triangle(std::uint32_t a, std::uint32_t b, std::uint32_t c) {
         if (a == b || b == c || a == c) return;  // collapsed: nothing to draw, and validators warn
         node_.indices.insert(node_.indices.end(), {a, b, c});
-        node_.has_twin.push_back(has_twin ? 1 : 0);
         node_.element.push_back(element_);
     }
 
@@ -188,12 +187,12 @@ private:
                 split_edge(ids[i], ids[(i + 1) % n], 1u << i, e, 0);
             }
             if (outline_.size() > std::size_t(n)) {
-                clip_ears(e.has_twin);
+                clip_ears();
                 return;
             }
         }
-        triangle(ids[0], ids[1], ids[2], e.has_twin);
-        if (n == 4) triangle(ids[0], ids[2], ids[3], e.has_twin);
+        triangle(ids[0], ids[1], ids[2]);
+        if (n == 4) triangle(ids[0], ids[2], ids[3]);
     }
 
     // Appends the hanging vertices strictly inside the edge a → b, in order from a: the one at
@@ -228,7 +227,7 @@ private:
     // apex of a triangle whose other points are all on one side). A convex outline always
     // has such an ear, and its last three points are never collinear. O(k²) for k points,
     // k = corners + hanging vertices: small, and only refined elements' neighbours get here.
-    void clip_ears(bool has_twin) {
+    void clip_ears() {
         std::size_t size = outline_.size();
         int on_edge[4] = {0, 0, 0, 0};  // points left on each element edge
         for (const OutlinePoint& p : outline_) {
@@ -256,12 +255,12 @@ private:
             }
             if (best == size) break;  // only for an element that is not convex: draw no more
             const OutlinePoint p = outline_[best];
-            triangle(outline_[(best + size - 1) % size].id, p.id, outline_[(best + 1) % size].id, has_twin);
+            triangle(outline_[(best + size - 1) % size].id, p.id, outline_[(best + 1) % size].id);
             for (int e = 0; e < 4; ++e) on_edge[e] -= int((p.edges >> e) & 1u);
             outline_.erase(outline_.begin() + std::ptrdiff_t(best));
             --size;
         }
-        if (size == 3) triangle(outline_[0].id, outline_[1].id, outline_[2].id, has_twin);
+        if (size == 3) triangle(outline_[0].id, outline_[1].id, outline_[2].id);
     }
 
     // Sets each hanging vertex's normal to the normalized mean of its edge's ends', after the ends'

@@ -17,9 +17,6 @@ struct WeldedNode {
     std::vector<glm::dvec3> normals;     // unit, area-weighted mean of the elements' around it
     std::vector<glm::dvec3> radiosity;   // area-weighted mean of the elements around the vertex
     std::vector<std::uint32_t> indices;  // 3 per triangle, counter-clockwise seen from its front
-    // Per triangle: its element has a twin facing the other way, so its back is never seen
-    // (the twin's front is drawn there instead).
-    std::vector<std::uint8_t> has_twin;
     std::vector<std::uint32_t> element;  // per triangle: the element it is part of (mesh index)
 
     // How weld made each vertex's value of the elements', so that any other per-element values
