@@ -215,3 +215,14 @@ TEST_CASE("eta: a progressive solve's expected passes shoot every holder once, t
     w.max_passes = 500;
     CHECK(hemirad::bake::expected_solve_passes(w, 1000) == 500);
 }
+
+TEST_CASE("eta: a stage planned before its work is counted is first predicted when it is; a predicted one keeps its first", "[eta]") {
+    Eta eta;
+    eta.add({"mesh", Cost::own, 1.0, 0.0});  // its triangles not yet counted
+    eta.add({"gather", Cost::hemicube, 50.0, 1.0});
+    eta.replan("mesh", 1000.0, 0.01);   // 1,000 triangles at 10 ms
+    eta.replan("gather", 0.0, 0.0);     // left out after refinement
+    CHECK(eta.stages()[0].first_predicted == Approx(10.0));
+    CHECK(eta.stages()[1].first_predicted == Approx(50.0));
+    CHECK(eta.left(0.0) == Approx(10.0));
+}

@@ -136,7 +136,9 @@ void Eta::replan(const std::string& name, double units, double unit_seconds) {
     if (!s) return;
     s->plan.units = units;
     s->plan.unit_seconds = unit_seconds;
-    if (s->state == Stage::State::pending) s->first_predicted = s->plan.predicted();  // its counts come late
+    // A stage planned before its work was counted (the mesh's, before its triangles are) is first
+    // predicted now; one already predicted keeps that for the report.
+    if (s->state == Stage::State::pending && s->first_predicted == 0.0) s->first_predicted = s->plan.predicted();
     if (s->state != Stage::State::running) s->total = units;
 }
 

@@ -65,8 +65,8 @@ public:
     // The plan's stages, in the order they run.
     void add(const StagePlan& stage);
     // A stage's work is counted again (the gather's vertices once the mesh is refined): its
-    // prediction from now on. The first prediction of a stage that has begun is kept for the
-    // report; one still to come (the mesh's, planned before its triangles are counted) takes this.
+    // prediction from now on. The first prediction of a stage is kept for the report; one planned
+    // with no work (the mesh's, before its triangles are counted) takes this one.
     void replan(const std::string& name, double units, double unit_seconds);
     bool has(const std::string& name) const;
 
