@@ -310,7 +310,11 @@ void StageProgress::passes(const solve::Progressive& solver, double threshold) {
         if (s.plan.name == "solve") planned = s.plan.units;
     if (double(decay_.samples().size()) != fitted_at_) {
         fitted_at_ = double(decay_.samples().size());
-        const double fitted = decay_.total_passes(threshold);
+        double fitted = decay_.total_passes(threshold);
+        // A fit of the first few passes, before the error has moved, can run to millions: it is held
+        // to the cap before it is blended, so that even its small weight cannot pull the plan there
+        // (the sci-fi hall showed "pass 5 of ~178,388" for a solve planned at 4,832 that took 3,881).
+        if (fitted >= 0.0 && max_passes_ > 0.0) fitted = std::min(fitted, max_passes_);
         expected_passes_ = fitted >= 0.0 ? std::ceil(blend_passes(planned, fitted, decay_, threshold)) : -1.0;
         if (expected_passes_ >= 0.0 && max_passes_ > 0.0) expected_passes_ = std::min(expected_passes_, max_passes_);
     }
