@@ -216,7 +216,7 @@ TEST_CASE("eta: a progressive solve's expected passes shoot every holder once, t
     CHECK(hemirad::bake::expected_solve_passes(w, 1000) == 500);
 }
 
-TEST_CASE("eta: a stage planned before its work is counted is first predicted when it is; a predicted one keeps its first", "[eta]") {
+TEST_CASE("eta: a stage planned before its work is counted is first predicted when it is, a predicted one keeps its first", "[eta]") {
     Eta eta;
     eta.add({"mesh", Cost::own, 1.0, 0.0});  // its triangles not yet counted
     eta.add({"gather", Cost::hemicube, 50.0, 1.0});
