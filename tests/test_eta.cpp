@@ -42,14 +42,19 @@ TEST_CASE("eta: a stage at 10% with a known rate extrapolates to the right total
     run_at_rate(eta, 0.0, 2.0, 100.0, 20.0);          // 10 units: 10%
     CHECK(eta.fraction() == Approx(0.1));
     CHECK(eta.stage_left(20.0) == Approx(180.0));     // 90 units at 2 s
-    CHECK(eta.ratio(Cost::hemicube) == Approx(2.0));
+    // A running stage's ratio counts by the share of it done: its first units are not its
+    // typical ones (a solve shoots its largest patches first).
+    CHECK(eta.ratio(Cost::hemicube) == Approx(std::pow(2.0, 0.1)));
     CHECK(eta.ratio(Cost::own) == 1.0);
-    CHECK(eta.left(20.0) == Approx(180.0 + 100.0 + 7.0));
+    CHECK(eta.left(20.0) == Approx(180.0 + 50.0 * std::pow(2.0, 0.1) + 7.0));
     // Time passing since the last update comes off the stage's rest.
     CHECK(eta.stage_left(21.0) == Approx(179.0));
 
+    // Half-way, half of the solve's ratio (in log).
+    for (double t = 25.0; t <= 100.0; t += 5.0) eta.update(t, t / 2.0, 100.0);
+    CHECK(eta.ratio(Cost::hemicube) == Approx(std::sqrt(2.0)));
     // The stage ends at 200 s as extrapolated: the gather began re-fitted by the solve's ratio.
-    for (double t = 25.0; t <= 200.0; t += 5.0) eta.update(t, t / 2.0, 100.0);
+    for (double t = 105.0; t <= 200.0; t += 5.0) eta.update(t, t / 2.0, 100.0);
     eta.begin("gather", 200.0);
     CHECK(eta.left(200.0) == Approx(100.0 + 7.0));
     const Eta::Stage& gather = eta.stages()[1];
@@ -122,7 +127,8 @@ TEST_CASE("eta: a resumed stage's rate counts from its first update", "[eta]") {
     eta.update(0.5, 600.0, 1000.0);
     for (double t = 1.0; t <= 20.5; t += 0.5) eta.update(t, 600.0 + 2.0 * (t - 0.5), 1000.0);
     CHECK(eta.stage_left(20.5) == Approx(360.0 * 0.5));  // 360 units left at 2 a second
-    CHECK(eta.ratio(Cost::hemicube) == Approx(0.5));
+    // Its rate, 0.5 s a unit (predicted 1), weighed by the 64% of the stage done.
+    CHECK(eta.ratio(Cost::hemicube) == Approx(std::pow(0.5, 0.64)));
 }
 
 TEST_CASE("eta: the prediction made at a share of the bake", "[eta]") {
@@ -225,4 +231,47 @@ TEST_CASE("eta: a stage planned before its work is counted is first predicted wh
     CHECK(eta.stages()[0].first_predicted == Approx(10.0));
     CHECK(eta.stages()[1].first_predicted == Approx(50.0));
     CHECK(eta.left(0.0) == Approx(10.0));
+}
+
+TEST_CASE("eta: a gather that refinement may leave out counts as the chance-weighted geometric mean of the bake with and without it", "[eta]") {
+    hemirad::bake::WorkCounts w;
+    w.shape.counts.patches = 800;
+    w.shape.counts.elements = 8000;
+    w.solver = "progressive";
+    w.refine = true;
+    w.gather = 96;
+    w.gather_passes = 4;
+    w.gather_refine = true;
+    w.gather_planar_patches = 800;
+    w.gather_cluster_share = 0.0;
+    const auto total = [](const std::vector<StagePlan>& stages, bool with_gather) {
+        double sum = 0.0;
+        for (const StagePlan& s : stages)
+            if (with_gather || s.name != "gather") sum += s.predicted();
+        return sum;
+    };
+    const auto gather_of = [](const std::vector<StagePlan>& stages) {
+        for (const StagePlan& s : stages)
+            if (s.name == "gather") return s.predicted();
+        return -1.0;
+    };
+    // Asked for (--gather): it always runs, at its full cost G.
+    w.gather_given = true;
+    const std::vector<StagePlan> given = hemirad::bake::predict_stages(w);
+    const double B = total(given, false), G = gather_of(given);
+    REQUIRE(G > 0.0);
+    // Planned with a cap near the refined mesh's vertices: refinement decides, a chance p between
+    // 0 and 1 (the cap at 1.5 vertices an element of 8000 × 3.6 refined: p = log(2 / 0.864) / log 4).
+    w.gather_given = false;
+    w.max_planned_gather = 50000;
+    const double most = 8000.0 * 3.6 * 1.5 / 50000.0, p = std::log(2.0 / most) / std::log(4.0);
+    REQUIRE(p > 0.0);
+    REQUIRE(p < 1.0);
+    const std::vector<StagePlan> maybe = hemirad::bake::predict_stages(w);
+    CHECK(total(maybe, false) == Approx(B));
+    CHECK(B + gather_of(maybe) == Approx(std::pow(B, 1.0 - p) * std::pow(B + G, p)).epsilon(1e-9));
+    CHECK(gather_of(maybe) < p * G);  // below the linear weight
+    // A cap far below: left out for certain, no gather planned.
+    w.max_planned_gather = 1000;
+    CHECK(gather_of(hemirad::bake::predict_stages(w)) < 0.0);
 }

@@ -209,13 +209,28 @@ double Eta::stage_ratio(const Stage& s) const {
 }
 
 double Eta::ratio(Cost cost) const {
+    // The latest stage of the kind with evidence: a finished one's ratio as it is; a running one's
+    // weighed (in log) against the ratio before it by the share of it done, since its first units
+    // are not its typical ones (a progressive solve shoots its largest patches first, at up to twice
+    // a later pass's cost: on the sci-fi hall and furniture:20k its early ratio alone put the
+    // stages after it 2× long).
+    double running = 0.0, share = 0.0;
+    bool has_running = false;
     for (auto it = stages_.rbegin(); it != stages_.rend(); ++it) {
         if (it->plan.cost != cost || !it->plan.evidence || cost == Cost::own) continue;
         if (it->state != Stage::State::done && it->state != Stage::State::running) continue;
         const double r = stage_ratio(*it);
-        if (r > 0.0) return r;
+        if (!(r > 0.0)) continue;
+        if (it->state == Stage::State::done) {
+            return has_running ? std::exp(share * std::log(running) + (1.0 - share) * std::log(r)) : r;
+        }
+        if (!has_running) {
+            has_running = true;
+            running = r;
+            share = it->total > 0.0 ? std::clamp(it->done / it->total, 0.0, 1.0) : 0.0;
+        }
     }
-    return 1.0;
+    return has_running ? std::exp(share * std::log(running)) : 1.0;
 }
 
 double Eta::corrected(const Stage& s) const { return s.plan.predicted() * ratio(s.plan.cost); }

@@ -86,7 +86,8 @@ public:
     double stage_left(double t) const;
     double left(double t) const;
     // Measured over predicted seconds per unit, from the latest stage of that kind with enough
-    // measured (the running one once it has measured progress); 1 where none has.
+    // measured: a finished one's; a running one's weighed in log against the one before it (or 1)
+    // by the share of it done. 1 where none has.
     double ratio(Cost cost) const;
 
     // The predicted end of the bake (t + left) is kept every `kSampleSeconds` or so (sample());
