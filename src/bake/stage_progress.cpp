@@ -168,7 +168,7 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         // matters of an estimate is its ratio to the truth, so the total is their geometric mean
         // weighted by the chance, B^(1−p) (B + G)^p, which minimises the expected squared log
         // error. Measured against a linear weight, B + pG: key-mini (p 0.56, left out) 1.83 for
-        // 2.36, furniture:20k at draft (p 0.31, it ran) 0.52 for 1.18; the Cornell box, the atrium
+        // 2.36, furniture:20k at draft (p 0.30, it ran) 0.52 for 1.18; the Cornell box, the atrium
         // and the lit room within 10% of each other.
         double rest = 0.0, gather = 0.0;
         for (const StagePlan& stage : out) (stage.name == "gather" ? gather : rest) += stage.predicted();
