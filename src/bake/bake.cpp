@@ -30,6 +30,8 @@
 #include "formfactor/parallel.h"
 #include "output/finite.h"
 #include "scene/outlines.h"
+#include "solve/final_gather.h"
+#include "solve/progressive.h"
 
 namespace hemirad::bake {
 
@@ -485,11 +487,19 @@ WorkCounts work_counts(const Plan& p, const Setup& s, const Meshed& m, const sce
     w.gather_refine = p.o.gather_refine > 0 && !s.direct_only;
     if (m.solver == "progressive") w.max_passes = double(max_passes_for(p.o, m.mesh.patches.size()));
     // The solve's passes as the progress line first predicts them (stage_progress.h).
+    // And what a gather draws (solve::gather_mesh).
     std::vector<double> emitted;
     emitted.reserve(m.mesh.patches.size());
-    for (const mesh::Patch& patch : m.mesh.patches)
+    double one_by_one = 0.0;
+    for (const mesh::Patch& patch : m.mesh.patches) {
         emitted.push_back((patch.emission.x + patch.emission.y + patch.emission.z) * patch.area);
+        if (solve::drawn_by_element(patch))
+            one_by_one += patch.element_count;
+        else
+            w.gather_planar_patches += 1.0;
+    }
     w.emitting_holders = double(solve::flux_holders(std::move(emitted), s.threshold));
+    w.gather_cluster_share = m.mesh.elements.empty() ? 1.0 : one_by_one / double(m.mesh.elements.size());
     w.sky = p.sky.has_value();
     double reflected = 0.0, area = 0.0;
     for (const mesh::Element& e : m.mesh.elements) {
@@ -499,15 +509,6 @@ WorkCounts work_counts(const Plan& p, const Setup& s, const Meshed& m, const sce
         area += e.area;
     }
     w.reflectance = area > 0.0 ? reflected / area : 0.0;
-    double one_by_one = 0.0;
-    w.gather_planar_patches = 0.0;
-    for (const mesh::Patch& patch : m.mesh.patches) {
-        if (patch.cluster() || patch.element_count <= 1)
-            one_by_one += patch.element_count;
-        else
-            w.gather_planar_patches += 1.0;
-    }
-    w.gather_cluster_share = m.mesh.elements.empty() ? 1.0 : one_by_one / double(m.mesh.elements.size());
     return w;
 }
 

@@ -9,7 +9,6 @@
 #include <fmt/core.h>
 
 #include "solve/progressive.h"
-#include "solve/refinement.h"
 
 namespace hemirad::bake {
 
@@ -170,14 +169,18 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         // error. Measured against a linear weight, B + pG: key-mini (p 0.56, left out) 1.83 for
         // 2.36, furniture:20k at draft (p 0.30, it ran) 0.52 for 1.18; the Cornell box, the atrium
         // and the lit room within 10% of each other.
-        double rest = 0.0, gather = 0.0;
-        for (const StagePlan& stage : out) (stage.name == "gather" ? gather : rest) += stage.predicted();
+        double rest = 0.0;
+        StagePlan* gather = nullptr;
         for (StagePlan& stage : out) {
-            if (stage.name != "gather" || !(gather > 0.0)) continue;
-            const double hedged =
-                std::exp((1.0 - runs) * std::log(std::max(rest, 1e-3)) + runs * std::log(std::max(rest, 1e-3) + gather)) -
-                std::max(rest, 1e-3);
-            stage.unit_seconds *= std::max(0.0, hedged) / gather;
+            if (stage.name == "gather")
+                gather = &stage;
+            else
+                rest += stage.predicted();
+        }
+        const double base = std::max(rest, 1e-3), full = gather ? gather->predicted() : 0.0;
+        if (full > 0.0) {
+            const double hedged = std::exp((1.0 - runs) * std::log(base) + runs * std::log(base + full)) - base;
+            gather->unit_seconds *= std::max(0.0, hedged) / full;
         }
     }
     return out;

@@ -156,7 +156,7 @@ mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {
         mesh::Patch q = p;
         q.first_element = static_cast<std::uint32_t>(out.elements.size());
         const std::uint32_t index = static_cast<std::uint32_t>(out.patches.size());
-        if (p.cluster() || p.element_count <= 1) {
+        if (drawn_by_element(p)) {
             for (std::uint32_t k = p.first_element; k < p.first_element + p.element_count; ++k) {
                 out.elements.push_back(mesh.elements[k]);
                 out.elements.back().patch = index;

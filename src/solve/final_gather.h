@@ -58,6 +58,9 @@ std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
 // come from its own hemicube at pixel resolution, and the drawing costs a patch, not its elements
 // (the Cornell box at the default quality: 742 drawn elements for 15,354).
 mesh::Mesh gather_mesh(const mesh::Mesh& mesh);
+// Whether gather_mesh draws `patch` element by element (a cluster, or a patch of one element)
+// rather than as one cell.
+inline bool drawn_by_element(const mesh::Patch& patch) { return patch.cluster() || patch.element_count <= 1; }
 
 // Splits the elements of `mesh` marked in `split` in four (mesh::split_elements, with `texturing`),
 // and carries a solution over: children take their parent's irradiance, and each of `radiosities`
