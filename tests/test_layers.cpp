@@ -15,21 +15,22 @@ namespace fs = std::filesystem;
 namespace {
 
 // Module → the modules it may include besides itself (the CMake targets follow the same order:
-// hemirad_core holds core … dist, then hemirad_gen, hemirad_bake, hemirad_bench, hemirad_cli).
+// hemirad_image holds image; hemirad_core holds core … dist, then hemirad_gen, hemirad_bake, hemirad_bench, hemirad_cli).
 const std::map<std::string, std::set<std::string>>& allowed() {
     static const std::map<std::string, std::set<std::string>> rules = {
         {"core", {}},
+        {"image", {"core"}},
         {"cl", {"core"}},
-        {"scene", {"core"}},
-        {"mesh", {"core", "scene"}},
-        {"formfactor", {"core", "cl", "scene", "mesh"}},
-        {"output", {"core", "scene", "mesh", "formfactor"}},
-        {"solve", {"core", "scene", "mesh", "formfactor", "output"}},
-        {"dist", {"core", "cl", "mesh", "formfactor"}},
-        {"gen", {"core", "scene"}},
-        {"bake", {"core", "cl", "scene", "mesh", "formfactor", "output", "solve", "dist"}},
-        {"bench", {"core", "cl", "scene", "mesh", "formfactor", "output", "solve", "dist", "gen", "bake"}},
-        {"cli", {"core", "cl", "scene", "mesh", "formfactor", "output", "solve", "dist", "gen", "bake", "bench"}},
+        {"scene", {"core", "image"}},
+        {"mesh", {"core", "image", "scene"}},
+        {"formfactor", {"core", "image", "cl", "scene", "mesh"}},
+        {"output", {"core", "image", "scene", "mesh", "formfactor"}},
+        {"solve", {"core", "image", "scene", "mesh", "formfactor", "output"}},
+        {"dist", {"core", "image", "cl", "mesh", "formfactor"}},
+        {"gen", {"core", "image", "scene"}},
+        {"bake", {"core", "image", "cl", "scene", "mesh", "formfactor", "output", "solve", "dist"}},
+        {"bench", {"core", "image", "cl", "scene", "mesh", "formfactor", "output", "solve", "dist", "gen", "bake"}},
+        {"cli", {"core", "image", "cl", "scene", "mesh", "formfactor", "output", "solve", "dist", "gen", "bake", "bench"}},
     };
     return rules;
 }

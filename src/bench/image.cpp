@@ -3,8 +3,6 @@
 
 #include <fmt/core.h>
 
-#include <OpenImageIO/imageio.h>
-
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -16,6 +14,7 @@
 #include "bake/bake.h"
 #include "bench/support.h"
 #include "core/error.h"
+#include "image/image.h"
 
 namespace hemirad::bench {
 namespace fs = std::filesystem;
@@ -29,27 +28,20 @@ double luminance(double r, double g, double b) { return 0.2126 * r + 0.7152 * g 
 
 glm::dvec3 vec3(const ordered_json& j) { return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()}; }
 
-// Every channel of an image file as floats, pixel by pixel; `spec` gets its size and channels.
-std::vector<float> read_channels(const fs::path& file, OIIO::ImageSpec& spec) {
-    auto in = OIIO::ImageInput::open(file.string());
-    if (!in) throw InputError(fmt::format("{}: cannot read the image", file.string()));
-    spec = in->spec();
-    std::vector<float> all(std::size_t(spec.width) * spec.height * spec.nchannels);
-    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, all.data()))
-        throw InputError(fmt::format("{}: cannot read the image", file.string()));
-    return all;
-}
-
-// Linear RGB of an image file (render.exr), as floats.
+// Linear RGB of an EXR file (render.exr), as floats.
 std::vector<float> read_rgb(const fs::path& file, int& width, int& height) {
-    OIIO::ImageSpec spec;
-    const std::vector<float> all = read_channels(file, spec);
-    if (spec.nchannels < 3) throw InputError(fmt::format("{}: fewer than 3 channels", file.string()));
-    width = spec.width;
-    height = spec.height;
+    const image::FloatImage all = image::read_exr(file);
+    const int r = all.channel("R"), g = all.channel("G"), b = all.channel("B");
+    if (r < 0 || g < 0 || b < 0) throw InputError(fmt::format("{}: no R, G and B channels", file.string()));
+    width = all.width;
+    height = all.height;
+    const std::size_t n = all.channels.size();
     std::vector<float> rgb(std::size_t(width) * height * 3);
-    for (std::size_t p = 0; p < std::size_t(width) * height; ++p)
-        for (int c = 0; c < 3; ++c) rgb[3 * p + c] = all[p * spec.nchannels + c];
+    for (std::size_t p = 0; p < std::size_t(width) * height; ++p) {
+        rgb[3 * p + 0] = all.values[p * n + std::size_t(r)];
+        rgb[3 * p + 1] = all.values[p * n + std::size_t(g)];
+        rgb[3 * p + 2] = all.values[p * n + std::size_t(b)];
+    }
     return rgb;
 }
 
@@ -85,23 +77,23 @@ ImageReference load_image_reference(const std::string& dir) {
         }
         if (!r.json.contains("faces")) throw InputError(fmt::format("{}: not a path-traced reference", json.string()));
     }
-    OIIO::ImageSpec spec;
-    const std::vector<float> all = read_channels(exr, spec);
+    const image::FloatImage all = image::read_exr(exr);
     const std::vector<std::string> want = {"R", "G", "B", "noise.Y", "face"};
-    if (spec.nchannels != int(want.size())) throw InputError(fmt::format("{}: not a path-traced reference", exr.string()));
+    if (all.channels.size() != want.size()) throw InputError(fmt::format("{}: not a path-traced reference", exr.string()));
     std::vector<int> index(want.size());
     for (std::size_t k = 0; k < want.size(); ++k) {
-        index[k] = spec.channelindex(want[k]);
+        index[k] = all.channel(want[k]);
         if (index[k] < 0) throw InputError(fmt::format("{}: no channel {}", exr.string(), want[k]));
     }
-    r.width = spec.width;
-    r.height = spec.height;
+    r.width = all.width;
+    r.height = all.height;
+    const std::size_t channels = all.channels.size();
     const std::size_t n = std::size_t(r.width) * r.height;
     r.rgb.resize(3 * n);
     r.noise_y.resize(n);
     r.face.resize(n);
     for (std::size_t p = 0; p < n; ++p) {
-        const float* px = &all[p * spec.nchannels];
+        const float* px = &all.values[p * channels];
         for (int c = 0; c < 3; ++c) r.rgb[3 * p + c] = px[index[c]];
         r.noise_y[p] = px[index[3]];
         r.face[p] = int(std::lround(px[index[4]]));

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "bake/bake.h"
+#include "image/image.h"
 #include "bake/engine_select.h"
 #include "bench/command.h"
 #include "cl/runtime.h"
@@ -340,7 +341,7 @@ int run(int argc, char** argv) {
     }
     const dist::Session mpi(argc, argv);
     CLI::App app{"hemirad: radiosity baker with a hemicube form-factor engine"};
-    app.set_version_flag("--version", HEMIRAD_VERSION);
+    app.set_version_flag("--version", fmt::format("hemirad {}\nimages: {}", HEMIRAD_VERSION, image::backend().name));
     app.require_subcommand(1);
     BakeOptions bake_options;
     CLI::App* bake = app.add_subcommand("bake", "bake diffuse global illumination into a glTF scene");

@@ -1,5 +1,4 @@
 // Image files: linear 32-bit float EXR, tone-mapped sRGB PNG, and the exposure that suits them.
-#include <OpenImageIO/imageio.h>
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -9,6 +8,7 @@
 #include <cstdint>
 
 #include "core/error.h"
+#include "image/image.h"
 #include "output/output.h"
 
 namespace hemirad::output {
@@ -31,21 +31,8 @@ double srgb_oetf(double linear) {  // IEC 61966-2-1
     return linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1.0 / 2.4) - 0.055;
 }
 
-// Opens `file` for writing in `format` (named, so a temporary file name's extension does not
-// matter), writes `pixels` (3 channels of `pixel_type`), closes; throws with OIIO's message.
-void write_image(const std::filesystem::path& file, const char* format, const OIIO::ImageSpec& spec,
-                 OIIO::TypeDesc pixel_type, const void* pixels) {
-    const std::string name = file.string();
-    auto out = OIIO::ImageOutput::create(format);
-    if (!out) {
-        throw InternalError(fmt::format("{}: cannot write {}: {}", name, format, OIIO::geterror()));
-    }
-    const bool ok = out->open(name, spec) && out->write_image(pixel_type, pixels) && out->close();
-    if (!ok) throw OutputError(fmt::format("{}: cannot write: {}", name, out->geterror()));
-}
-
 // OpenImageIO's PNG writer does not see libpng's failed writes: on a full disk it left 0-byte
-// frames and said nothing. A whole PNG ends with its IEND chunk, the last bytes written.
+// frames and said nothing (checked for either back-end). A whole PNG ends with its IEND chunk, the last bytes written.
 void check_png_written(const std::filesystem::path& file) {
     static constexpr unsigned char kEnd[8] = {'I', 'E', 'N', 'D', 0xAE, 0x42, 0x60, 0x82};
     std::error_code ec;
@@ -96,9 +83,7 @@ void write_exr(const Image& image, const std::filesystem::path& file) {
     check_size(image, file);
     // 32-bit floats: half floats end at 65504, and a scene's units may put radiosity far above
     // (the loader allows emission up to 1e30): every pixel became inf.
-    OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
-    spec.attribute("compression", "zip");
-    write_image(file, "openexr", spec, OIIO::TypeDesc::FLOAT, image.rgb.data());
+    image::write_exr(file, image.width, image.height, image.rgb.data());
 }
 
 void write_png(const Image& image, const std::filesystem::path& file, double exposure) {
@@ -109,8 +94,7 @@ void write_png(const Image& image, const std::filesystem::path& file, double exp
         const double display = srgb_oetf(tone(exposure * double(image.rgb[i])));
         bytes[i] = static_cast<std::uint8_t>(std::lround(std::clamp(display, 0.0, 1.0) * 255.0));
     }
-    OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
-    write_image(file, "png", spec, OIIO::TypeDesc::UINT8, bytes.data());
+    image::write_png(file, image.width, image.height, bytes.data());
     check_png_written(file);
 }
 

@@ -127,8 +127,9 @@ double auto_exposure(const Image& image);
 // approaches 1 smoothly.
 double tone(double x);
 
-// Linear half-float EXR, and a tone-mapped (exposure, then filmic-free Reinhard-style
-// shoulder, then sRGB) 8-bit PNG. Both through OpenImageIO; throw InternalError on failure.
+// Linear 32-bit float EXR, and a tone-mapped (exposure, then filmic-free Reinhard-style
+// shoulder, then sRGB) 8-bit PNG. Both through the image back-end (src/image); a failed write
+// throws OutputError.
 void write_exr(const Image& image, const std::filesystem::path& file);
 void write_png(const Image& image, const std::filesystem::path& file, double exposure);
 

@@ -1,8 +1,7 @@
-// Texture means decoded by OpenImageIO from memory, a band of rows at a time (see image_mean.h).
+// Texture means decoded from memory by the image back-end, a band of rows at a time (see
+// image_mean.h).
 #include "scene/image_mean.h"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -10,9 +9,13 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <memory>
+#include <optional>
 #include <vector>
 
 #include <fmt/core.h>
+
+#include "image/image.h"
 
 namespace hemirad::scene {
 namespace {
@@ -24,7 +27,7 @@ double srgb_to_linear(double x) {
     return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
 }
 
-// The first line of a decoder's message, without the made-up file name it was given.
+// The first line of a decoder's message, without the made-up file name OpenImageIO was given.
 std::string first_line(std::string text) {
     text = text.substr(0, text.find('\n'));
     for (const char* ext : {"png", "jpg", "webp"}) {
@@ -33,18 +36,6 @@ std::string first_line(std::string text) {
     }
     while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
     return text.empty() ? "no reason given" : text;
-}
-
-// OpenImageIO picks a reader by the file name's extension, and reading from memory there is no
-// file to probe: the bytes' own signature says which, and only glTF's image formats (PNG, JPEG,
-// and WebP from EXT_texture_webp) are given to it, not every format a plugin might read.
-std::string extension_for(const unsigned char* bytes, std::size_t size) {
-    static const unsigned char kPng[] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-    static const unsigned char kJpeg[] = {0xff, 0xd8, 0xff};
-    if (size >= sizeof kPng && std::memcmp(bytes, kPng, sizeof kPng) == 0) return "png";
-    if (size >= sizeof kJpeg && std::memcmp(bytes, kJpeg, sizeof kJpeg) == 0) return "jpg";
-    if (size >= 12 && std::memcmp(bytes, "RIFF", 4) == 0 && std::memcmp(bytes + 8, "WEBP", 4) == 0) return "webp";
-    return {};
 }
 
 // Sends what the image libraries print to stderr (fd 2) to a scratch file while it lives:
@@ -86,25 +77,18 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels
         return out;
     };
     if (size == 0) return fail("the image is empty (0 bytes)");
-    const std::string ext = extension_for(bytes, size);
-    if (ext.empty()) return fail("not a PNG, JPEG or WebP image (its first bytes are none of their signatures)");
-    const std::string name = "image." + ext;
+    const std::optional<image::Format> format = image::format_of(bytes, size);
+    if (!format) return fail("not a PNG, JPEG or WebP image (its first bytes are none of their signatures)");
+    const char* ext = image::extension(*format);
 
     const StderrCapture quiet;  // the decoders' own complaints: the problem below says what went wrong
-    OIIO::Filesystem::IOMemReader memory(bytes, size);
-    OIIO::ImageSpec config;
-    void* proxy = &memory;
-    config.attribute("oiio:ioproxy", OIIO::TypeDesc::PTR, &proxy);
-    config.attribute("oiio:UnassociatedAlpha", 1);  // the file's colours, not multiplied by alpha
-    std::unique_ptr<OIIO::ImageInput> in = OIIO::ImageInput::create(name, false, &config);
-    if (!in) return fail(fmt::format("cannot decode a .{} image ({})", ext, first_line(OIIO::geterror())));
-    OIIO::ImageSpec spec;
-    if (!in->open(name, spec, config))
-        return fail(fmt::format("not a .{} image OpenImageIO can decode ({})", ext, first_line(in->geterror())));
+    std::string problem;
+    const std::unique_ptr<image::Decoder> in = image::open(*format, bytes, size, problem);
+    if (!in) return fail(fmt::format("not a .{} image hemirad can decode ({})", ext, first_line(problem)));
+    const image::Spec& spec = in->spec();
     const std::uint64_t pixels = std::uint64_t(std::max(spec.width, 0)) * std::uint64_t(std::max(spec.height, 0));
-    if (spec.width < 1 || spec.height < 1 || spec.depth > 1 || spec.nchannels < 1)
-        return fail(fmt::format("not a picture ({} × {} × {} pixels, {} channels)", spec.width, spec.height,
-                                spec.depth, spec.nchannels));
+    if (spec.width < 1 || spec.height < 1 || spec.channels < 1)
+        return fail(fmt::format("not a picture ({} × {} pixels, {} channels)", spec.width, spec.height, spec.channels));
     if (pixels > kMaxImagePixels || spec.width > kMaxImageEdge || spec.height > kMaxImageEdge) {
         out.refused = true;
         return fail(fmt::format("{} × {} pixels, above the limits of {} pixels and {} a side", spec.width,
@@ -113,13 +97,9 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels
 
     // 8- and 16-bit values are counted per level, then decoded once per level (a histogram:
     // one pow() per distinct level, not per pixel); anything else is read as linear floats.
-    const std::size_t base = spec.format.basetype;
-    const int bits = base == OIIO::TypeDesc::UINT8 || base == OIIO::TypeDesc::INT8 ? 8
-                     : base == OIIO::TypeDesc::UINT16 || base == OIIO::TypeDesc::INT16 ? 16
-                                                                                         : 32;
-    const OIIO::TypeDesc type = bits == 8 ? OIIO::TypeDesc::UINT8 : bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::FLOAT;
-    const int colour = spec.nchannels >= 3 ? 3 : 1;  // grey (+alpha): one channel for all three
-    const bool has_alpha = spec.nchannels == colour + 1;
+    const int bits = spec.bits;
+    const int colour = spec.channels >= 3 ? 3 : 1;  // grey (+alpha): one channel for all three
+    const bool has_alpha = spec.channels == colour + 1;
     const int channels = colour + (has_alpha ? 1 : 0);  // read: the colour, then alpha
     const std::size_t value_bytes = std::size_t(bits / 8);
     const std::size_t row_values = std::size_t(spec.width) * std::size_t(channels);
@@ -158,8 +138,8 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels
 
     for (int y = 0; y < spec.height; y += band) {
         const int n = std::min(band, spec.height - y);
-        if (!in->read_scanlines(0, 0, spec.y + y, spec.y + y + n, 0, 0, channels, type, rows.data()))
-            return fail(fmt::format("the image does not decode past row {} ({})", y, first_line(in->geterror())));
+        if (!in->read_rows(y, y + n, channels, rows.data()))
+            return fail(fmt::format("the image does not decode past row {} ({})", y, first_line(in->error())));
         const std::size_t values = std::size_t(n) * row_values;
         if (bits == 8) {
             for (std::size_t i = 0; i < values; ++i) ++histogram[(i % std::size_t(channels)) * levels + rows[i]];
@@ -223,7 +203,7 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels
     out.ok = true;
     out.width = spec.width;
     out.height = spec.height;
-    out.channels = spec.nchannels;
+    out.channels = spec.channels;
     out.bits = bits;
     return out;
 }

@@ -1,6 +1,6 @@
-// The mean linear colour of an encoded texture image (PNG, JPEG or WebP), decoded by OpenImageIO
-// a band of rows at a time: the loader needs only the mean, so a 20000 × 20000
-// PNG costs a few megabytes of memory, not gigabytes.
+// The mean linear colour of an encoded texture image (PNG, JPEG or WebP), decoded by the image
+// back-end (src/image) a band of rows at a time: the loader needs only the mean, so a
+// 20000 × 20000 PNG costs a few megabytes of memory, not gigabytes.
 #pragma once
 
 #include <cstddef>
@@ -40,7 +40,7 @@ struct Texels {
 
 struct ImageMean {
     bool ok = false;
-    std::string problem;    // when !ok: "not an image OpenImageIO can decode (…)", …
+    std::string problem;    // when !ok: "not a .png image hemirad can decode (…)", …
     // When !ok: the image was refused for a limit (kMaxImagePixels, kMaxImageEdge) or a broken
     // structure (a bufferView past its buffer), not merely missing or undecodable: such a file is
     // refused whatever --strict-textures says, as every other hostile input is.
