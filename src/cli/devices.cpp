@@ -6,6 +6,7 @@
 
 #include "cl/runtime.h"
 #include "dist/dist.h"
+#include "image/image.h"
 
 namespace hemirad::cli {
 
@@ -33,7 +34,13 @@ void list_devices(std::ostream& out, bool json) {
     if (devices.empty()) out << "(no OpenCL platform or device found)\n";
     out << "all          every OpenCL device above, sharing each batch (as does a list: opencl:0.0,opencl:0.1)\n";
     out << (dist::built_with_mpi() ? "MPI          built in: under mpirun or srun, ranks share each batch too\n"
-                                   : "MPI          not built in (install libopenmpi-dev and build again)\n");
+                                   : "MPI          not built in (a build with libopenmpi-dev has it)\n");
+#ifdef HEMIRAD_HAVE_EMBREE
+    out << "embree       built in: the ray-casting peer of hemirad bench (--engines embree)\n";
+#else
+    out << "embree       not built in (a build with libembree-dev has the benchmark's ray-casting peer)\n";
+#endif
+    out << fmt::format("images       {}: PNG, JPEG and WebP textures, EXR and PNG output\n", image::backend().name);
 }
 
 }  // namespace hemirad::cli
