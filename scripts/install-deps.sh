@@ -1,17 +1,33 @@
 #!/usr/bin/env bash
-# Installs hemirad's build and test dependencies from Debian packages (bookworm or later).
+# Installs hemirad's dependencies from Debian packages (bookworm or later).
+#
+# Usage: scripts/install-deps.sh [--bake]
+#   (default)  everything the full build and its tests need (what CI installs)
+#   --bake     only what building and running `hemirad` with the codecs image back-end needs
+#              (the README's bake command, `cmake --preset bake`): no OpenImageIO, test, MPI,
+#              Embree, fuzzing or plotting packages
 set -euo pipefail
 
+# What `hemirad` itself needs.
 packages=(
   build-essential cmake ninja-build pkg-config
-  ocl-icd-opencl-dev opencl-clhpp-headers pocl-opencl-icd clinfo
+  ocl-icd-opencl-dev opencl-clhpp-headers pocl-opencl-icd
   libglm-dev
   libtinygltf-dev nlohmann-json3-dev libstb-dev
   # Compressed glTF geometry: EXT_meshopt_compression and KHR_draco_mesh_compression.
   libmeshoptimizer-dev libdraco-dev
-  # OpenImageIO's CMake config also names openimageio-tools, python3-imath and OpenCV's headers.
+  # The codecs image back-end (src/image/codecs.cpp; the bundle's): PNG, JPEG, WebP, EXR.
+  libpng-dev libjpeg-dev libwebp-dev libopenexr-dev
+  libcli11-dev libfmt-dev
+)
+case "${1:-}" in
+  --bake) ;;
+  "") packages+=(
+  clinfo
+  # The full build's image back-end. OpenImageIO's CMake config also names openimageio-tools,
+  # python3-imath and OpenCV's headers.
   libopenimageio-dev openimageio-tools python3-imath libopencv-core-dev
-  catch2 libcli11-dev libfmt-dev
+  catch2
   # The ray-casting peer engine of bench/ (optional in CMake, installed here so CI builds it).
   libembree-dev
   # Bakes across MPI ranks (optional in CMake, installed here so CI builds and tests it).
@@ -21,7 +37,9 @@ packages=(
   clang libclang-rt-dev
   # bench/plot.py: PNG plots from the benchmark's JSON.
   python3 python3-matplotlib
-)
+  ) ;;
+  *) echo "install-deps.sh: unknown argument '$1' (usage: scripts/install-deps.sh [--bake])" >&2; exit 2 ;;
+esac
 
 sudo=""
 if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
