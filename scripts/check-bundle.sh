@@ -10,7 +10,8 @@
 #    loads resolves inside the bundle, except the C and C++ runtime (glibc, libstdc++, libgcc_s).
 # 2. Bakes (unless --libraries-only), from an empty working folder with an empty environment:
 #    `hemirad devices`, the Cornell box and the textured lit room at default settings.
-# 3. Bad input: a missing file and a broken glTF give exit 2 and the full build's message.
+# 3. Bad input: a missing file, a broken glTF and broken PNG and JPEG textures (under
+#    --strict-textures) give exit 2 and the full build's message.
 set -euo pipefail
 
 libraries_only=0
@@ -77,21 +78,36 @@ for scene in cornell_box lit_room; do
     echo "check-bundle: $line"
 done
 
-# 3. Bad input: exit 2 and one line naming the file, as the full build says it.
+# 3. Bad input: exit 2 and one line naming the file, as the full build says it. Broken textures
+#    under --strict-textures too: the image back-ends word their decoders' reasons alike.
+textured() {  # a floor textured with image $1 under an emissive ceiling
+    cat > "$work/$2" <<'GLTF'
+{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],"nodes":[{"mesh":0},{"mesh":1}],"buffers":[{"uri":"data:application/octet-stream;base64,AACAvwAAAAAAAIC/AACAPwAAAAAAAIC/AACAPwAAAAAAAIA/AACAvwAAAAAAAIA/AACAvwAAAEAAAIC/AACAvwAAAEAAAIA/AACAPwAAAEAAAIA/AACAPwAAAEAAAIC/AAAAAAAAAAAAAIA/AAAAAAAAgD8AAIA/AAAAAAAAgD8AAAAAAAAAAAAAgD8AAAAAAACAPwAAgD8AAAAAAACAPwAAAgABAAAAAwACAAQABgAFAAQABwAGAA==","byteLength":184}],"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":96},{"buffer":0,"byteOffset":96,"byteLength":64},{"buffer":0,"byteOffset":160,"byteLength":24}],"accessors":[{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[-1,0,-1],"max":[1,0,1]},{"bufferView":0,"byteOffset":48,"componentType":5126,"count":4,"type":"VEC3","min":[-1,2,-1],"max":[1,2,1]},{"bufferView":1,"componentType":5126,"count":4,"type":"VEC2"},{"bufferView":2,"componentType":5123,"count":6,"type":"SCALAR"},{"bufferView":2,"byteOffset":12,"componentType":5123,"count":6,"type":"SCALAR"}],"materials":[{"pbrMetallicRoughness":{"baseColorTexture":{"index":0}}},{"emissiveFactor":[1,1,1]}],"textures":[{"source":0}],"images":[{"uri":"TEX"}],"meshes":[{"primitives":[{"attributes":{"POSITION":0,"TEXCOORD_0":2},"indices":3,"material":0}]},{"primitives":[{"attributes":{"POSITION":1},"indices":4,"material":1}]}]}
+GLTF
+    sed -i "s/TEX/$1/" "$work/$2"
+}
+head -c 2000 "$work/bundle_cornell_box/render.png" > "$work/cut.png"
+printf '\211PNG\r\n\032\nnot the chunks of a PNG at all' > "$work/noise.png"
+printf '\377\330\377\340\000\020JFIF\000' > "$work/header.jpg"
+printf '\377\330\377not the markers of a JPEG' > "$work/noise.jpg"
+textured cut.png cut_png.gltf
+textured noise.png noise_png.gltf
+textured header.jpg header_jpg.gltf
+textured noise.jpg noise_jpg.gltf
 printf '{"asset": {"version": "2.0"}, "nodes": [' > "$work/broken.gltf"
-for input in "$work/missing.gltf" "$work/broken.gltf"; do
+for input in "$work/missing.gltf" "$work/broken.gltf" "$work"/*_png.gltf "$work"/*_jpg.gltf; do
     set +e
-    bare "$exe" bake "$input" -o "$work/out_bad" > /dev/null 2> "$work/bad.txt"
+    bare "$exe" bake "$input" -o "$work/out_bad" --strict-textures > /dev/null 2> "$work/bad.txt"
     code=$?
     set -e
     [ "$code" = 2 ] || fail "bake $(basename "$input"): exit $code, not 2"
     [ ! -e "$work/out_bad/baked.bin" ] || fail "bake $(basename "$input") left a partial output"
     if [ -n "$full" ]; then
         set +e
-        bare "$full" bake "$input" -o "$work/out_bad" > /dev/null 2> "$work/bad_full.txt"
+        bare "$full" bake "$input" -o "$work/out_bad" --strict-textures > /dev/null 2> "$work/bad_full.txt"
         set -e
         cmp -s "$work/bad.txt" "$work/bad_full.txt" ||
             fail "bake $(basename "$input"): the bundle says '$(cat "$work/bad.txt")', the full build '$(cat "$work/bad_full.txt")'"
     fi
 done
-echo "check-bundle: bad input: exit 2, one line$([ -z "$full" ] || echo ", the full build's")"
+echo "check-bundle: bad input (a missing file, a broken glTF, 4 broken textures): exit 2, one line$([ -z "$full" ] || echo ", the full build's")"

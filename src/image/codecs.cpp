@@ -45,7 +45,7 @@ struct MemoryReader {
 };
 void png_read_memory(png_structp png, png_bytep out, png_size_t n) {
     auto* in = static_cast<MemoryReader*>(png_get_io_ptr(png));
-    if (n > in->size - in->at) png_error(png, "Read Error");
+    if (n > in->size - in->at) png_error(png, "Read error: hit end of file");  // OpenImageIO's words
     std::memcpy(out, in->bytes + in->at, n);
     in->at += n;
 }
@@ -139,21 +139,26 @@ struct JpegErrors {
     std::jmp_buf jump;
     std::string message;
 };
-[[noreturn]] void jpeg_on_error(j_common_ptr info) {
+// The first thing libjpeg said, in OpenImageIO's words ("JPEG error: …"): a warning that came
+// before the error (a header cut short warns "Premature end of JPEG file", then fails) says more.
+void jpeg_keep_message(j_common_ptr info) {
     auto* errors = reinterpret_cast<JpegErrors*>(info->err);
+    if (!errors->message.empty()) return;
     char text[JMSG_LENGTH_MAX];
     (*info->err->format_message)(info, text);
-    errors->message = text;
-    std::longjmp(errors->jump, 1);
+    errors->message = std::string("JPEG error: ") + text;
 }
-void jpeg_quiet(j_common_ptr) {}  // warnings (a truncated file, filled in by libjpeg) are not printed
+[[noreturn]] void jpeg_on_error(j_common_ptr info) {
+    jpeg_keep_message(info);
+    std::longjmp(reinterpret_cast<JpegErrors*>(info->err)->jump, 1);
+}
 
 class JpegDecoder final : public Decoder {
 public:
     JpegDecoder() {
         info_.err = jpeg_std_error(&errors_.manager);
         errors_.manager.error_exit = jpeg_on_error;
-        errors_.manager.output_message = jpeg_quiet;
+        errors_.manager.output_message = jpeg_keep_message;  // kept, not printed
     }
     ~JpegDecoder() override {
         if (created_) jpeg_destroy_decompress(&info_);
