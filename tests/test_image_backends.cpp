@@ -333,6 +333,66 @@ TEST_CASE("image back-ends: broken files fail alike in both, and a cut JPEG deco
     }
 }
 
+// A copy of `file` damaged one of four ways, its signature kept (so the format is still told):
+// cut short, one byte changed, a run of bytes overwritten with noise, or noise inserted.
+Bytes damage(const Bytes& file, std::mt19937& rng) {
+    Bytes out = file;
+    const std::size_t keep = 8;  // the signature
+    const auto at = [&](std::size_t size) { return keep + rng() % (size - keep); };
+    switch (rng() % 4) {
+        case 0: out.resize(at(out.size())); break;
+        case 1: out[at(out.size())] ^= static_cast<unsigned char>(1 + rng() % 255); break;
+        case 2: {
+            const std::size_t from = at(out.size()), n = std::min<std::size_t>(1 + rng() % 64, out.size() - from);
+            for (std::size_t i = 0; i < n; ++i) out[from + i] = static_cast<unsigned char>(rng());
+            break;
+        }
+        default: {
+            Bytes noise(1 + rng() % 32);
+            for (auto& b : noise) b = static_cast<unsigned char>(rng());
+            out.insert(out.begin() + std::ptrdiff_t(at(out.size())), noise.begin(), noise.end());
+            break;
+        }
+    }
+    return out;
+}
+
+TEST_CASE("image back-ends: damaged PNGs and JPEGs open, fail or decode alike in both, for the same reason",
+          "[image][backends]") {
+    const std::vector<Bytes> files = {
+        encode_png({"RGB 8", PNG_COLOR_TYPE_RGB, 8}, 24, 20, 1),
+        encode_png({"RGBA 16", PNG_COLOR_TYPE_RGB_ALPHA, 16}, 17, 9, 2),
+        encode_png({"palette 4 + tRNS", PNG_COLOR_TYPE_PALETTE, 4, false, true}, 21, 13, 3),
+        encode_png({"grey 8 interlaced", PNG_COLOR_TYPE_GRAY, 8, true}, 19, 23, 4),
+        encode_jpeg(40, 24, 3, false, false, 5),
+        encode_jpeg(24, 40, 3, true, true, 6),
+        encode_jpeg(32, 16, 1, false, false, 7),
+    };
+    std::mt19937 rng(45);
+    const int trials = 3000;
+    int opened = 0, failed = 0, decoded = 0;
+    for (int trial = 0; trial < trials; ++trial) {
+        const Bytes& file = files[std::size_t(trial) % files.size()];
+        const Bytes bad = damage(file, rng);
+        INFO("trial " << trial << " (" << bad.size() << " bytes, from " << file.size() << ")");
+        const Decoded a = decode(oiio, bad), b = decode(codecs, bad);
+        REQUIRE(a.opened == b.opened);
+        REQUIRE(a.read == b.read);
+        CHECK(a.problem == b.problem);
+        if (a.read) check_same(a, b);
+        opened += a.opened ? 1 : 0;
+        failed += a.read ? 0 : 1;
+        decoded += a.read ? 1 : 0;
+        if (!a.read) CHECK_FALSE(b.problem.empty());
+    }
+    // Damage of every kind was met: files that did not open, files that failed part way, and
+    // files that decoded (a changed byte in a JPEG's data, an ancillary chunk).
+    CHECK(opened < trials);
+    CHECK(opened - decoded > trials / 50);
+    CHECK(decoded > trials / 50);
+    CHECK(failed > trials / 10);
+}
+
 TEST_CASE("image back-ends: each one's EXR and PNG, read back by the other, hold the pixels written",
           "[image][backends]") {
     const fs::path dir = fs::temp_directory_path() / "hemirad_test_image_backends";

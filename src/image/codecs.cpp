@@ -26,15 +26,17 @@ namespace {
 
 // --- PNG -------------------------------------------------------------------------------------
 
-// libpng reports an error by calling this, which must not return: it keeps the message and jumps
-// back to the setjmp of the call that was running. Warnings (a bad ancillary chunk) are ignored,
-// as libpng's own defaults and OpenImageIO's reader do.
+// libpng reports an error by calling this, which must not return: it keeps the message, in
+// OpenImageIO's words ("PNG read error: …", "PNG write error: …"), and jumps back to the setjmp of the call that was
+// running. Warnings (a bad ancillary chunk) are ignored, as libpng's own defaults and OpenImageIO's
+// reader do.
 struct PngErrors {
+    const char* prefix;
     std::string message;
 };
 [[noreturn]] void png_on_error(png_structp png, png_const_charp message) {
     auto* errors = static_cast<PngErrors*>(png_get_error_ptr(png));
-    errors->message = message ? message : "unknown libpng error";
+    errors->message = std::string(errors->prefix) + (message ? message : "no reason given");
     png_longjmp(png, 1);
 }
 void png_on_warning(png_structp, png_const_charp) {}
@@ -43,9 +45,14 @@ struct MemoryReader {
     const unsigned char* bytes;
     std::size_t size, at = 0;
 };
+// Bytes past the end are OpenImageIO's "Read error: hit end of file" (its reader's own message,
+// not libpng's, so without the prefix).
 void png_read_memory(png_structp png, png_bytep out, png_size_t n) {
     auto* in = static_cast<MemoryReader*>(png_get_io_ptr(png));
-    if (n > in->size - in->at) png_error(png, "Read error: hit end of file");  // OpenImageIO's words
+    if (n > in->size - in->at) {
+        static_cast<PngErrors*>(png_get_error_ptr(png))->message = "Read error: hit end of file";
+        png_longjmp(png, 1);
+    }
     std::memcpy(out, in->bytes + in->at, n);
     in->at += n;
 }
@@ -96,6 +103,7 @@ public:
             std::vector<png_bytep> rows(std::size_t(spec_.height));
             for (int y = 0; y < spec_.height; ++y) rows[std::size_t(y)] = whole_.data() + row_bytes_ * std::size_t(y);
             png_read_image(png_, rows.data());
+            png_read_end(png_, nullptr);  // as OpenImageIO does here: a broken chunk after the pixels fails it
         }
         auto* to = static_cast<unsigned char*>(out);
         const std::size_t pixel_out = std::size_t(channels) * value_bytes;
@@ -123,7 +131,7 @@ private:
     }
 
     MemoryReader memory_;
-    PngErrors errors_;
+    PngErrors errors_{"PNG read error: ", {}};
     png_structp png_ = nullptr;
     png_infop info_ = nullptr;
     bool interlaced_ = false;
@@ -264,7 +272,7 @@ void write_png_codecs(const std::filesystem::path& file, int width, int height, 
     const std::string name = file.string();
     std::FILE* out = std::fopen(name.c_str(), "wb");
     if (!out) throw OutputError(fmt::format("{}: cannot write: {}", name, std::strerror(errno)));
-    PngErrors errors;
+    PngErrors errors{"PNG write error: ", {}};
     png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &errors, png_on_error, png_on_warning);
     png_infop info = png ? png_create_info_struct(png) : nullptr;
     if (!png || !info) {

@@ -36,7 +36,8 @@ public:
     const Spec& spec() const { return spec_; }
     // Rows [y0, y1) (y0 the row after the last one read), the first `channels` channels of each
     // pixel, spec().bits per value in the machine's byte order, into `out`. False with error() set
-    // when the data ends or breaks before y1.
+    // when the data ends or breaks before y1. error() and open's `problem` are one line, in
+    // OpenImageIO's words in both back-ends ("PNG read error: …", "JPEG error: …"), naming no file.
     virtual bool read_rows(int y0, int y1, int channels, void* out) = 0;
     const std::string& error() const { return error_; }
 

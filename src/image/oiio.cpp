@@ -46,7 +46,13 @@ public:
     }
 
 private:
+    // OpenImageIO's first line (the first thing that went wrong; what follows restates it),
+    // without the made-up file name it was given.
     bool fail(std::string message) {
+        message = message.substr(0, message.find('\n'));
+        for (const char* ext : {"png", "jpg", "webp"})
+            for (const std::string& name : {fmt::format(" (\"image.{}\")", ext), fmt::format("\"image.{}\"", ext)})
+                for (std::size_t at; (at = message.find(name)) != std::string::npos;) message.erase(at, name.size());
         error_ = std::move(message);
         return false;
     }

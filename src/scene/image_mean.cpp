@@ -27,13 +27,9 @@ double srgb_to_linear(double x) {
     return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
 }
 
-// The first line of a decoder's message, without the made-up file name OpenImageIO was given.
-std::string first_line(std::string text) {
+// A decoder's reason (one line, image.h), or a word that there was none.
+std::string reason(std::string text) {
     text = text.substr(0, text.find('\n'));
-    for (const char* ext : {"png", "jpg", "webp"}) {
-        for (const std::string& name : {fmt::format(" (\"image.{}\")", ext), fmt::format("\"image.{}\"", ext)})
-            for (std::size_t at; (at = text.find(name)) != std::string::npos;) text.erase(at, name.size());
-    }
     while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
     return text.empty() ? "no reason given" : text;
 }
@@ -84,7 +80,7 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels
     const StderrCapture quiet;  // the decoders' own complaints: the problem below says what went wrong
     std::string problem;
     const std::unique_ptr<image::Decoder> in = image::open(*format, bytes, size, problem);
-    if (!in) return fail(fmt::format("not a .{} image hemirad can decode ({})", ext, first_line(problem)));
+    if (!in) return fail(fmt::format("not a .{} image hemirad can decode ({})", ext, reason(problem)));
     const image::Spec& spec = in->spec();
     const std::uint64_t pixels = std::uint64_t(std::max(spec.width, 0)) * std::uint64_t(std::max(spec.height, 0));
     if (spec.width < 1 || spec.height < 1 || spec.channels < 1)
@@ -139,7 +135,7 @@ ImageMean decode_image_mean(const unsigned char* bytes, std::size_t size, Texels
     for (int y = 0; y < spec.height; y += band) {
         const int n = std::min(band, spec.height - y);
         if (!in->read_rows(y, y + n, channels, rows.data()))
-            return fail(fmt::format("the image does not decode past row {} ({})", y, first_line(in->error())));
+            return fail(fmt::format("the image does not decode past row {} ({})", y, reason(in->error())));
         const std::size_t values = std::size_t(n) * row_values;
         if (bits == 8) {
             for (std::size_t i = 0; i < values; ++i) ++histogram[(i % std::size_t(channels)) * levels + rows[i]];
