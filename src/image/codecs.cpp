@@ -27,9 +27,9 @@ namespace {
 // --- PNG -------------------------------------------------------------------------------------
 
 // libpng reports an error by calling this, which must not return: it keeps the message, in
-// OpenImageIO's words ("PNG read error: …", "PNG write error: …"), and jumps back to the setjmp of the call that was
-// running. Warnings (a bad ancillary chunk) are ignored, as libpng's own defaults and OpenImageIO's
-// reader do.
+// OpenImageIO's words ("PNG read error: …", "PNG write error: …"), and jumps back to the setjmp
+// of the call that was running. Warnings (a bad ancillary chunk) are ignored, as libpng's own
+// defaults and OpenImageIO's reader do.
 struct PngErrors {
     const char* prefix;
     std::string message;
@@ -96,11 +96,13 @@ public:
         if (y0 != next_ || y1 > spec_.height || y0 > y1 || channels < 1 || channels > spec_.channels)
             return fail(fmt::format("rows {} to {} asked after row {}", y0, y1, next_));
         const std::size_t value_bytes = std::size_t(spec_.bits / 8);
+        // Everything with a destructor is made before the setjmp: libpng's error jumps over the
+        // frames between, and would skip destructors there.
         std::vector<unsigned char> row(interlaced_ ? 0 : row_bytes_);
+        std::vector<png_bytep> rows(interlaced_ && whole_.empty() ? std::size_t(spec_.height) : 0);
         if (setjmp(png_jmpbuf(png_))) return fail(errors_.message);
         if (interlaced_ && whole_.empty()) {  // the passes fill every row: the whole image at once
             whole_.resize(row_bytes_ * std::size_t(spec_.height));
-            std::vector<png_bytep> rows(std::size_t(spec_.height));
             for (int y = 0; y < spec_.height; ++y) rows[std::size_t(y)] = whole_.data() + row_bytes_ * std::size_t(y);
             png_read_image(png_, rows.data());
             png_read_end(png_, nullptr);  // as OpenImageIO does here: a broken chunk after the pixels fails it
