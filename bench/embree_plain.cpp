@@ -119,7 +119,7 @@ Packets make_packets(int n) {
 // Casts every packet of every shot once on `threads` threads, each claiming packets from one
 // counter; nothing is done with a hit but count it (a closed scene must hit with every ray).
 std::size_t plain_loop(RTCScene scene, const Packets& packets, const std::vector<formfactor::FloatFrame>& frames,
-                       float tnear, unsigned threads) {
+                       float clearance, unsigned threads) {
     const std::size_t per_shot = packets.dir.size(), total = per_shot * frames.size();
     std::atomic<std::size_t> next{0};
     std::vector<std::size_t> hits(threads, 0);
@@ -138,7 +138,7 @@ std::size_t plain_loop(RTCScene scene, const Packets& packets, const std::vector
                 for (int r = 0; r < kPacket; ++r) {
                     const float x = d[r], y = d[kPacket + r], z = d[2 * kPacket + r];
                     valid[static_cast<std::size_t>(r)] = r < packets.lanes[q] ? -1 : 0;
-                    set_packet_ray(rh, r, f, x, y, z, tnear);
+                    set_packet_ray(rh, r, f, x, y, z, clearance);
                 }
                 rtcIntersect16(valid.data(), scene, &context, &rh);
                 for (int r = 0; r < packets.lanes[q]; ++r) count += rh.hit.geomID[r] != RTC_INVALID_GEOMETRY_ID;
@@ -190,23 +190,22 @@ int main(int argc, char** argv) {
             for (const auto& shot : shots)
                 frames.push_back(formfactor::float_frame(formfactor::make_frame(m.patches[shot.shooter.patch], o.seed, shot.shot)));
             const PlainScene plain(m, RTC_SCENE_FLAG_ROBUST), fast(m, RTC_SCENE_FLAG_NONE);
-            // The peer's own: hits nearer are the shooter's plane.
-            const auto tnear = static_cast<float>(1e4 * formfactor::base_plane_epsilon(m));
+            const float clearance = formfactor::ray_clearance(m);  // the peer's own
             for (int n : o.hemicubes) {
                 const Packets packets = make_packets(n);
                 formfactor::EmbreeEngine peer(m, {n, o.seed}, threads);
                 std::vector<formfactor::ShotResult> out;
                 peer.shoot_batch({shots[0]}, out);  // warm-up
-                plain_loop(plain.scene(), packets, {frames[0]}, tnear, threads);
-                plain_loop(fast.scene(), packets, {frames[0]}, tnear, threads);
+                plain_loop(plain.scene(), packets, {frames[0]}, clearance, threads);
+                plain_loop(fast.scene(), packets, {frames[0]}, clearance, threads);
                 std::vector<double> peer_ms, plain_ms, fast_ms;
                 std::size_t hits = 0;
                 for (int rep = 0; rep < o.repeats; ++rep) {
                     auto t0 = Clock::now();
-                    hits = plain_loop(plain.scene(), packets, frames, tnear, threads);
+                    hits = plain_loop(plain.scene(), packets, frames, clearance, threads);
                     plain_ms.push_back(1e3 * seconds_since(t0) / static_cast<double>(shots.size()));
                     t0 = Clock::now();
-                    plain_loop(fast.scene(), packets, frames, tnear, threads);
+                    plain_loop(fast.scene(), packets, frames, clearance, threads);
                     fast_ms.push_back(1e3 * seconds_since(t0) / static_cast<double>(shots.size()));
                     double seconds = 0.0;
                     for (std::size_t first = 0; first < shots.size(); first += static_cast<std::size_t>(o.batch)) {

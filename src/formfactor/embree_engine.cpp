@@ -153,7 +153,7 @@ struct EmbreeEngine::Impl {
     RTCScene scene = nullptr;
     std::vector<std::uint32_t> element_of;  // triangle (first_triangle[geometry] + primID) → element
     std::array<std::uint32_t, 2> first_triangle{};
-    float tnear = 0.0f;
+    float clearance = 0.0f;  // ray_clearance: hits from this height above the shooter's plane on
     std::vector<Packet> packets;          // tile by tile; within a tile, rows of 4×4 blocks
     std::vector<std::size_t> tile_first;  // tile t is packets [tile_first[t], tile_first[t + 1])
     // Kept from batch to batch, so that a shot allocates nothing once a batch of its size ran.
@@ -260,9 +260,7 @@ void EmbreeEngine::Impl::build() {
     rtcCommitScene(scene);
     if (rtcGetDeviceError(device) != RTC_ERROR_NONE) throw InternalError("embree: the scene did not build");
 
-    // Hits nearer than this are the shooter's own plane (the reference clips 1e-9 of the scene's
-    // extent above it; floats round at ~1e-7 of it).
-    tnear = static_cast<float>(1e4 * base_plane_epsilon(mesh));
+    clearance = ray_clearance(mesh);
     build_packets();
 }
 
@@ -303,17 +301,17 @@ void EmbreeEngine::Impl::build_packets() {
 
 // Which side of element k the ray of lane r met, as the reference decides it: the shooter's
 // origin against the element's plane, in doubles. Where the ray crosses the plane at a cosine
-// above 1e-2 the sign of Embree's normal (counter-clockwise front, as elements are wound) against
+// above 0.1 the sign of Embree's normal (counter-clockwise front, as elements are wound) against
 // the ray says the same, and the element's data stays out of the cache: the two can differ only
 // where the origin lies within float rounding of the plane (~1e-7 of the scene), and at that
-// cosine it lies 1e-2 of the hit's distance away, a distance the shooter's own plane (tnear) and
-// the patch around the origin keep far above 1e-5 of the scene.
+// cosine it lies 0.1 of the hit's distance away, a distance the clearance above the shooter's
+// plane keeps at 1e-6 of the scene or more.
 inline bool EmbreeEngine::Impl::seen_from_behind(const RTCRayHit16& rh, int r, const ShotFrame& f,
                                                  std::uint32_t k) const {
     const float nx = rh.hit.Ng_x[r], ny = rh.hit.Ng_y[r], nz = rh.hit.Ng_z[r];
     const float dx = rh.ray.dir_x[r], dy = rh.ray.dir_y[r], dz = rh.ray.dir_z[r];
     const float cos_nd = nx * dx + ny * dy + nz * dz;  // times |Ng| |d|
-    if (cos_nd * cos_nd > 1e-4f * (nx * nx + ny * ny + nz * nz) * (dx * dx + dy * dy + dz * dz)) return cos_nd > 0.0f;
+    if (cos_nd * cos_nd > 1e-2f * (nx * nx + ny * ny + nz * nz) * (dx * dx + dy * dy + dz * dz)) return cos_nd > 0.0f;
     const mesh::Element& e = mesh.elements[k];
     return glm::dot(e.normal, f.origin - e.centroid) < 0.0;
 }
@@ -353,7 +351,7 @@ void EmbreeEngine::Impl::cast_tile(const ShotFrame& f, std::size_t tile, TileSum
         const Packet& p = packets[q];
         for (int r = 0; r < kPacket; ++r) {
             const float x = p.dir[r], y = p.dir[kPacket + r], z = p.dir[2 * kPacket + r];
-            set_packet_ray(rh, r, f.rays, x, y, z, tnear);
+            set_packet_ray(rh, r, f.rays, x, y, z, clearance);
         }
         rtcIntersect16(p.valid.data(), scene, &context, &rh);
         for (int r = 0; r < p.size; ++r) {
