@@ -370,7 +370,7 @@ TEST_CASE("image back-ends: damaged PNGs and JPEGs open, fail or decode alike in
     };
     std::mt19937 rng(45);
     const int trials = 3000;
-    int opened = 0, failed = 0, decoded = 0;
+    int opened = 0, decoded = 0;
     for (int trial = 0; trial < trials; ++trial) {
         const Bytes& file = files[std::size_t(trial) % files.size()];
         const Bytes bad = damage(file, rng);
@@ -381,7 +381,6 @@ TEST_CASE("image back-ends: damaged PNGs and JPEGs open, fail or decode alike in
         CHECK(a.problem == b.problem);
         if (a.read) check_same(a, b);
         opened += a.opened ? 1 : 0;
-        failed += a.read ? 0 : 1;
         decoded += a.read ? 1 : 0;
         if (!a.read) CHECK_FALSE(b.problem.empty());
     }
@@ -390,7 +389,7 @@ TEST_CASE("image back-ends: damaged PNGs and JPEGs open, fail or decode alike in
     CHECK(opened < trials);
     CHECK(opened - decoded > trials / 50);
     CHECK(decoded > trials / 50);
-    CHECK(failed > trials / 10);
+    CHECK(trials - decoded > trials / 10);  // failed, to open or part way
 }
 
 TEST_CASE("image back-ends: each one's EXR and PNG, read back by the other, hold the pixels written",

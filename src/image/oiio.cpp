@@ -5,6 +5,8 @@
 
 #include <fmt/core.h>
 
+#include <cctype>
+
 #include "core/error.h"
 #include "image/image.h"
 
@@ -47,12 +49,13 @@ public:
 
 private:
     // OpenImageIO's first line (the first thing that went wrong; what follows restates it),
-    // without the made-up file name it was given.
+    // without the made-up file name it was given or trailing blanks: one line (image.h).
     bool fail(std::string message) {
         message = message.substr(0, message.find('\n'));
         for (const char* ext : {"png", "jpg", "webp"})
             for (const std::string& name : {fmt::format(" (\"image.{}\")", ext), fmt::format("\"image.{}\"", ext)})
                 for (std::size_t at; (at = message.find(name)) != std::string::npos;) message.erase(at, name.size());
+        while (!message.empty() && std::isspace(static_cast<unsigned char>(message.back()))) message.pop_back();
         error_ = std::move(message);
         return false;
     }

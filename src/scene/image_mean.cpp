@@ -5,7 +5,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -27,10 +26,8 @@ double srgb_to_linear(double x) {
     return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
 }
 
-// A decoder's reason (one line, image.h), or a word that there was none.
-std::string reason(std::string text) {
-    text = text.substr(0, text.find('\n'));
-    while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
+// A decoder's reason (one line already, image.h), or a word that there was none.
+std::string reason(const std::string& text) {
     return text.empty() ? "no reason given" : text;
 }
 
