@@ -94,7 +94,8 @@ TEST_CASE("options: every number option refuses NaN, Inf, other spellings and va
         {"--gather", "-1"},           {"--gather", "7"},            {"--gather", "6"},
         {"--gather", "4098"},         {"--gather-passes", "0"},     {"--gather-passes", "9"},
         {"--gather-refine", "-1"},    {"--gather-refine", "9"},     {"--gather-contrast", "0"},
-        {"--gather-contrast", "1.5"}, {"--gather-contrast", "nan"},
+        {"--gather-contrast", "1.5"}, {"--gather-contrast", "nan"}, {"--gather-points", "-1"},
+        {"--gather-points", "1e3"},
     };
     for (const auto& [option, value] : out_of_range) {
         INFO(option << " " << value);

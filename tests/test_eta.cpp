@@ -233,7 +233,7 @@ TEST_CASE("eta: a stage planned before its work is counted is first predicted wh
     CHECK(eta.left(0.0) == Approx(10.0));
 }
 
-TEST_CASE("eta: a gather that refinement may leave out counts as the chance-weighted geometric mean of the bake with and without it", "[eta]") {
+TEST_CASE("eta: a gather past its budget is planned as a sparse one of the budget's hemicubes", "[eta]") {
     hemirad::bake::WorkCounts w;
     w.shape.counts.patches = 800;
     w.shape.counts.elements = 8000;
@@ -244,34 +244,41 @@ TEST_CASE("eta: a gather that refinement may leave out counts as the chance-weig
     w.gather_refine = true;
     w.gather_planar_patches = 800;
     w.gather_cluster_share = 0.0;
-    const auto total = [](const std::vector<StagePlan>& stages, bool with_gather) {
-        double sum = 0.0;
+    const auto gather_of = [](const std::vector<StagePlan>& stages) -> const StagePlan* {
         for (const StagePlan& s : stages)
-            if (with_gather || s.name != "gather") sum += s.predicted();
-        return sum;
+            if (s.name == "gather") return &s;
+        return nullptr;
     };
-    const auto gather_of = [](const std::vector<StagePlan>& stages) {
-        for (const StagePlan& s : stages)
-            if (s.name == "gather") return s.predicted();
-        return -1.0;
-    };
-    // Asked for (--gather): it always runs, at its full cost G.
-    w.gather_given = true;
-    const std::vector<StagePlan> given = hemirad::bake::predict_stages(w);
-    const double B = total(given, false), G = gather_of(given);
-    REQUIRE(G > 0.0);
-    // Planned with a cap near the refined mesh's vertices: refinement decides, a chance p between
-    // 0 and 1 (the cap at 1.5 vertices an element of 8000 × 3.6 refined: p = log(2 / 0.864) / log 4).
-    w.gather_given = false;
-    w.max_planned_gather = 50000;
-    const double most = 8000.0 * 3.6 * 1.5 / 50000.0, p = std::log(2.0 / most) / std::log(4.0);
-    REQUIRE(p > 0.0);
-    REQUIRE(p < 1.0);
-    const std::vector<StagePlan> maybe = hemirad::bake::predict_stages(w);
-    CHECK(total(maybe, false) == Approx(B));
-    CHECK(B + gather_of(maybe) == Approx(std::pow(B, 1.0 - p) * std::pow(B + G, p)).epsilon(1e-9));
-    CHECK(gather_of(maybe) < p * G);  // below the linear weight
-    // A cap far below: left out for certain, no gather planned.
-    w.max_planned_gather = 1000;
-    CHECK(gather_of(hemirad::bake::predict_stages(w)) < 0.0);
+    // No limit (--gather-points 0, or --gather given): every vertex, its later passes and refinement.
+    w.gather_budget = 0.0;
+    const std::vector<StagePlan> all = hemirad::bake::predict_stages(w);
+    const StagePlan* full = gather_of(all);
+    REQUIRE(full != nullptr);
+    const double unit = hemirad::bake::gather_point_seconds(800.0);
+    CHECK(full->unit_seconds == Approx(unit));
+    const double refined = 8000.0 * 3.6, points = refined * 1.3;
+    CHECK(full->units == Approx(points * (1.0 + 0.05 * 3.0 + 0.3)));
+    // A budget above the vertices changes nothing; one below them plans exactly that many
+    // hemicubes, one pass, no refinement.
+    w.gather_budget = 50000;
+    CHECK(gather_of(hemirad::bake::predict_stages(w))->units == Approx(full->units));
+    w.gather_budget = 1000;
+    w.gather_points_given = true;
+    CHECK(gather_of(hemirad::bake::predict_stages(w))->units == Approx(1000.0));
+    // Unless given, the budget is also what the model allows the drawn mesh: here far above.
+    w.gather_points_given = false;
+    CHECK(hemirad::bake::timed_gather_budget(800.0) > 1000.0);
+    CHECK(gather_of(hemirad::bake::predict_stages(w))->units == Approx(1000.0));
+    // A drawn mesh so large that the model's time allows fewer: those, and never below the floor.
+    w.gather_budget = 50000;
+    w.shape.counts.elements = 80000;
+    w.gather_cluster_share = 1.0;  // every refined element drawn
+    const double drawn = 800.0 + 10.0 * refined;
+    const double timed = std::floor(hemirad::bake::kGatherSeconds / hemirad::bake::gather_point_seconds(drawn));
+    REQUIRE(timed < 10.0 * points);
+    REQUIRE(timed < 50000.0);
+    CHECK(hemirad::bake::timed_gather_budget(drawn) == Approx(std::max(timed, hemirad::bake::kMinGatherPoints)));
+    CHECK(gather_of(hemirad::bake::predict_stages(w))->units ==
+          Approx(std::max(timed, hemirad::bake::kMinGatherPoints)));
+    CHECK(hemirad::bake::timed_gather_budget(1e12) == hemirad::bake::kMinGatherPoints);
 }

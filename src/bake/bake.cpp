@@ -319,9 +319,10 @@ std::string checkpoint_fingerprint(const Plan& p, const Setup& s, const Meshed& 
 TimeEstimate say_expected_time(const Plan& p, const Meshed& m, Warnings& warnings) {
     const BakeShape& shape = m.shape;
     const double refined = shape.counts.elements * (shape.refine_levels > 0 ? 2.0 : 1.0);
-    const bool gathered = p.o.gather > 0 && (p.gather_given || refined <= kMaxPlannedGather);
-    const TimeEstimate expected = expected_bake_time(shape, m.solver, double(m.mesh.lights.size()),
-                                                     gathered ? refined : 0.0, p.o.gather);
+    const double budget = double(gather_budget(p));
+    const double gathered = p.o.gather > 0 ? (budget > 0.0 ? std::min(refined, budget) : refined) : 0.0;
+    const TimeEstimate expected =
+        expected_bake_time(shape, m.solver, double(m.mesh.lights.size()), gathered, p.o.gather);
     if (expected.total() > kSayTimeAbove)
         warnings.add(fmt::format("this bake is expected to take about {} ({}; modelled on 2 CPU cores through PoCL, a "
                                  "GPU is faster); --progress shows how far it is; Ctrl-C stops it leaving the output folder as "
@@ -481,8 +482,8 @@ WorkCounts work_counts(const Plan& p, const Setup& s, const Meshed& m, const sce
     w.light_hemicubes = double(m.mesh.lights.size());
     w.refine = s.effects.refinement.on && p.o.refine_levels > 0;
     w.gather = p.o.gather;
-    w.gather_given = p.gather_given;
-    w.max_planned_gather = double(kMaxPlannedGather);
+    w.gather_budget = double(gather_budget(p));
+    w.gather_points_given = p.o.gather_points >= 0;
     w.gather_passes = s.direct_only ? 1 : p.o.gather_passes;
     w.gather_refine = p.o.gather_refine > 0 && !s.direct_only;
     if (m.solver == "progressive") w.max_passes = double(max_passes_for(p.o, m.mesh.patches.size()));

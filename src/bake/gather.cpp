@@ -6,6 +6,7 @@
 
 #include <fmt/core.h>
 
+#include "bake/stage_progress.h"
 #include "core/cancel.h"
 #include "core/memory.h"
 #include "core/timing.h"
@@ -13,6 +14,7 @@
 #include "output/welded_mesh.h"
 #include "solve/final_gather.h"
 #include "solve/lights.h"
+#include "solve/sparse_gather.h"
 
 namespace hemirad::bake {
 
@@ -38,6 +40,19 @@ constexpr double kGatherMinSize = 0.06;
 
 
 }  // namespace
+
+std::size_t gather_budget(const Plan& plan) {
+    if (plan.o.gather_points >= 0) return static_cast<std::size_t>(plan.o.gather_points);
+    return plan.gather_given ? 0 : kMaxPlannedGather;
+}
+
+std::size_t gather_budget(const Plan& plan, const mesh::Mesh& mesh) {
+    const std::size_t budget = gather_budget(plan);
+    if (budget == 0 || plan.o.gather_points >= 0) return budget;
+    double drawn = 0.0;  // solve::gather_mesh's elements
+    for (const mesh::Patch& p : mesh.patches) drawn += solve::drawn_by_element(p) ? double(p.element_count) : 1.0;
+    return std::min(budget, static_cast<std::size_t>(timed_gather_budget(drawn)));
+}
 
 Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
     const Options& o = c.plan.o;
@@ -91,17 +106,9 @@ std::size_t gathered_vertices(const scene::Scene& scene, const output::WeldedMes
 }
 
 // A hemicube per vertex: on real content many times the solve's shots, each costing about as
-// much (a 113k-vertex material ball at draft: the gather ran 15x the solve's time). Beyond
-// kMaxPlannedGather vertices the quality's gather is left out (a warning says so); --gather N
-// asks for it whatever the size. The count is the graded mesh's, so a mesh is graded only to be
-// gathered.
-bool too_many(const LightContext& c, std::size_t vertices, const char* graded) {
-    if (c.plan.gather_given || vertices <= kMaxPlannedGather) return false;
-    c.warnings.add(fmt::format("final gather left out: {} vertices{} would each take a hemicube (more than {}); "
-                               "--gather {} asks for it",
-                               vertices, graded, kMaxPlannedGather, c.plan.o.gather));
-    return true;
-}
+// much (a 113k-vertex material ball at draft: the gather ran 15x the solve's time). Beyond the
+// budget (gather_budget) a mesh is gathered sparsely.
+bool too_many(std::size_t budget, std::size_t vertices) { return budget > 0 && vertices > budget; }
 
 // The punctual and directional lights' light on `mesh`, shot on an engine of its own.
 std::vector<glm::dvec3> direct_light_on(const LightContext& c, const mesh::Mesh& mesh, EngineStack& engines) {
@@ -122,11 +129,11 @@ void refine_gather(const LightContext& c, Lit& lit, std::vector<glm::dvec3>& dir
     r.noise_floor = kGatherNoiseFloor;
     r.min_size = kGatherMinSize * c.setup.mesh_settings.element_size;
     // At most half as many vertices again as the gather's (the jungle at draft with --gather 32:
-    // 82,724 vertices in 161 s, and four levels went on past 500 s), and the quality's within
-    // kMaxPlannedGather.
+    // 82,724 vertices in 161 s, and four levels went on past 500 s), and within the budget.
     const std::size_t base = static_cast<std::size_t>(lit.gathered.points);
     r.max_vertices = base + base / 2;
-    if (!c.plan.gather_given) r.max_vertices = std::min(r.max_vertices, kMaxPlannedGather);
+    const std::size_t budget = gather_budget(c.plan, lit.mesh);
+    if (budget > 0) r.max_vertices = std::min(r.max_vertices, budget);
     r.texturing = &texturing;
     r.make_engine = [&](const mesh::Mesh& finer_drawn) { return engines.gather(finer_drawn, o.gather); };
     if (!direct.empty()) r.direct_light = [&](const mesh::Mesh& finer) { return direct_light_on(c, finer, engines); };
@@ -138,13 +145,16 @@ void refine_gather(const LightContext& c, Lit& lit, std::vector<glm::dvec3>& dir
     lit.gathered.gather_split = refined.split;
     if (refined.capped)
         c.warnings.add(fmt::format("gather refinement stopped at level {} of {}: more would gather at more than {} "
-                                   "vertices (half again the gather's {}, and {} at most unless --gather is given); "
-                                   "that level split only its elements of the highest contrast",
-                                   refined.levels, o.gather_refine, r.max_vertices, base, kMaxPlannedGather));
+                                   "vertices (half again the gather's {}{}); that level split only its elements of "
+                                   "the highest contrast",
+                                   refined.levels, o.gather_refine, r.max_vertices, base,
+                                   budget > 0 ? fmt::format(", and the gather's budget of {} hemicubes", budget) : ""));
 }
 
-// The gather proper, on `welded` (the output's vertices of lit.mesh).
-void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded, EngineStack& engines) {
+// The gather proper, on `welded` (the output's vertices of lit.mesh): at every vertex, or (`sparse`
+// > 0) at that many at most, where the light varies.
+void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded, EngineStack& engines,
+                     std::size_t sparse) {
     const Options& o = c.plan.o;
     std::vector<glm::dvec3> direct = direct_light_on(c, lit.mesh, engines);
     const std::function<bool(std::size_t)> gathered_node = gathered_nodes(c.scene);
@@ -168,6 +178,37 @@ void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded
         for (std::size_t k = 0; k < lit.mesh.elements.size(); ++k) emitted[k] = lit.mesh.elements[k].emission;
         gs.passes = 1;
     }
+    if (sparse > 0) {
+        solve::SparseGatherSettings ss;
+        ss.budget = sparse;
+        ss.progress = [&](long done, long budget) { c.progress.gathering_sparse(done, budget); };
+        const solve::SparseGathered sg =
+            solve::sparse_gather(lit.mesh, welded, gathered_node, c.setup.direct_only ? emitted : s.radiosity,
+                                 s.irradiance, direct, drawn, *gather_engine, gs, ss, lit.gathered.light);
+        if (sg.cancelled) throw cancel::Interrupted();
+        Gathered& g = lit.gathered;
+        g.points = sg.points;
+        g.sparse_seeds = sg.seeds;
+        g.sparse_levels = sg.levels;
+        g.sparse_vertices = sg.vertices;
+        g.sparse_interpolated = sg.interpolated;
+        g.sparse_unreached = sg.unreached;
+        g.sparse_capped = sg.capped;
+        g.sparse_budget = ss.budget;
+        const std::string allowed = o.gather_points >= 0
+                                        ? std::string("--gather-points allows")
+                                        : fmt::format("the time model allows (about {:.0f} s on 2 CPU cores)", kGatherSeconds);
+        const std::string unreached =
+            sg.unreached > 0 ? fmt::format(" ({} on surfaces with no point keep their elements' light)", sg.unreached)
+                             : std::string();
+        c.warnings.add(fmt::format(
+            "final gather sparse: {} vertices, more than the {} hemicubes {}; shot at {} of them ({} seeds, {} "
+            "levels where the light varies{}), one pass, no contact grading or gather refinement, the others "
+            "interpolated{}; --gather-points 0 gathers at every vertex",
+            sg.vertices, ss.budget, allowed, sg.points, sg.seeds, sg.levels,
+            sg.capped ? ", cut short by the budget" : "", unreached));
+        return;
+    }
     if (!solve::final_gather(lit.mesh, welded, gathered_node, c.setup.direct_only ? emitted : s.radiosity, s.irradiance,
                              direct, drawn, *gather_engine, gs, lit.gathered.light))
         throw cancel::Interrupted();
@@ -185,7 +226,10 @@ Lit gather(const LightContext& c, Lit lit, EngineStack& engines) {
         c.progress.begin_stage("gather");  // the weld and the grading too: the gather's time
         Solution& s = lit.solved.solution;
         output::WeldedMesh welded = output::weld(c.scene.nodes.size(), lit.mesh, s.radiosity);
-        if (!too_many(c, gathered_vertices(c.scene, welded), "")) {
+        const std::size_t budget = gather_budget(c.plan, lit.mesh);
+        if (too_many(budget, gathered_vertices(c.scene, welded))) {
+            gather_vertices(c, lit, welded, engines, budget);
+        } else {
             // Elements along contact lines halved once, so that the gather's vertices follow the
             // light's fall there (mesh/contact.h): on copies, kept if the gather goes ahead.
             const mesh::Texturing texturing(c.scene);
@@ -193,11 +237,10 @@ Lit gather(const LightContext& c, Lit lit, EngineStack& engines) {
             std::vector<glm::dvec3> radiosity = s.radiosity, irradiance = s.irradiance;
             const std::size_t split = solve::grade_contacts(
                 graded, radiosity, irradiance, kContactGrading * c.setup.mesh_settings.element_size, &texturing);
-            bool go = true;
             if (split > 0) {
+                // Graded past the budget: the gather goes ahead ungraded.
                 output::WeldedMesh graded_welded = output::weld(c.scene.nodes.size(), graded, radiosity);
-                go = !too_many(c, gathered_vertices(c.scene, graded_welded), " (once graded along contact lines)");
-                if (go) {
+                if (!too_many(budget, gathered_vertices(c.scene, graded_welded))) {
                     lit.mesh = std::move(graded);
                     s.radiosity = std::move(radiosity);
                     s.irradiance = std::move(irradiance);
@@ -205,7 +248,7 @@ Lit gather(const LightContext& c, Lit lit, EngineStack& engines) {
                     lit.gathered.contact_split = split;
                 }
             }
-            if (go) gather_vertices(c, lit, welded, engines);
+            gather_vertices(c, lit, welded, engines, 0);
         }
         lit.welded = std::move(welded);  // of lit.mesh, as graded and refined by the gather
         c.progress.end_stage();

@@ -24,15 +24,23 @@ Lit refine(const LightContext& c, Lit lit, EngineStack& engines);
 
 // A hemicube at every output vertex (but the sky dome's) from the converged solution: first the
 // elements along contact lines are halved once, then the gather, then gather refinement where the
-// gathered light changes faster than the vertices follow. Left out (a warning) beyond
-// kMaxPlannedGather vertices unless --gather was given.
+// gathered light changes faster than the vertices follow. Beyond gather_budget vertices, a sparse
+// gather instead (solve::sparse_gather, one pass, no grading or refinement; a warning says so).
 Lit gather(const LightContext& c, Lit lit, EngineStack& engines);
 
 // Stages "solve", "refine" and "gather" on the engines `engines` makes (bake.cpp). `mesh` is the
 // one the solve's engine was made for: it stays in place while that engine lives, then moves on.
 Lit light(const LightContext& c, mesh::Mesh& mesh, EngineStack& engines, const SolveContext& sc);
 
-// The most output vertices the quality's final gather takes on by itself.
+// The most gather hemicubes the quality's final gather shoots by itself: a mesh with more output
+// vertices is gathered sparsely (solve/sparse_gather.h).
 inline constexpr std::size_t kMaxPlannedGather = 50000;
+
+// The most gather hemicubes of this bake (0: no limit): --gather-points, else kMaxPlannedGather,
+// or no limit where --gather is given.
+std::size_t gather_budget(const Plan& plan);
+// ... for a bake of `mesh`: also, unless --gather-points is given, at most timed_gather_budget of the
+// mesh the gather draws.
+std::size_t gather_budget(const Plan& plan, const mesh::Mesh& mesh);
 
 }  // namespace hemirad::bake

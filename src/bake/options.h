@@ -33,6 +33,10 @@ struct Options {
     int gather_passes = 0;        // final gathers, each from the last one's light; 0: from the quality
     int gather_refine = -1;       // gather refinement levels (solve::gather_contrasts); < 0: from the quality
     double gather_contrast = -1.0;  // … splitting elements whose vertices' light spans more than this share; < 0: the quality's
+    // Gather hemicubes at most: a mesh with more output vertices is gathered sparsely (where the
+    // light varies, interpolated between; solve/sparse_gather.h). 0: no limit, every vertex; < 0:
+    // kMaxPlannedGather, or no limit where --gather is given.
+    long gather_points = -1;
     std::string solver = "auto";  // auto | matrix | progressive
     std::string effects;          // overrides: "occlusion=off,colour=on,…" (scene::parse_effect_overrides)
     std::string output_mode = "scene";  // --output-mode scene|radiosity (output.h)

@@ -50,6 +50,11 @@ public:
         (void)points;
         (void)total;
     }
+    // A sparse gather's hemicubes (solve/sparse_gather.h): `points` of at most `budget`, one pass.
+    virtual void gathering_sparse(long points, long budget) {
+        (void)points;
+        (void)budget;
+    }
     // A stage begins (`stage`: load, mesh, solve, refine, gather, output): its clock starts; and
     // ends: its line is closed.
     virtual void begin_stage(const std::string& stage) { (void)stage; }

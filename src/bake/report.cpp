@@ -6,6 +6,7 @@
 
 #include <fmt/core.h>
 
+#include "bake/gather.h"
 #include "bake/stage_checkpoint.h"
 #include "core/error.h"
 #include "core/memory.h"
@@ -58,6 +59,7 @@ ordered_json settings_json(const Record& r) {
         {"gather_passes", o.gather_passes},
         {"gather_refine", o.gather_refine},
         {"gather_contrast", o.gather_contrast},
+        {"gather_points", gather_budget(r.plan)},
         {"seed", o.seed},
         {"device", o.device},
         {"verify", o.verify},
@@ -181,6 +183,18 @@ ordered_json make_report(const Record& r) {
                         {"emission_unsplit", L.mesh.emission_unsplit},
                         {"dropped_triangles", L.mesh.dropped_triangles},
                         {"skipped_primitives", r.scene.skipped_primitives}};
+    if (L.gathered.sparse_seeds > 0) {
+        const Gathered& g = L.gathered;
+        // A sparse gather (solve/sparse_gather.h): what it shot and what it interpolated.
+        report["counts"]["sparse_gather"] = {{"vertices", g.sparse_vertices},
+                                             {"budget", g.sparse_budget},
+                                             {"points", g.points},
+                                             {"seeds", g.sparse_seeds},
+                                             {"levels", g.sparse_levels},
+                                             {"interpolated", g.sparse_interpolated},
+                                             {"unreached", g.sparse_unreached},
+                                             {"capped", g.sparse_capped}};
+    }
     report["plan"] = plan_json(r);
     report["passes"] = L.solved.solution.passes;
     if (L.solved.solution.resumed_from >= 0) report["resumed_from_pass"] = L.solved.solution.resumed_from;

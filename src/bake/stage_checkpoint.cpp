@@ -12,6 +12,7 @@
 #include <fmt/core.h>
 
 #include "bake/budget.h"
+#include "bake/gather.h"
 #include "core/error.h"
 #include "formfactor/opencl_engine.h"
 
@@ -138,6 +139,13 @@ void solved_io(IO& io, L& lit) {
     io.item(lit.gathered.points);
     io.item(lit.gathered.contact_split);
     io.item(lit.gathered.gather_split);
+    io.item(lit.gathered.sparse_seeds);
+    io.item(lit.gathered.sparse_levels);
+    io.item(lit.gathered.sparse_vertices);
+    io.item(lit.gathered.sparse_interpolated);
+    io.item(lit.gathered.sparse_unreached);
+    io.item(lit.gathered.sparse_capped);
+    io.item(lit.gathered.sparse_budget);
 }
 
 template <class IO, class N>
@@ -193,8 +201,9 @@ std::string stage_settings(const Plan& plan, const Setup& setup, const Meshed& m
                          o.refine_levels, o.contrast, o.batch,
                          refinement_room(meshed.shape, meshed.solver, plan.memory_limit.bytes));
     if (stage >= Stage::gathered)
-        s += fmt::format("; gather {}{}, passes {}, refine {}, contrast {:.17g}", o.gather, plan.gather_given ? " given" : "",
-                         o.gather_passes, o.gather_refine, o.gather_contrast);
+        s += fmt::format("; gather {}{}, passes {}, refine {}, contrast {:.17g}, points {}", o.gather,
+                         plan.gather_given ? " given" : "", o.gather_passes, o.gather_refine, o.gather_contrast,
+                         gather_budget(plan));
     return s;
 }
 

@@ -38,9 +38,9 @@ constexpr double kExrSecondsPerPixel = 1.5e-7, kPngSecondsPerPixel = 1e-7;
 constexpr double kGltfSecondsPerElement = 1.2e-6, kGltfSecondsPerTriangle = 3.4e-6;
 // The gather's vertices a pass per element of the refined mesh: 0.86–2.44 on six bakes (the Cornell
 // box 0.86, the atrium 0.96, the lit room 1.17, city:4k 1.41 and city:10k 1.58 at draft, furniture:20k
-// at draft 2.44), 1.3 their geometric mean, which counts its work; 1.5 decides whether a gather is
-// expected to be left out for its size (gather.h).
-constexpr double kGatherVerticesPerElement = 1.3, kGatherMostVerticesPerElement = 1.5;
+// at draft 2.44), 1.3 their geometric mean, which counts its work and decides whether it is
+// expected past its budget (a sparse gather, gather.h).
+constexpr double kGatherVerticesPerElement = 1.3;
 // Refinement's growth over two levels: 3.6×, the geometric mean of the public exports (the
 // kitchen 2.2, the Japanese room 1.9, the workplace corner 3.1, the fantasy inn 3.6, the sport hall
 // 3.9, Littlest Tokyo 4.7, the keyboard 5.6, the sci-fi hall 6.6, the autumn river 8.3: textures
@@ -115,6 +115,12 @@ double expected_solve_passes(const WorkCounts& w, double holders) {
     return passes;
 }
 
+double gather_point_seconds(double drawn) { return kGatherVertexSeconds + kGatherSecondsPerDrawn * drawn; }
+
+double timed_gather_budget(double drawn) {
+    return std::max(kMinGatherPoints, std::floor(kGatherSeconds / gather_point_seconds(drawn)));
+}
+
 double expected_pass_seconds(const BakeShape& s) {
     const double n = n_share(s.hemicube);
     return kPassSeconds256 * n * n + s.counts.elements * kPassSecondsPerElement;
@@ -140,49 +146,24 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         out.push_back(refine);
         refined *= std::pow(growth_per_level(), s.refine_levels);
     }
-    // The chance that the gather runs: a gather is left out for its size (gather.h), and where
-    // refinement comes first its growth is known only to within about 2× (kRefineGrowth): the share
-    // of that range, log-uniform, that keeps the gather.
-    double runs = 1.0;
-    if (!w.gather_given) {
-        const double most = refined * kGatherMostVerticesPerElement / double(w.max_planned_gather);
-        const bool refining = w.refine && s.refine_levels > 0;
-        runs = refining ? std::clamp(std::log(2.0 / most) / std::log(4.0), 0.0, 1.0) : (most > 1.0 ? 0.0 : 1.0);
-    }
-    if (w.gather > 0 && runs > 0.0) {
+    if (w.gather > 0) {
         // A unit is a vertex's first hemicube; its later passes re-use the row (kLaterPassShare
-        // each); gather refinement's vertices take one hemicube each.
+        // each); gather refinement's vertices take one hemicube each. Beyond the budget, a sparse
+        // gather: the budget's hemicubes, one pass.
         const double passes = std::max(1, w.gather_passes);
         const double points = refined * kGatherVerticesPerElement;
-        const double units =
-            points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
         const double drawn = w.gather_planar_patches + w.gather_cluster_share * refined;
-        out.push_back({"gather", Cost::hemicube, units, kGatherVertexSeconds + kGatherSecondsPerDrawn * drawn});
+        double budget = w.gather_budget;
+        if (budget > 0.0 && !w.gather_points_given) budget = std::min(budget, timed_gather_budget(drawn));
+        const bool sparse = budget > 0.0 && points > budget;
+        const double units =
+            sparse ? budget
+                   : points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
+        out.push_back({"gather", Cost::hemicube, units, gather_point_seconds(drawn)});
     }
     double output = 0.0;
     for (const auto& step : predict_output(refined, w.triangles, s.pixels)) output += step.second;
     out.push_back({"output", Cost::own, 1.0, output});
-    if (runs < 1.0) {
-        // A gather that may be left out: the bake takes B without it or B + G with it, and what
-        // matters of an estimate is its ratio to the truth, so the total is their geometric mean
-        // weighted by the chance, B^(1−p) (B + G)^p, which minimises the expected squared log
-        // error. Measured against a linear weight, B + pG: key-mini (p 0.56, left out) 1.83 for
-        // 2.36, furniture:20k at draft (p 0.30, it ran) 0.52 for 1.18; the Cornell box, the atrium
-        // and the lit room within 10% of each other.
-        double rest = 0.0;
-        StagePlan* gather = nullptr;
-        for (StagePlan& stage : out) {
-            if (stage.name == "gather")
-                gather = &stage;
-            else
-                rest += stage.predicted();
-        }
-        const double base = std::max(rest, 1e-3), full = gather ? gather->predicted() : 0.0;
-        if (full > 0.0) {
-            const double hedged = std::exp((1.0 - runs) * std::log(base) + runs * std::log(base + full)) - base;
-            gather->unit_seconds *= std::max(0.0, hedged) / full;
-        }
-    }
     return out;
 }
 
@@ -393,6 +374,13 @@ void StageProgress::gathering(long points, long total) {
     const double extra = gather_phase_ == 0 ? gather_extra_ * work / gather_passes_ : 0.0;
     eta_.update(now(), gather_base_ + units(done), gather_base_ + units(work) + extra);
     show(fmt::format("{} / {} vertices{}", points, total, gather_phase_ > 0 ? " (refined)" : ""));
+}
+
+void StageProgress::gathering_sparse(long points, long budget) {
+    into("gather");
+    // A hemicube a unit, as the plan counts a sparse gather; it may stop short of its budget.
+    eta_.update(now(), double(points), double(std::max(points, budget)));
+    show(fmt::format("{} / {} points (sparse)", points, budget));
 }
 
 }  // namespace hemirad::bake

@@ -26,8 +26,10 @@ struct WorkCounts {
     double light_hemicubes = 0.0;    // the punctual lights' (two a point light, one a spot)
     bool refine = false;             // refinement on (shape.refine_levels levels)
     int gather = 0;                  // the final gather's N (0: none)
-    bool gather_given = false;       // --gather given: never left out for its size
-    double max_planned_gather = 50000;  // else, vertices above this leave it out (kMaxPlannedGather)
+    // Gather hemicubes at most (gather_budget; 0: no limit): more vertices are gathered sparsely,
+    // this many hemicubes in one pass, without gather refinement.
+    double gather_budget = 50000;
+    bool gather_points_given = false;  // --gather-points: else also timed_gather_budget of the drawn mesh
     int gather_passes = 1;
     bool gather_refine = false;
     // What a gather draws (solve::gather_mesh): the planar patches of more than one element (one
@@ -54,6 +56,16 @@ double expected_solve_passes(const WorkCounts& w, double holders);
 // A progressive pass's seconds on 2 CPU cores through PoCL: per element of the mesh (set up,
 // drawn, received), and a hemicube's fixed part at its N.
 double expected_pass_seconds(const BakeShape& shape);
+// A gather vertex's first hemicube, by the model (2 CPU cores), for a drawn mesh of `drawn` elements
+// (solve::gather_mesh).
+double gather_point_seconds(double drawn);
+// The gather hemicubes the quality's gather shoots at most on such a drawn mesh, unless
+// --gather-points says: as many as the model expects to take kGatherSeconds, at least
+// kMinGatherPoints (a scene of 931k output vertices drawing 440k elements: about 10,000 at 9 ms a
+// hemicube, where every vertex would take 2 h 20 min). A count, not a time: the same on every
+// device, so the same bytes.
+inline constexpr double kGatherSeconds = 90.0, kMinGatherPoints = 2000.0;
+double timed_gather_budget(double drawn);
 // The progressive solve's passes expected from the plan's `planned` and the decay's `fitted`
 // (stage_progress.cpp says how).
 double blend_passes(double planned, double fitted, const DecayFit& decay, double threshold);
@@ -82,6 +94,7 @@ public:
     void rows(long done, long total) override;
     void refining(int level, long shots, long total) override;
     void gathering(long points, long total) override;
+    void gathering_sparse(long points, long budget) override;
     void refined(std::size_t elements) override;
 
     double now() const { return seconds_since(start_); }

@@ -114,6 +114,12 @@ struct Gathered {
     long points = 0;                 // vertices gathered (0: no gather)
     std::size_t contact_split = 0;   // elements split along contact lines for the gather
     std::size_t gather_split = 0;    // elements split where the gathered light changes fast
+    // A sparse gather's (more vertices than --gather-points): its points and what it interpolated.
+    long sparse_seeds = 0;           // 0: every vertex was gathered (or none)
+    int sparse_levels = 0;
+    std::size_t sparse_vertices = 0, sparse_interpolated = 0, sparse_unreached = 0;
+    bool sparse_capped = false;
+    std::size_t sparse_budget = 0;   // the hemicubes it was allowed
 };
 
 // What solve, refine and gather leave: the final mesh and its light.

@@ -146,6 +146,11 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "gathered irradiance (luminance) is more than this share of its brightest radiosity (default: "
                     "the quality's)")
         ->transform(real_in(0.0, 1.0, true));
+    bake.add_option("--gather-points", o.gather_points,
+                    "the most hemicubes the final gather shoots: a mesh with more output vertices is gathered where "
+                    "the light varies and interpolated between (report.json's gather.sparse says how); 0: every "
+                    "vertex, however many (default: 50000, or every vertex where --gather is given)")
+        ->transform(integer_from(0L));
     bake.add_option("--patch-size", o.patch_size,
                     "maximum patch edge, scene units (default: scene diagonal × the quality's fraction)")
         ->transform(real_in(0.0, kLargestSize, true));

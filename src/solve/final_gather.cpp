@@ -147,6 +147,20 @@ std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity,
     return split;
 }
 
+void fill_hidden(const output::WeldedMesh& welded, const std::vector<std::vector<char>>& hidden,
+                 output::VertexLight& out) {
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> where;
+    std::vector<char> marks;
+    for (std::size_t n = 0; n < hidden.size() && n < welded.nodes.size(); ++n) {
+        for (std::size_t v = 0; v < hidden[n].size(); ++v) {
+            if (!hidden[n][v]) continue;
+            where.push_back({static_cast<std::uint32_t>(n), static_cast<std::uint32_t>(v)});
+            marks.push_back(1);
+        }
+    }
+    fill_hidden(welded, where, marks, out);
+}
+
 mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {
     mesh::Mesh out;
     out.lights = mesh.lights;
@@ -383,6 +397,16 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
             if (settings.progress) settings.progress(done, work);
         }
         fill_hidden(welded, where, hidden, out);
+    }
+    if (settings.hidden) {
+        settings.hidden->resize(node_count);
+        for (std::size_t i = 0; i < total; ++i) {
+            if (!hidden[i]) continue;
+            const auto [n, v] = where[i];
+            auto& marks = (*settings.hidden)[n];
+            if (marks.empty()) marks.assign(welded.nodes[n].positions.size(), 0);
+            marks[v] = 1;
+        }
     }
     return true;
 }

@@ -90,9 +90,19 @@ struct GatherSettings {
     // light `prior` holds; only the others are shot. One pass only.
     const std::vector<std::vector<char>>* known = nullptr;
     const output::VertexLight* prior = nullptr;
+    // When given: per node and vertex, 1 where the shot point saw mostly the backs of one-sided
+    // surfaces (its light is then its seen neighbours', see final_gather); others untouched.
+    std::vector<std::vector<char>>* hidden = nullptr;
     std::function<bool()> cancelled;                       // checked between engine calls
     std::function<void(long done, long total)> progress;   // after each engine call (all passes)
 };
+
+// Gives each vertex marked in `hidden` (per node and vertex; a node's list empty for none) the mean
+// of its unmarked neighbours' light along the triangles' edges, ring by ring inward, as
+// final_gather does for the points that see mostly backs (marked vertices with no unmarked one
+// around them keep their own).
+void fill_hidden(const output::WeldedMesh& welded, const std::vector<std::vector<char>>& hidden,
+                 output::VertexLight& out);
 
 // Gathers at the gather points of `drawn` (gather_mesh(mesh) with gather_points(welded, gathered)
 // set, and `engine` made for it) from the solved `mesh`'s element radiosities `radiosity` (with the
