@@ -12,6 +12,7 @@
 
 #include "bench/accuracy.h"
 #include "bench/room_reference.h"
+#include "bench/throughput.h"
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
@@ -182,4 +183,26 @@ TEST_CASE("a quick accuracy sweep bakes the room as a bake plans it, and the pla
 
     for (std::size_t i : room["pareto"].get<std::vector<std::size_t>>()) CHECK(runs[i]["sweep"] != "solver");
     for (const auto& [name, p] : room["presets"].items()) CHECK(p["sweep"] != "solver");
+}
+
+TEST_CASE("bench: the throughput table has a column per batch size and a row per scene, N, engine and device",
+          "[bench]") {
+    const auto row = [](const char* scene, int n, const char* engine, int batch, double shots) {
+        return ordered_json{{"scene", scene}, {"hemicube", n},         {"engine", engine},
+                            {"device", "cpu"}, {"batch", batch},        {"shots_per_s", shots}};
+    };
+    ordered_json results = ordered_json::array();
+    results.push_back(row("cornell", 64, "opencl", 1, 100.0));
+    results.push_back(row("cornell", 64, "embree", 1, 50.0));
+    results.push_back(row("cornell", 64, "opencl", 64, 800.0));
+    results.push_back(row("cornell", 256, "opencl", 64, 250.0));  // N 256 ran at 64 only
+    const std::string table = bench::batch_table(results, {1, 64});
+    CAPTURE(table);
+    CHECK(table.find("| scene | N | engine | device | 1 | 64 |") != std::string::npos);
+    CHECK(table.find("| cornell | 64 | opencl | cpu | 100 | 800 |") != std::string::npos);
+    CHECK(table.find("| cornell | 64 | embree | cpu | 50 | – |") != std::string::npos);
+    CHECK(table.find("| cornell | 256 | opencl | cpu | – | 250 |") != std::string::npos);
+    // In the order the results first name them.
+    CHECK(table.find("| cornell | 64 | opencl") < table.find("| cornell | 64 | embree"));
+    CHECK(table.find("| cornell | 64 | embree") < table.find("| cornell | 256 | opencl"));
 }

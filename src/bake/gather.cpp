@@ -49,9 +49,13 @@ std::size_t gather_budget(const Plan& plan) {
 std::size_t gather_budget(const Plan& plan, const mesh::Mesh& mesh) {
     const std::size_t budget = gather_budget(plan);
     if (budget == 0 || plan.o.gather_points >= 0) return budget;
-    double drawn = 0.0;  // solve::gather_mesh's elements
-    for (const mesh::Patch& p : mesh.patches) drawn += solve::drawn_by_element(p) ? double(p.element_count) : 1.0;
-    return std::min(budget, static_cast<std::size_t>(timed_gather_budget(drawn)));
+    return std::min(budget, static_cast<std::size_t>(timed_gather_budget(double(gather_drawn(mesh)))));
+}
+
+std::size_t gather_drawn(const mesh::Mesh& mesh) {
+    std::size_t drawn = 0;
+    for (const mesh::Patch& p : mesh.patches) drawn += solve::drawn_by_element(p) ? p.element_count : 1;
+    return drawn;
 }
 
 Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
@@ -206,7 +210,8 @@ void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded
             "levels where the light varies{}), one pass, no contact grading or gather refinement, the others "
             "interpolated{}; --gather-points 0 gathers at every vertex",
             sg.vertices, ss.budget, allowed, sg.points, sg.seeds, sg.levels,
-            sg.capped ? ", cut short by the budget" : "", unreached));
+            sg.capped ? ", cut short by the budget" : "", unreached),
+            true);  // what accuracy was given up: said under --quiet too
         return;
     }
     if (!solve::final_gather(lit.mesh, welded, gathered_node, c.setup.direct_only ? emitted : s.radiosity, s.irradiance,

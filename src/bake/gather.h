@@ -42,5 +42,7 @@ std::size_t gather_budget(const Plan& plan);
 // ... for a bake of `mesh`: also, unless --gather-points is given, at most timed_gather_budget of the
 // mesh the gather draws.
 std::size_t gather_budget(const Plan& plan, const mesh::Mesh& mesh);
+// The elements a gather of `mesh` draws (solve::gather_mesh, counted).
+std::size_t gather_drawn(const mesh::Mesh& mesh);
 
 }  // namespace hemirad::bake

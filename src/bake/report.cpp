@@ -169,6 +169,8 @@ ordered_json make_report(const Record& r) {
                         {"elements", L.mesh.elements.size()},
                         {"elements_before_refinement", r.elements_before},
                         {"gather_points", L.gathered.points},
+                        // The elements a gather hemicube draws (a planar patch as one).
+                        {"gather_drawn", L.gathered.points > 0 ? gather_drawn(L.mesh) : 0},
                         {"contact_split", L.gathered.contact_split},
                         {"gather_split", L.gathered.gather_split},
                         {"quads", L.mesh.quads},

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <optional>
 #include <thread>
@@ -168,6 +169,33 @@ std::vector<formfactor::ShotRequest> shots_from(const std::vector<formfactor::Sh
     return {shots.begin() + static_cast<std::ptrdiff_t>(first), shots.begin() + static_cast<std::ptrdiff_t>(end)};
 }
 
+std::string batch_table(const ordered_json& results, const std::vector<int>& batches) {
+    std::string out = "\nshots/s against batch size\n\n| scene | N | engine | device |";
+    for (int b : batches) out += fmt::format(" {} |", b);
+    out += "\n|---|---|---|---|";
+    for (std::size_t i = 0; i < batches.size(); ++i) out += "---|";
+    out += "\n";
+    // Rows in the order the results first name them; a cell per batch size.
+    std::vector<std::string> keys;
+    std::map<std::string, std::map<int, double>> cells;
+    for (const ordered_json& r : results) {
+        const std::string key = fmt::format("| {} | {} | {} | {} |", r.at("scene").get<std::string>(),
+                                            r.at("hemicube").get<int>(), r.at("engine").get<std::string>(),
+                                            r.at("device").get<std::string>());
+        if (cells.find(key) == cells.end()) keys.push_back(key);
+        cells[key][r.at("batch").get<int>()] = r.at("shots_per_s").get<double>();
+    }
+    for (const std::string& key : keys) {
+        out += key;
+        for (int b : batches) {
+            const auto it = cells[key].find(b);
+            out += it == cells[key].end() ? " – |" : fmt::format(" {:.4g} |", it->second);
+        }
+        out += "\n";
+    }
+    return out;
+}
+
 namespace {
 
 // The most elements a benchmark's mesh may have: a tiny --element-size (1e-4 on a room) would
@@ -206,8 +234,10 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
     for (int n : o.hemicubes)
         if (n < 8 || n > 4096 || n % 2 != 0)
             throw InputError(fmt::format("--hemicube {}: must be even, from 8 to 4096", n));
-    if (o.shots < 1 || o.repeats < 1 || o.batch < 1)
-        throw InputError("bench: --shots, --repeats and --batch must be at least 1");
+    if (o.shots < 1 || o.repeats < 1 || o.batches.empty())
+        throw InputError("bench: --shots and --repeats must be at least 1, and --batch name a size");
+    for (int b : o.batches)
+        if (b < 1 || b > kMaxBenchBatch) throw InputError(fmt::format("--batch {}: must be from 1 to {}", b, kMaxBenchBatch));
     const EngineSelection selection = select_engines(o.engines);
     // Every scene first: bad input ends the run before any output.
     std::vector<BenchScene> scenes;
@@ -223,7 +253,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
     doc["settings"] = {
         {"shots", o.shots},
         {"repeats", o.repeats},
-        {"batch", o.batch},
+        {"batches", o.batches},
         {"seed", o.seed},
         {"sample_shots_checked", std::min<std::size_t>(kSampleShots, static_cast<std::size_t>(o.shots))}};
 
@@ -301,6 +331,8 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
 
             std::vector<formfactor::ShotResult> out;
             for (auto& r : runners) r.impl->shoot_batch({shots[0]}, out);  // warm-up: builds, first uploads
+            for (const int batch_size : o.batches) {
+            for (auto& r : runners) r.ms_per_shot.clear();
             using StageTimes = std::array<double, formfactor::OpenCLEngine::kStages>;
             std::vector<StageTimes> stages_before;  // the timed shots' device time is the difference
             for (auto& r : runners) {
@@ -310,8 +342,8 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
             for (int rep = 0; rep < o.repeats; ++rep) {
                 for (auto& r : runners) {
                     double seconds = 0.0;
-                    for (std::size_t first = 0; first < shots.size(); first += static_cast<std::size_t>(o.batch)) {
-                        const std::vector<formfactor::ShotRequest> batch = shots_from(shots, first, o.batch);
+                    for (std::size_t first = 0; first < shots.size(); first += static_cast<std::size_t>(batch_size)) {
+                        const std::vector<formfactor::ShotRequest> batch = shots_from(shots, first, batch_size);
                         const auto t0 = Clock::now();
                         r.impl->shoot_batch(batch, out);
                         seconds += seconds_since(t0);
@@ -348,7 +380,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
             }
 
             const double ref_median = selection.ref ? stats(runners[0].ms_per_shot).median : 0.0;
-            log << fmt::format("\nN = {}, {} shots × {} repeats, batches of {}\n\n", n, o.shots, o.repeats, o.batch);
+            log << fmt::format("\nN = {}, {} shots × {} repeats, batches of {}\n\n", n, o.shots, o.repeats, batch_size);
             log << "| engine | device | ms/shot median (min, σ) | shots/s | samples/s | vs ref | % of limit | worst "
                    "Σ\\|ΔF\\| vs ref |\n|---|---|---|---|---|---|---|---|\n";
             for (std::size_t i = 0; i < runners.size(); ++i) {
@@ -364,7 +396,7 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                     {"patches", m.patches.size()},
                     {"elements", m.elements.size()},
                     {"hemicube", n},
-                    {"batch", o.batch},
+                    {"batch", batch_size},
                     {"shots_per_s", shots_per_s},
                     {"samples_per_s", 3.0 * n * n * shots_per_s},
                     {"ms_per_shot", {{"min", st.min}, {"median", st.median}, {"sigma_percent", st.sigma_percent}}},
@@ -405,7 +437,9 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                 results.push_back(row);
             }
             for (const auto& row : results) {
-                if (!row.contains("device_ms_per_shot") || row["scene"] != spec || row["hemicube"] != n) continue;
+                if (!row.contains("device_ms_per_shot") || row["scene"] != spec || row["hemicube"] != n ||
+                    row["batch"] != batch_size)
+                    continue;
                 log << fmt::format("\n{} device time per shot (ms, event profiling):",
                                    row["device"].get<std::string>());
                 for (const auto& [stage, ms] : row["device_ms_per_shot"].items())
@@ -417,9 +451,11 @@ ordered_json run_throughput(const ThroughputOptions& o, std::ostream& log) {
                                            static_cast<double>(tested));
                 log << "\n";
             }
+            }
         }
     }
     doc["results"] = results;
+    if (o.batches.size() > 1) log << batch_table(results, o.batches);
     return doc;
 }
 

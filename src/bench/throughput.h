@@ -21,7 +21,7 @@ struct ThroughputOptions {
     std::vector<std::string> engines;  // ref, embree, opencl (every device), opencl:P.D; empty: all
     int shots = 16;                    // shots per engine per repeat
     int repeats = 5;
-    int batch = 1;              // shots per shoot_batch call
+    std::vector<int> batches{1};  // shots per shoot_batch call: each is a run (1..4096)
     double patch_size = 0.0;    // 0: as a bake at the default quality (core/quality.h)
     double element_size = 0.0;  // 0: as a bake at the default quality
     std::uint64_t seed = 1;
@@ -68,6 +68,11 @@ mesh::Settings mesh_settings_for(const ThroughputOptions& options, const scene::
 // The shots every engine is timed on: `count` patches spread over the scene (mesh `m`, which has
 // patches), shot i with shot counter i (the seed stream).
 std::vector<formfactor::ShotRequest> bench_shots(const mesh::Mesh& m, int count);
+// The most shots one benchmark call may hold (--batch): a GPU fills at hundreds to thousands.
+inline constexpr int kMaxBenchBatch = 4096;
+// A markdown table of shots/s with a column per batch size: a row per scene, N, engine and
+// device of `results` (run_throughput's rows), in the order they first appear.
+std::string batch_table(const nlohmann::ordered_json& results, const std::vector<int>& batches);
 // shots[first, first + batch), cut at the end: one engine call of a timed run.
 std::vector<formfactor::ShotRequest> shots_from(const std::vector<formfactor::ShotRequest>& shots, std::size_t first,
                                                 int batch);

@@ -260,7 +260,12 @@ void add_bench_options(CLI::App& cmd, bench::BenchCommand& c) {
     cmd.add_option("--repeats", o.repeats, "timed repeats (min, median and spread over them)")
         ->transform(integer_from(1))
         ->capture_default_str();
-    cmd.add_option("--batch", o.batch, "shots per engine call")->transform(integer_in(1, 256))->capture_default_str();
+    cmd.add_option("--batch", o.batches,
+                   "shots per engine call, comma-separated (each a run; with several, a table of shots/s against "
+                   "them ends the output; --scaling takes the first)")
+        ->delimiter(',')
+        ->transform(integer_in(1, bench::kMaxBenchBatch))
+        ->capture_default_str();
     const QualityPreset& quality = quality_preset("default");
     cmd.add_option(
            "--patch-size", o.patch_size,
@@ -398,7 +403,7 @@ int run(int argc, char** argv) {
         if (!t.scenes.empty()) sc.scene = t.scenes.front();
         if (bench_app->get_option("--hemicube")->count() > 0) sc.hemicube = t.hemicubes.front();
         if (bench_app->get_option("--shots")->count() > 0) sc.shots = t.shots;
-        if (bench_app->get_option("--batch")->count() > 0) sc.batch = t.batch;
+        if (bench_app->get_option("--batch")->count() > 0) sc.batch = t.batches.front();
         if (bench_app->get_option("--repeats")->count() > 0) sc.repeats = t.repeats;
         sc.seed = t.seed;
     }
