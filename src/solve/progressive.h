@@ -69,8 +69,10 @@ public:
     long passes() const { return passes_; }
 
     // The convergence measure compared against `threshold`: the smaller of ambient_share()
-    // and round_change(). unshot_fraction() is the raw unshot share of the emitted flux.
-    double error() const { return std::min(ambient_share(), round_change_); }
+    // and round_change(); 0 once no patch holds unshot flux (nothing left to change: the share
+    // of an ambient term of nothing over an incident flux of nothing is no measure). unshot_fraction()
+    // is the raw unshot share of the emitted flux.
+    double error() const { return nothing_unshot() ? 0.0 : std::min(ambient_share(), round_change_); }
     // Share of the incident flux Σ H·A that is still the ambient estimate, not shot light.
     double ambient_share() const;
     // Flux-weighted change Σ|ΔH|·A / Σ H·A of the ambient-corrected incident light over the

@@ -417,7 +417,7 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
         interpolate();
     }
 
-    // The others: the gathered points' reflected light interpolated, the direct light their own.
+    // The others: their elements' light and the gathered points' correction (below).
     for (std::size_t n = 0; n < node_count; ++n) {
         if (!gathered(n)) continue;
         const NodeState& s = state[n];
