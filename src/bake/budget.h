@@ -85,7 +85,8 @@ TimeEstimate expected_bake_time(const BakeShape& shape, const std::string& solve
                                 double gather_points, int gather);
 
 // `auto`'s choice: the matrix where the bake with it needs at most half the memory limit and it
-// is expected to be no slower; else progressive. `why` says which rule decided, with the numbers.
+// is expected to be no slower (timed as on OpenCL whatever the engine, so that every device bakes
+// the same bytes); else progressive. `why` says which rule decided, with the numbers.
 struct SolverChoice {
     std::string solver;
     std::string why;
