@@ -90,12 +90,7 @@ TEST_CASE("final gather: a vertex under a square lamp gathers the analytic form 
     // REFERENCES.md: a point 1 below the centre of a unit square facing it, F = 0.2394564705. The
     // lamp emits 1 and nothing else shines, so the floor vertex under its centre must gather
     // exactly that irradiance, and its radiosity ρ times it.
-    scene::Scene s;
-    const std::uint32_t floor = add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-    const std::uint32_t lamp = add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
-    add_quad(s, {0, 0, 0}, {4, 0, 0}, {4, 4, 0}, {0, 4, 0}, floor, "floor");
-    add_quad(s, {1.5, 1.5, 1}, {1.5, 2.5, 1}, {2.5, 2.5, 1}, {2.5, 1.5, 1}, lamp, "lamp");
-    finish(s);
+    const scene::Scene s = lamp_scene(false);
     mesh::Settings ms;
     ms.patch_size = 0.5;
     ms.element_size = 0.25;
@@ -231,31 +226,6 @@ TEST_CASE("final gather: later passes re-use the first pass's rows and gather wh
 }
 
 namespace {
-
-// The floor of the lamp scenes below: 4 × 4 at z = 0 facing up (node 0), reflectance 0.5; the
-// lamp, [1.5, 2.5]² at z = 1 facing down, emitting 1 (node 1); with `occluder`, a black plate
-// [1, 2] × [1, 3] at z = 0.5 facing down (node 2), whose shadow's penumbra on the floor is
-// x ∈ [1.5, 2.5] (for 0.5 < y < 3.5).
-scene::Scene lamp_scene(bool occluder) {
-    scene::Scene s;
-    const std::uint32_t floor = add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-    const std::uint32_t lamp = add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
-    add_quad(s, {0, 0, 0}, {4, 0, 0}, {4, 4, 0}, {0, 4, 0}, floor, "floor");
-    add_quad(s, {1.5, 1.5, 1}, {1.5, 2.5, 1}, {2.5, 2.5, 1}, {2.5, 1.5, 1}, lamp, "lamp");
-    if (occluder) {
-        const std::uint32_t black = add_material(s, glm::dvec3(0.0), glm::dvec3(0.0));
-        add_quad(s, {1, 1, 0.5}, {1, 3, 0.5}, {2, 3, 0.5}, {2, 1, 0.5}, black, "plate");
-    }
-    finish(s);
-    return s;
-}
-
-mesh::Polygon rectangle_at(double x0, double x1, double y0, double y1, double z) {
-    mesh::Polygon p;
-    p.n = 4;
-    p.v = {glm::dvec3(x0, y0, z), glm::dvec3(x0, y1, z), glm::dvec3(x1, y1, z), glm::dvec3(x1, y0, z)};
-    return p;
-}
 
 // The irradiance at floor point (x, y) from the lamp of lamp_scene(true), exactly: the unoccluded
 // form factor to the part of the lamp the plate leaves seen. From (x, y, 0) the plate's shadow on

@@ -7,6 +7,27 @@
 
 namespace hemirad::test {
 
+scene::Scene lamp_scene(bool occluder) {
+    scene::Scene s;
+    const std::uint32_t floor = add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    const std::uint32_t lamp = add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
+    add_quad(s, {0, 0, 0}, {4, 0, 0}, {4, 4, 0}, {0, 4, 0}, floor, "floor");
+    add_quad(s, {1.5, 1.5, 1}, {1.5, 2.5, 1}, {2.5, 2.5, 1}, {2.5, 1.5, 1}, lamp, "lamp");
+    if (occluder) {
+        const std::uint32_t black = add_material(s, glm::dvec3(0.0), glm::dvec3(0.0));
+        add_quad(s, {1, 1, 0.5}, {1, 3, 0.5}, {2, 3, 0.5}, {2, 1, 0.5}, black, "plate");
+    }
+    finish(s);
+    return s;
+}
+
+mesh::Polygon rectangle_at(double x0, double x1, double y0, double y1, double z) {
+    mesh::Polygon p;
+    p.n = 4;
+    p.v = {glm::dvec3(x0, y0, z), glm::dvec3(x0, y1, z), glm::dvec3(x1, y1, z), glm::dvec3(x1, y0, z)};
+    return p;
+}
+
 scene::Scene needle_box(int needles) {
     scene::Scene s;
     const std::uint32_t wall = scene::add_material(s, glm::dvec3(0.7), glm::dvec3(0.0));

@@ -75,6 +75,15 @@ double area_form_factor(const mesh::Mesh& m, formfactor::Engine& engine, std::ui
 double parallel_rectangles_ff(double a, double b, double c);
 double perpendicular_rectangles_ff(double l, double w, double h);
 
+// The floor of the lamp scenes: 4 × 4 at z = 0 facing up (node 0), reflectance 0.5; the lamp,
+// [1.5, 2.5]² at z = 1 facing down, emitting 1 (node 1); with `occluder`, a black plate
+// [1, 2] × [1, 3] at z = 0.5 facing down (node 2), whose shadow's penumbra on the floor is
+// x ∈ [1.5, 2.5] (for 0.5 < y < 3.5).
+scene::Scene lamp_scene(bool occluder);
+
+// The rectangle [x0, x1] × [y0, y1] at height z, as a polygon.
+mesh::Polygon rectangle_at(double x0, double x1, double y0, double y1, double z);
+
 // The same triangles in the same order: corners, reflectance, material, node and primitive.
 bool same_triangles(const scene::Scene& a, const scene::Scene& b);
 

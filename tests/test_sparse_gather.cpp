@@ -35,25 +35,13 @@ output::WeldedNode two_triangles() {
     return node;
 }
 
-mesh::Polygon lamp_square() {
-    mesh::Polygon p;
-    p.n = 4;
-    p.v = {glm::dvec3(1.5, 1.5, 1.0), glm::dvec3(1.5, 2.5, 1.0), glm::dvec3(2.5, 2.5, 1.0), glm::dvec3(2.5, 1.5, 1.0)};
-    return p;
-}
-
 // A floor of 4 × 4 under a unit square lamp at height 1 (emitting 1), meshed in elements of
 // `element`: the floor's irradiance at any point is the lamp's form factor from it.
 struct LampFloor {
     scene::Scene s;
     mesh::Mesh m;
     std::vector<glm::dvec3> radiosity, irradiance;
-    explicit LampFloor(double element) {
-        const std::uint32_t floor = add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
-        const std::uint32_t lamp = add_material(s, glm::dvec3(0.0), glm::dvec3(1.0));
-        add_quad(s, {0, 0, 0}, {4, 0, 0}, {4, 4, 0}, {0, 4, 0}, floor, "floor");
-        add_quad(s, {1.5, 1.5, 1}, {1.5, 2.5, 1}, {2.5, 2.5, 1}, {2.5, 1.5, 1}, lamp, "lamp");
-        finish(s);
+    explicit LampFloor(double element) : s(lamp_scene(false)) {
         mesh::Settings ms;
         ms.patch_size = 4.0 * element;
         ms.element_size = element;
@@ -66,7 +54,7 @@ struct LampFloor {
             irradiance[k] = glm::dvec3(m.elements[k].emission.x > 0.0 ? 0.0 : exact(m.elements[k].centroid));
         }
     }
-    static double exact(const glm::dvec3& p) { return formfactor::point_to_polygon(p, {0, 0, 1}, lamp_square()); }
+    static double exact(const glm::dvec3& p) { return formfactor::point_to_polygon(p, {0, 0, 1}, rectangle_at(1.5, 2.5, 1.5, 2.5, 1.0)); }
     std::size_t floor_node() const {
         for (std::size_t n = 0; n < s.nodes.size(); ++n)
             if (s.nodes[n].name == "floor") return n;

@@ -147,6 +147,21 @@ std::size_t grade_contacts(mesh::Mesh& mesh, std::vector<glm::dvec3>& radiosity,
     return split;
 }
 
+VertexMeans element_means(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
+                          const std::vector<glm::dvec3>& irradiance, const std::vector<glm::dvec3>& direct) {
+    std::vector<glm::dvec3> emission(mesh.elements.size()), rho(mesh.elements.size());
+    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
+        emission[k] = mesh.elements[k].emission;
+        rho[k] = mesh.elements[k].rho;
+    }
+    VertexMeans means;
+    means.emission = output::vertex_values(welded, mesh, emission);
+    means.rho = output::vertex_values(welded, mesh, rho);
+    means.irradiance = output::vertex_values(welded, mesh, irradiance);
+    if (!direct.empty()) means.direct = output::vertex_values(welded, mesh, direct);
+    return means;
+}
+
 void fill_hidden(const output::WeldedMesh& welded, const std::vector<std::vector<char>>& hidden,
                  output::VertexLight& out) {
     std::vector<std::pair<std::uint32_t, std::uint32_t>> where;
@@ -201,16 +216,8 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         (!direct.empty() && direct.size() != mesh.elements.size()) || drawn.patches.size() != mesh.patches.size()) {
         throw InternalError("final gather: the solution, the lights' light or the drawn mesh do not match the mesh");
     }
-    std::vector<glm::dvec3> emission(mesh.elements.size()), rho(mesh.elements.size());
-    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
-        emission[k] = mesh.elements[k].emission;
-        rho[k] = mesh.elements[k].rho;
-    }
-    // The elements' means at the vertices of the one weld of the mesh.
-    const output::VertexValues e = output::vertex_values(welded, mesh, emission);
-    const output::VertexValues r = output::vertex_values(welded, mesh, rho);
-    const output::VertexValues h = output::vertex_values(welded, mesh, irradiance);
-    const output::VertexValues d = direct.empty() ? output::VertexValues{} : output::vertex_values(welded, mesh, direct);
+    const VertexMeans means = element_means(mesh, welded, irradiance, direct);
+    const output::VertexValues &e = means.emission, &r = means.rho, &h = means.irradiance, &d = means.direct;
     out.radiosity.assign(node_count, {});
     out.irradiance.assign(node_count, {});
     std::vector<std::pair<std::uint32_t, std::uint32_t>> where;  // point i's node and vertex

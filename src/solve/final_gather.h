@@ -97,6 +97,14 @@ struct GatherSettings {
     std::function<void(long done, long total)> progress;   // after each engine call (all passes)
 };
 
+// The elements' means at the vertices of `welded` (the one weld of `mesh`): their emission,
+// reflectance and `irradiance`, and `direct` (the lights' light; empty where `direct` is).
+struct VertexMeans {
+    output::VertexValues emission, rho, irradiance, direct;
+};
+VertexMeans element_means(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
+                          const std::vector<glm::dvec3>& irradiance, const std::vector<glm::dvec3>& direct);
+
 // Gives each vertex marked in `hidden` (per node and vertex; a node's list empty for none) the mean
 // of its unmarked neighbours' light along the triangles' edges, ring by ring inward, as
 // final_gather does for the points that see mostly backs (marked vertices with no unmarked one

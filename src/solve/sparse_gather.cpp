@@ -215,16 +215,8 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     SparseGathered result;
     const std::size_t node_count = welded.nodes.size();
     const int K = std::clamp(sparse.neighbours, 1, 16);
-    std::vector<glm::dvec3> emission(mesh.elements.size()), rho(mesh.elements.size());
-    for (std::size_t k = 0; k < mesh.elements.size(); ++k) {
-        emission[k] = mesh.elements[k].emission;
-        rho[k] = mesh.elements[k].rho;
-    }
-    const output::VertexValues e = output::vertex_values(welded, mesh, emission);
-    const output::VertexValues r = output::vertex_values(welded, mesh, rho);
-    const output::VertexValues h = output::vertex_values(welded, mesh, irradiance);
-    const output::VertexValues d =
-        direct.empty() ? output::VertexValues{} : output::vertex_values(welded, mesh, direct);
+    const VertexMeans means = element_means(mesh, welded, irradiance, direct);
+    const output::VertexValues &e = means.emission, &r = means.rho, &h = means.irradiance, &d = means.direct;
     const auto direct_at = [&](std::size_t n, std::size_t v) { return direct.empty() ? glm::dvec3(0.0) : d[n][v]; };
 
     // The current light of every vertex: the elements' means until a gather or interpolation.
