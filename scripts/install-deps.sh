@@ -19,6 +19,8 @@ packages=(
   # The codecs image back-end (src/image/codecs.cpp; the bundle's): PNG, JPEG, WebP, EXR.
   libpng-dev libjpeg-dev libwebp-dev libopenexr-dev
   libcli11-dev libfmt-dev
+  # The host stages' threads (src/core/parallel.h).
+  libtbb-dev
 )
 case "${1:-}" in
   --bake) ;;

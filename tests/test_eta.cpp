@@ -243,7 +243,7 @@ TEST_CASE("eta: a gather past its budget is planned as a sparse one of the budge
     w.gather_passes = 4;
     w.gather_refine = true;
     w.gather_planar_patches = 800;
-    w.gather_cluster_share = 0.0;
+    w.gather_cluster_cells = 0.0;
     const auto gather_of = [](const std::vector<StagePlan>& stages) -> const StagePlan* {
         for (const StagePlan& s : stages)
             if (s.name == "gather") return &s;
@@ -272,7 +272,7 @@ TEST_CASE("eta: a gather past its budget is planned as a sparse one of the budge
     // A drawn mesh so large that the model's time allows fewer: those, and never below the floor.
     w.gather_budget = 50000;
     w.shape.counts.elements = 80000;
-    w.gather_cluster_share = 1.0;  // every refined element drawn
+    w.gather_cluster_cells = 10.0 * refined;  // as many cells drawn as refined elements
     const double drawn = 800.0 + 10.0 * refined;
     const double timed = std::floor(hemirad::bake::kGatherSeconds / hemirad::bake::gather_point_seconds(drawn));
     REQUIRE(timed < 10.0 * points);

@@ -25,6 +25,7 @@
 #include "core/counted.h"
 #include "core/error.h"
 #include "core/memory.h"
+#include "core/parallel.h"
 #include "core/timing.h"
 #include "formfactor/hemicube.h"
 #include "formfactor/parallel.h"
@@ -491,16 +492,12 @@ WorkCounts work_counts(const Plan& p, const Setup& s, const Meshed& m, const sce
     // And what a gather draws (solve::gather_mesh).
     std::vector<double> emitted;
     emitted.reserve(m.mesh.patches.size());
-    double one_by_one = 0.0;
     for (const mesh::Patch& patch : m.mesh.patches) {
         emitted.push_back((patch.emission.x + patch.emission.y + patch.emission.z) * patch.area);
-        if (solve::drawn_by_element(patch))
-            one_by_one += patch.element_count;
-        else
-            w.gather_planar_patches += 1.0;
+        if (!patch.cluster() && patch.element_count > 1) w.gather_planar_patches += 1.0;
     }
+    w.gather_cluster_cells = double(gather_drawn(m.mesh)) - w.gather_planar_patches;
     w.emitting_holders = double(solve::flux_holders(std::move(emitted), s.threshold));
-    w.gather_cluster_share = m.mesh.elements.empty() ? 1.0 : one_by_one / double(m.mesh.elements.size());
     w.sky = p.sky.has_value();
     double reflected = 0.0, area = 0.0;
     for (const mesh::Element& e : m.mesh.elements) {
@@ -529,6 +526,8 @@ void run(const Options& options, Progress& shown) {
     // One progress line through every stage, with the bake's time left from a model of its
     // stages re-fitted as it runs (stage_progress.h); report.json's `estimate` records it.
     StageProgress progress(shown);
+    // The host stages' threads (--threads): the bake's bytes are the same whatever their count.
+    const parallel::ThreadLimit host_threads(options.threads);
     Timings timings;
     timings.start = Clock::now();
     const Plan plan = make_plan(options);

@@ -9,6 +9,7 @@
 #include "bake/stage_progress.h"
 #include "core/cancel.h"
 #include "core/memory.h"
+#include "core/parallel.h"
 #include "core/timing.h"
 #include "mesh/texturing.h"
 #include "output/welded_mesh.h"
@@ -53,8 +54,11 @@ std::size_t gather_budget(const Plan& plan, const mesh::Mesh& mesh) {
 }
 
 std::size_t gather_drawn(const mesh::Mesh& mesh) {
+    std::vector<std::size_t> cells(mesh.patches.size());
+    parallel::for_each(mesh.patches.size(), 64,
+                       [&](std::size_t p) { cells[p] = solve::drawn_cells(mesh, mesh.patches[p]).size(); });
     std::size_t drawn = 0;
-    for (const mesh::Patch& p : mesh.patches) drawn += solve::drawn_by_element(p) ? p.element_count : 1;
+    for (const std::size_t c : cells) drawn += c;
     return drawn;
 }
 

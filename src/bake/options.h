@@ -28,6 +28,7 @@ struct Options {
     double threshold = -1.0;      // < 0: from the quality
     long max_passes = -1;         // < 0: kDefaultMaxPasses or twice the patches, whichever is more (max_passes_for)
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
+    int threads = 0;              // host threads of the host stages (core/parallel.h); 0: every core
     bool batch_given = false;     // --batch was given; else several devices or ranks raise it (planned_batch)
     int gather = -1;              // final gather hemicube N (0: none); < 0: from the quality
     int gather_passes = 0;        // final gathers, each from the last one's light; 0: from the quality

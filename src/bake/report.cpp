@@ -10,6 +10,7 @@
 #include "bake/stage_checkpoint.h"
 #include "core/error.h"
 #include "core/memory.h"
+#include "core/parallel.h"
 #include "dist/dist.h"
 #include "formfactor/near_field.h"
 #include "output/finite.h"
@@ -55,6 +56,7 @@ ordered_json settings_json(const Record& r) {
         {"threshold", S.threshold},
         {"max_passes", max_passes_for(o, L.mesh.patches.size())},
         {"batch", o.batch},
+        {"threads", parallel::threads()},
         {"gather", o.gather},
         {"gather_passes", o.gather_passes},
         {"gather_refine", o.gather_refine},

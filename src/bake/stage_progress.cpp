@@ -69,7 +69,7 @@ constexpr double kPassSecondsPerElement = 3.3e-8, kPassSeconds256 = 5e-4;
 constexpr double kGatherRefineShare = 0.3;
 // A gather vertex's first pass: a fixed part (its hemicube's set-up and drawing, its row's light
 // on the host) and a part per element it draws (solve::gather_mesh: a planar patch one, a
-// cluster's elements each). Fitted on six bakes (the Cornell box, the atrium and the lit room at
+// cluster's face one). Fitted on six bakes (the Cornell box, the atrium and the lit room at
 // the default quality, N 96 and four passes; city:4k, city:10k and furniture:20k at draft, N 32 and
 // one pass: 61–751 µs a vertex, 569–26,000 drawn), within 25% of each; the hemicube's N made no
 // clear difference.
@@ -152,7 +152,7 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         // gather: the budget's hemicubes, one pass.
         const double passes = std::max(1, w.gather_passes);
         const double points = refined * kGatherVerticesPerElement;
-        const double drawn = w.gather_planar_patches + w.gather_cluster_share * refined;
+        const double drawn = w.gather_planar_patches + w.gather_cluster_cells;
         double budget = w.gather_budget;
         if (budget > 0.0 && !w.gather_points_given) budget = std::min(budget, timed_gather_budget(drawn));
         const bool sparse = budget > 0.0 && points > budget;

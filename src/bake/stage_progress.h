@@ -33,9 +33,10 @@ struct WorkCounts {
     int gather_passes = 1;
     bool gather_refine = false;
     // What a gather draws (solve::gather_mesh): the planar patches of more than one element (one
-    // each), and the share of the elements that are drawn one by one (clusters' and single ones).
+    // each), and the other cells (a cluster's faces, an element where a face's outline is not
+    // exact, a patch of one element), counted on the mesh before refinement, which keeps faces.
     double gather_planar_patches = 0.0;
-    double gather_cluster_share = 1.0;
+    double gather_cluster_cells = 0.0;
     double max_passes = 0.0;         // the progressive solve's cap (0: none)
     // The emitting patches that hold all but the threshold's share of the emitted flux
     // (solve::flux_holders): the sun's light reflected is not among them before the solve.

@@ -169,6 +169,11 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "each still shoots its flux at the time it is applied")
         ->transform(integer_in(1, 256))
         ->capture_default_str();
+    bake.add_option("--threads", o.threads,
+                    "host threads for the stages the host runs (meshing, contact lines, the gather's rows, "
+                    "interpolation, output); 0: every core. The bytes baked are the same for any count")
+        ->transform(integer_in(0, 4096))
+        ->capture_default_str();
     bake.add_option("--solver", o.solver,
                     "matrix (a form-factor row per patch, then Gauss-Seidel), progressive (shooting), or auto: "
                     "matrix up to 3000 patches and reflectances up to 0.95, unless --preview-every is given")

@@ -3,8 +3,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <mutex>
+#include <utility>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "core/rng.h"
 #include "formfactor/analytic.h"
 #include "formfactor/engine.h"
@@ -31,32 +35,61 @@ glm::dvec3 from_face(int face, const glm::dvec3& q) {
     }
 }
 
-DeltaFormFactors::DeltaFormFactors(int n, Weights weights) : n_(n), table_(3u * static_cast<std::size_t>(n) * n) {
+namespace {
+
+// Table (n, weights), as DeltaFormFactors describes: cell by cell, so the rows may be filled in
+// any order on any number of threads with the same bits.
+std::vector<double> delta_table(int n, Weights weights) {
+    std::vector<double> table(3u * static_cast<std::size_t>(n) * n);
     const double cell = 2.0 / n;  // cell size on the unit-distance face plane
     const glm::dvec3 up{0.0, 0.0, 1.0};
-    for (int face = 0; face < kFaces; ++face) {
+    const auto rows = [n](int face) { return face == 0 ? n : n / 2; };
+    const auto offset = [n](int face) {
+        return face == 0 ? 0 : static_cast<std::size_t>(n) * n + static_cast<std::size_t>(face - 1) * n * (n / 2);
+    };
+    std::vector<std::pair<int, int>> all_rows;  // (face, j)
+    for (int face = 0; face < kFaces; ++face)
+        for (int j = 0; j < rows(face); ++j) all_rows.push_back({face, j});
+    parallel::for_each(all_rows.size(), 8, [&](std::size_t r) {
+        const auto [face, j] = all_rows[r];
         const double t0 = face == 0 ? -1.0 : 0.0;  // side faces start at the base plane
-        for (int j = 0; j < rows(face); ++j) {
-            for (int i = 0; i < n; ++i) {
-                const double s_lo = -1.0 + i * cell, s_hi = -1.0 + (i + 1) * cell;
-                const double t_lo = t0 + j * cell, t_hi = t0 + (j + 1) * cell;
-                const glm::dvec3 corners[4] = {
-                    from_face(face, {s_lo, t_lo, 1.0}), from_face(face, {s_hi, t_lo, 1.0}),
-                    from_face(face, {s_hi, t_hi, 1.0}), from_face(face, {s_lo, t_hi, 1.0})};
-                table_[offset(face) + static_cast<std::size_t>(j) * n + i] =
-                    weights == Weights::form_factor
-                        ? point_to_polygon(up, corners, 4)
-                        : (solid_angle(corners[0], corners[1], corners[2]) +
-                           solid_angle(corners[0], corners[2], corners[3])) / (4.0 * M_PI);
-            }
+        for (int i = 0; i < n; ++i) {
+            const double s_lo = -1.0 + i * cell, s_hi = -1.0 + (i + 1) * cell;
+            const double t_lo = t0 + j * cell, t_hi = t0 + (j + 1) * cell;
+            const glm::dvec3 corners[4] = {from_face(face, {s_lo, t_lo, 1.0}), from_face(face, {s_hi, t_lo, 1.0}),
+                                           from_face(face, {s_hi, t_hi, 1.0}), from_face(face, {s_lo, t_hi, 1.0})};
+            table[offset(face) + static_cast<std::size_t>(j) * n + i] =
+                weights == Weights::form_factor
+                    ? point_to_polygon(up, corners, 4)
+                    : (solid_angle(corners[0], corners[1], corners[2]) + solid_angle(corners[0], corners[2], corners[3])) /
+                          (4.0 * M_PI);
         }
+    });
+    return table;
+}
+
+}  // namespace
+
+DeltaFormFactors::DeltaFormFactors(int n, Weights weights) : n_(n) {
+    // Made once per process and kept up to N = 1024 (25 MB); a larger one (400 MB at N = 4096) is
+    // made for each engine that asks, and goes with it.
+    constexpr int kKeptUpTo = 1024;
+    if (n > kKeptUpTo) {
+        table_ = std::make_shared<const std::vector<double>>(delta_table(n, weights));
+        return;
     }
+    static std::mutex mutex;
+    static std::map<std::pair<int, Weights>, std::shared_ptr<const std::vector<double>>> made;
+    const std::lock_guard<std::mutex> lock(mutex);
+    auto& table = made[{n, weights}];
+    if (!table) table = std::make_shared<const std::vector<double>>(delta_table(n, weights));
+    table_ = table;
 }
 
 double DeltaFormFactors::sum() const {
     // Kahan summation: the table has millions of tiny terms at large N.
     double s = 0.0, c = 0.0;
-    for (double x : table_) {
+    for (double x : *table_) {
         const double y = x - c;
         const double t = s + y;
         c = (t - s) - y;

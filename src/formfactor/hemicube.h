@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include <glm/glm.hpp>
@@ -29,21 +30,23 @@ glm::dvec3 from_face(int face, const glm::dvec3& face_point);
 // one half and a light's two hemicubes (the whole cube) to one.
 enum class Weights { form_factor, solid_angle };
 
+// A table is computed once per (n, weights) in a process, over the host's threads, and shared by
+// every engine and copy that asks for it (engines are made per refinement level and gather).
 class DeltaFormFactors {
 public:
     explicit DeltaFormFactors(int n, Weights weights = Weights::form_factor);  // n even, >= 2
     int n() const { return n_; }
     // Cell (i, j) of a face: i along u (0..n−1), j along v (0..n−1 on top, 0..n/2−1 on sides).
     int rows(int face) const { return face == 0 ? n_ : n_ / 2; }
-    double at(int face, int i, int j) const { return table_[offset(face) + static_cast<std::size_t>(j) * n_ + i]; }
+    double at(int face, int i, int j) const { return (*table_)[offset(face) + static_cast<std::size_t>(j) * n_ + i]; }
     std::size_t offset(int face) const { return face == 0 ? 0 : static_cast<std::size_t>(n_) * n_ + static_cast<std::size_t>(face - 1) * n_ * (n_ / 2); }
     std::size_t cells() const { return 3u * static_cast<std::size_t>(n_) * n_; }
-    const std::vector<double>& table() const { return table_; }
+    const std::vector<double>& table() const { return *table_; }
     double sum() const;
 
 private:
     int n_;
-    std::vector<double> table_;
+    std::shared_ptr<const std::vector<double>> table_;
 };
 
 // Projected polygons are snapped to a fixed-point grid of kSubcell units per cell before the

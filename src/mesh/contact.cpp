@@ -2,10 +2,14 @@
 #include "mesh/contact.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <unordered_map>
+
+#include "core/parallel.h"
 
 namespace hemirad::mesh {
 
@@ -139,7 +143,15 @@ std::vector<bool> contact_elements(const Mesh& mesh, double min_size) {
             for (std::int64_t y = a.y; y <= b.y; ++y)
                 for (std::int64_t z = a.z; z <= b.z; ++z) grid[key({x, y, z})].push_back(static_cast<std::uint32_t>(k));
     }
-    for (const auto& [where, members] : grid) {
+    // The cells on the host's threads; a pair marks both elements, whichever cell finds it first.
+    std::vector<const std::pair<const std::uint64_t, std::vector<std::uint32_t>>*> cells;
+    cells.reserve(grid.size());
+    for (const auto& entry : grid) cells.push_back(&entry);
+    std::unique_ptr<std::atomic<unsigned char>[]> marks(new std::atomic<unsigned char>[count]);
+    for (std::size_t k = 0; k < count; ++k) marks[k].store(0, std::memory_order_relaxed);
+    parallel::for_each(cells.size(), 16, [&](std::size_t c) {
+        const std::uint64_t where = cells[c]->first;
+        const std::vector<std::uint32_t>& members = cells[c]->second;
         for (std::size_t i = 0; i < members.size(); ++i) {
             const std::uint32_t a = members[i];
             const Element& ea = mesh.elements[a];
@@ -157,11 +169,12 @@ std::vector<bool> contact_elements(const Mesh& mesh, double min_size) {
                     reach_in_front(ea.poly, eb.centroid, eb.normal) <= tolerance)
                     continue;  // a convex edge, or one behind the other
                 if (polygon_distance(ea.poly, eb.poly) > tolerance) continue;
-                if (longest[a] > min_size) marked[a] = true;
-                if (longest[b] > min_size) marked[b] = true;
+                if (longest[a] > min_size) marks[a].store(1, std::memory_order_relaxed);
+                if (longest[b] > min_size) marks[b].store(1, std::memory_order_relaxed);
             }
         }
-    }
+    });
+    for (std::size_t k = 0; k < count; ++k) marked[k] = marks[k].load(std::memory_order_relaxed) != 0;
     return marked;
 }
 

@@ -109,6 +109,9 @@ struct Mesh {
     std::vector<LightShooter> lights;  // the scene's punctual lights' hemicubes
     std::vector<DirectionalShooter> directions;  // the scene's shining directional lights, in light order
     std::vector<GatherPoint> gather_points;  // the final gather's points (solve/final_gather.h); set by it
+    // A gather's drawing (solve::gather_mesh): element c stands for the solved mesh's elements
+    // [drawn_from[c], drawn_from[c + 1]); one entry more than the elements. Empty otherwise.
+    std::vector<std::uint32_t> drawn_from;
     std::vector<Element> elements;  // elements of patch p are [first_element, first_element + element_count)
     std::size_t dropped_triangles = 0;  // zero or near-zero area
     std::size_t quads = 0;              // triangle pairs meshed as quads

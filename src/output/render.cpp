@@ -8,6 +8,7 @@
 #include <cstdint>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "formfactor/clip.h"
 #include "output/output.h"
 #include "output/welded_mesh.h"
@@ -409,15 +410,16 @@ Image render(const scene::Scene& scene, const WeldedMesh& welded, const View& vi
         return bins;
     };
     const std::vector<std::vector<std::uint32_t>> bins = bin(triangles), glass_bins = bin(glass);
-    Strip strip;
-    for (int s = 0; s < strip_count; ++s) {
-        const int rows = std::min(kStripRows, height - s * kStripRows) * kSupersample;
-        strip.reset(s * strip_samples, rows, width * kSupersample);
+    // Strips are independent (each its own rows of the image): on the host's threads.
+    parallel::for_each(std::size_t(strip_count), 1, [&](std::size_t s) {
+        Strip strip;
+        const int rows = std::min(kStripRows, height - int(s) * kStripRows) * kSupersample;
+        strip.reset(int(s) * strip_samples, rows, width * kSupersample);
         for (const std::uint32_t i : bins[s]) rasterize(triangles[i], strip);
         if (around.sky) fill_sky(setup, *around.sky, dome, strip);
         for (const std::uint32_t i : glass_bins[s]) blend(glass[i], transmits[i], strip);
         resolve(strip, image);
-    }
+    });
     return image;
 }
 

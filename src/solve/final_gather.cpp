@@ -2,6 +2,7 @@
 #include "solve/final_gather.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -9,6 +10,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "formfactor/analytic.h"
 #include "mesh/contact.h"
 #include "mesh/refine.h"
@@ -176,33 +178,123 @@ void fill_hidden(const output::WeldedMesh& welded, const std::vector<std::vector
     fill_hidden(welded, where, marks, out);
 }
 
+namespace {
+
+// The outline of elements [first, first + count), cut from one scene face: see drawn_cells.
+bool face_outline(const mesh::Mesh& mesh, std::uint32_t first, std::uint32_t count, mesh::Polygon& out) {
+    std::vector<glm::dvec3> corners;
+    double area = 0.0;
+    for (std::uint32_t k = first; k < first + count; ++k) {
+        const mesh::Element& e = mesh.elements[k];
+        area += e.area;
+        for (int i = 0; i < e.poly.n; ++i) corners.push_back(e.poly.v[static_cast<std::size_t>(i)]);
+    }
+    const auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
+        return a.x != b.x ? a.x < b.x : a.y != b.y ? a.y < b.y : a.z < b.z;
+    };
+    std::sort(corners.begin(), corners.end(), less);
+    std::vector<glm::dvec3> once;
+    for (std::size_t i = 0; i < corners.size();) {
+        std::size_t j = i + 1;
+        while (j < corners.size() && corners[j] == corners[i]) ++j;
+        if (j - i == 1) once.push_back(corners[i]);
+        i = j;
+    }
+    if (once.size() != 3 && once.size() != 4) return false;
+    // Counter-clockwise about the face's normal, from the least corner.
+    const glm::dvec3 normal = mesh.elements[first].normal;
+    glm::dvec3 centre(0.0);
+    for (const glm::dvec3& c : once) centre += c / double(once.size());
+    const glm::dvec3 u = once[0] - centre;
+    const glm::dvec3 w = glm::cross(normal, u);
+    std::vector<std::pair<double, std::size_t>> order;
+    for (std::size_t i = 0; i < once.size(); ++i)
+        order.push_back({std::atan2(glm::dot(once[i] - centre, w), glm::dot(once[i] - centre, u)), i});
+    std::sort(order.begin(), order.end());
+    mesh::Polygon poly;
+    poly.n = static_cast<int>(once.size());
+    for (std::size_t i = 0; i < once.size(); ++i) poly.v[i] = once[order[i].second];
+    // Convex and turning about the normal at every corner, planar, and the elements' area.
+    glm::dvec3 newell(0.0);
+    double size = 0.0;
+    for (int i = 0; i < poly.n; ++i) {
+        const glm::dvec3 &a = poly.v[std::size_t(i)], &b = poly.v[std::size_t((i + 1) % poly.n)],
+                         &c = poly.v[std::size_t((i + 2) % poly.n)];
+        if (!(glm::dot(glm::cross(b - a, c - b), normal) > 0.0)) return false;
+        newell += glm::cross(a, b);
+        size = std::max(size, glm::length(b - a));
+    }
+    for (int i = 0; i < poly.n; ++i)
+        if (std::abs(glm::dot(poly.v[std::size_t(i)] - poly.v[0], normal)) > 1e-9 * size) return false;
+    const double outline = 0.5 * glm::length(newell);
+    if (!(std::abs(outline - area) <= 1e-9 * area)) return false;
+    out = poly;
+    return true;
+}
+
+}  // namespace
+
+std::vector<DrawnCell> drawn_cells(const mesh::Mesh& mesh, const mesh::Patch& patch) {
+    std::vector<DrawnCell> cells;
+    const std::uint32_t end = patch.first_element + patch.element_count;
+    if (!patch.cluster() && patch.element_count > 1) {
+        cells.push_back({patch.first_element, patch.element_count, patch.poly});
+        return cells;
+    }
+    for (std::uint32_t k = patch.first_element; k < end;) {
+        const std::array<std::uint32_t, 2>& source = mesh.elements[k].source;
+        std::uint32_t run = k + 1;
+        if (source[0] != mesh::kNoSource)
+            while (run < end && mesh.elements[run].source == source) ++run;
+        DrawnCell cell{k, run - k, mesh.elements[k].poly};
+        if (cell.count == 1 || face_outline(mesh, k, cell.count, cell.poly)) {
+            cells.push_back(cell);
+        } else {
+            for (std::uint32_t e = k; e < run; ++e) cells.push_back({e, 1, mesh.elements[e].poly});
+        }
+        k = run;
+    }
+    return cells;
+}
+
 mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {
     mesh::Mesh out;
     out.lights = mesh.lights;
     out.directions = mesh.directions;
     out.patches.reserve(mesh.patches.size());
-    for (const mesh::Patch& p : mesh.patches) {
-        mesh::Patch q = p;
+    // Each patch's cells on the host's threads, then in patch order.
+    std::vector<std::vector<DrawnCell>> cells(mesh.patches.size());
+    parallel::for_each(mesh.patches.size(), 64, [&](std::size_t p) { cells[p] = drawn_cells(mesh, mesh.patches[p]); });
+    for (std::size_t p = 0; p < mesh.patches.size(); ++p) {
+        mesh::Patch q = mesh.patches[p];
         q.first_element = static_cast<std::uint32_t>(out.elements.size());
         const std::uint32_t index = static_cast<std::uint32_t>(out.patches.size());
-        if (drawn_by_element(p)) {
-            for (std::uint32_t k = p.first_element; k < p.first_element + p.element_count; ++k) {
-                out.elements.push_back(mesh.elements[k]);
-                out.elements.back().patch = index;
+        for (const DrawnCell& cell : cells[p]) {
+            mesh::Element e = mesh.elements[cell.first];  // node, material, sides as its elements'
+            if (cell.count > 1) {
+                const bool cell_patch = !q.cluster();
+                e.poly = cell.poly;
+                glm::dvec3 emission(0.0), centroid(0.0);
+                double area = 0.0;
+                for (std::uint32_t k = cell.first; k < cell.first + cell.count; ++k) {
+                    const mesh::Element& f = mesh.elements[k];
+                    emission += f.area * f.emission;
+                    centroid += f.area * f.centroid;
+                    area += f.area;
+                }
+                e.area = cell_patch ? q.area : area;
+                e.normal = cell_patch ? q.normal : e.normal;
+                e.centroid = cell_patch ? q.centroid : centroid / area;
+                e.emission = cell_patch ? q.emission : emission / area;
             }
-        } else {
-            mesh::Element e = mesh.elements[p.first_element];  // node, material, sides as its elements'
-            e.poly = p.poly;
-            e.normal = p.normal;
-            e.centroid = p.centroid;
-            e.area = p.area;
-            e.emission = p.emission;
             e.patch = index;
             out.elements.push_back(e);
+            out.drawn_from.push_back(cell.first);
         }
         q.element_count = static_cast<std::uint32_t>(out.elements.size()) - q.first_element;
         out.patches.push_back(q);
     }
+    out.drawn_from.push_back(static_cast<std::uint32_t>(mesh.elements.size()));
     return out;
 }
 
@@ -229,6 +321,8 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
             where.push_back({static_cast<std::uint32_t>(n), static_cast<std::uint32_t>(v)});
     }
     const std::size_t total = where.size();
+    if (drawn.drawn_from.size() != drawn.elements.size() + 1 || drawn.drawn_from.back() != mesh.elements.size())
+        throw InternalError("final gather: the drawn mesh is not gather_mesh's of the solved mesh");
     if (total != drawn.gather_points.size()) {
         throw InternalError("final gather: the drawn mesh's gather points are not the welded mesh's vertices");
     }
@@ -237,37 +331,37 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     // last pass's), and per drawn element the area-weighted mean of the elements it stands for.
     std::vector<glm::dvec3> fine = radiosity, coarse(drawn.elements.size(), glm::dvec3(0.0));
     const auto draw = [&] {
-        for (std::size_t p = 0; p < mesh.patches.size(); ++p) {
-            const mesh::Patch& fp = mesh.patches[p];
-            const mesh::Patch& cp = drawn.patches[p];
-            if (cp.element_count == fp.element_count) {  // elements drawn as they are
-                for (std::uint32_t k = 0; k < fp.element_count; ++k) coarse[cp.first_element + k] = fine[fp.first_element + k];
-                continue;
+        parallel::for_each(drawn.elements.size(), 1024, [&](std::size_t c) {
+            const std::uint32_t first = drawn.drawn_from[c], end = drawn.drawn_from[c + 1];
+            if (end - first == 1) {  // an element drawn as it is
+                coarse[c] = fine[first];
+                return;
             }
             glm::dvec3 sum(0.0);
             double area = 0.0;
-            for (std::uint32_t k = fp.first_element; k < fp.first_element + fp.element_count; ++k) {
+            for (std::uint32_t k = first; k < end; ++k) {
                 sum += mesh.elements[k].area * fine[k];
                 area += mesh.elements[k].area;
             }
-            coarse[cp.first_element] = area > 0.0 ? sum / area : glm::dvec3(0.0);
-        }
+            coarse[c] = area > 0.0 ? sum / area : glm::dvec3(0.0);
+        });
     };
     // A drawn cell close to the point: its elements weighed by their exact unoccluded form factors
     // from the point (the cell's visible form factor, the hemicube's, shared out by them). Returns
-    // false for a cell drawn as its mean; else appends the elements' weights (those > 0, in order).
+    // false for a cell that is one element; else appends the elements' weights (those > 0, in order).
     constexpr double kNearPatches = 2.0;
     struct NearWeight {
         std::uint32_t element;
         double f;
     };
     const auto near_weights = [&](const mesh::GatherPoint& point, std::uint32_t c, std::vector<NearWeight>& into) {
-        const mesh::Patch& fp = mesh.patches[drawn.elements[c].patch];
-        if (fp.cluster() || fp.element_count <= 1) return false;
-        const double reach = kNearPatches * std::sqrt(fp.area);
-        const glm::dvec3 to = point.position - fp.centroid;
+        const std::uint32_t first = drawn.drawn_from[c], end = drawn.drawn_from[c + 1];
+        if (end - first <= 1) return false;
+        const mesh::Element& cell = drawn.elements[c];
+        const double reach = kNearPatches * std::sqrt(cell.area);
+        const glm::dvec3 to = point.position - cell.centroid;
         if (glm::dot(to, to) > reach * reach) return false;
-        for (std::uint32_t k = fp.first_element; k < fp.first_element + fp.element_count; ++k) {
+        for (std::uint32_t k = first; k < end; ++k) {
             const double f = formfactor::point_to_polygon(point.position, point.normal, mesh.elements[k].poly);
             if (f > 0.0) into.push_back({k, f});
         }
@@ -300,7 +394,7 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     std::vector<std::size_t> start{0}, near_row{0}, near_start{0};
     std::vector<std::uint32_t> kept_element, near_at;
     std::vector<double> kept_F;
-    std::vector<NearWeight> near_weight, scratch;
+    std::vector<NearWeight> near_weight;
     std::size_t kept = 0;
     const auto store = [&](std::size_t i, const glm::dvec3& gathered) {
         const auto [n, v] = where[i];
@@ -308,9 +402,17 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         out.irradiance[n][v] = light;
         out.radiosity[n][v] = e[n][v] + r[n][v] * light;
     };
-    // A shot row's light; `keep`: its near weights appended to the kept ones.
-    const auto shot_light = [&](std::size_t i, const formfactor::ShotResult& row, bool keep) {
+    // A shot row's light; `near`, when given, gets the near cells' entries in the row and their
+    // weights (kept rows' weights, see above). Rows are independent: a batch's are taken on the
+    // host's threads, each with its own scratch.
+    struct RowNear {
+        std::vector<std::uint32_t> at;
+        std::vector<std::size_t> end;  // the weights of entry at[q] end at end[q]
+        std::vector<NearWeight> weights;
+    };
+    const auto shot_light = [&](std::size_t i, const formfactor::ShotResult& row, RowNear* near) {
         const mesh::GatherPoint& point = drawn.gather_points[i];
+        std::vector<NearWeight> scratch;
         glm::dvec3 light(0.0);
         for (std::size_t k = 0; k < row.size(); ++k) {
             scratch.clear();
@@ -319,10 +421,10 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
                 continue;
             }
             light += row.F[k] * weighed(scratch.data(), scratch.size(), row.element[k]);
-            if (keep) {
-                near_at.push_back(static_cast<std::uint32_t>(k));
-                near_weight.insert(near_weight.end(), scratch.begin(), scratch.end());
-                near_start.push_back(near_weight.size());
+            if (near) {
+                near->at.push_back(static_cast<std::uint32_t>(k));
+                near->weights.insert(near->weights.end(), scratch.begin(), scratch.end());
+                near->end.push_back(near->weights.size());
             }
         }
         return light;
@@ -367,12 +469,14 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
         draw();
         if (pass > 0) {
             if (settings.cancelled && settings.cancelled()) return false;
-            for (std::size_t i = 0; i < kept; ++i) store(i, kept_light(i));
+            parallel::for_each(kept, 64, [&](std::size_t i) { store(i, kept_light(i)); });
             done += static_cast<long>(kept);
             if (settings.progress) settings.progress(done, work);
         }
         // Pass 0 shoots every point to do; the later ones those past the kept rows.
         const std::size_t from = pass > 0 ? kept : 0;
+        std::vector<glm::dvec3> light;
+        std::vector<RowNear> nears;
         for (std::size_t first = from; first < todo.size(); first += batch) {
             if (settings.cancelled && settings.cancelled()) return false;
             const std::size_t count = std::min(batch, todo.size() - first);
@@ -380,25 +484,34 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
             for (std::size_t j = first; j < first + count; ++j)
                 requests.push_back(formfactor::ShotRequest::of_point(todo[j], kGatherShots + todo[j]));
             engine.shoot_batch(requests, results);
+            // Rows are kept in order from the first while they fit: this batch's may be kept only
+            // if its first row is next.
+            const bool may_keep = pass == 0 && passes > 1 && kept == todo[first];
+            light.assign(count, glm::dvec3(0.0));
+            nears.assign(may_keep ? count : 0, RowNear{});
+            parallel::for_each(count, 4, [&](std::size_t j) {
+                light[j] = shot_light(todo[first + j], results[j], may_keep ? &nears[j] : nullptr);
+            });
             for (std::size_t j = 0; j < count; ++j) {
                 const formfactor::ShotResult& row = results[j];
                 const std::size_t i = todo[first + j];
-                const bool keep = pass == 0 && passes > 1 && kept == i;
-                const std::size_t near_entries = near_at.size(), near_weights_kept = near_weight.size();
-                store(i, shot_light(i, row, keep));
+                store(i, light[j]);
                 hidden[i] = row.blocked > kHiddenBlocked;
-                if (!keep) continue;
-                if (kept_F.size() + row.size() + near_weight.size() + near_at.size() <= settings.kept_entries) {
+                if (!may_keep || kept != i) continue;
+                const RowNear& near = nears[j];
+                if (kept_F.size() + row.size() + near_weight.size() + near_at.size() + near.weights.size() +
+                        near.at.size() <=
+                    settings.kept_entries) {
                     kept_element.insert(kept_element.end(), row.element.begin(), row.element.end());
                     kept_F.insert(kept_F.end(), row.F.begin(), row.F.end());
                     start.push_back(kept_F.size());
+                    const std::size_t base = near_weight.size();
+                    near_at.insert(near_at.end(), near.at.begin(), near.at.end());
+                    near_weight.insert(near_weight.end(), near.weights.begin(), near.weights.end());
+                    for (const std::size_t end : near.end) near_start.push_back(base + end);
                     near_row.push_back(near_at.size());
                     ++kept;
-                } else {  // past the budget: this row's near weights go too, and the rest are shot again
-                    near_at.resize(near_entries);
-                    near_start.resize(near_entries + 1);
-                    near_weight.resize(near_weights_kept);
-                }
+                }  // else past the budget: the rest are shot again
             }
             done += static_cast<long>(count);
             if (settings.progress) settings.progress(done, work);

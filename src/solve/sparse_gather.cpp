@@ -11,6 +11,7 @@
 #include <unordered_map>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "mesh/contact.h"
 
 namespace hemirad::solve {
@@ -224,15 +225,23 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     current.radiosity.resize(node_count);
     current.irradiance.resize(node_count);
     std::vector<NodeState> state(node_count);
+    // Nodes are independent until points are chosen among them all: each node's graph, surfaces,
+    // candidates and interpolation are made on the host's threads, and what is summed over nodes
+    // is summed in node order.
+    std::vector<char> is_gathered(node_count, 0);
+    for (std::size_t n = 0; n < node_count; ++n) is_gathered[n] = gathered(n) ? 1 : 0;
+    parallel::for_each(node_count, 1, [&](std::size_t n) {
+        if (!is_gathered[n]) return;
+        state[n].graph = edge_graph(welded.nodes[n]);
+        state[n].component = components(state[n].graph);
+    });
     double area = 0.0, mean = 0.0;
     for (std::size_t n = 0; n < node_count; ++n) {
         current.radiosity[n] = welded.nodes[n].radiosity;
         current.irradiance[n] = h[n];
-        if (!gathered(n)) continue;
+        if (!is_gathered[n]) continue;
         const output::WeldedNode& node = welded.nodes[n];
         NodeState& s = state[n];
-        s.graph = edge_graph(node);
-        s.component = components(s.graph);
         s.source.assign(node.positions.size(), 0);
         s.shot.assign(node.positions.size(), 0);
         s.hidden.assign(node.positions.size(), 0);
@@ -315,13 +324,13 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     double size = std::sqrt(std::max(area, 1e-300) / double(seed_budget));
     std::vector<std::vector<std::pair<double, std::uint32_t>>> seeds(node_count);
     for (int attempt = 0;; ++attempt) {
-        std::size_t count = 0;
-        for (std::size_t n = 0; n < node_count; ++n) {
-            if (!gathered(n)) continue;
+        parallel::for_each(node_count, 1, [&](std::size_t n) {
+            if (!is_gathered[n]) return;
             const std::vector<double> one(welded.nodes[n].positions.size(), 1.0);
             seeds[n] = pick_per_cell(welded.nodes[n], state[n], size, one);
-            count += seeds[n].size();
-        }
+        });
+        std::size_t count = 0;
+        for (std::size_t n = 0; n < node_count; ++n) count += seeds[n].size();
         if (count <= seed_budget || attempt == 40) break;
         size *= std::max(1.1, std::sqrt(double(count) / double(seed_budget)));
     }
@@ -372,15 +381,16 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     // The interpolation between the gathered points, and the light it gives the others.
     std::vector<Interpolation> weights(node_count);
     const auto interpolate = [&] {
-        for (std::size_t n = 0; n < node_count; ++n)
-            if (gathered(n)) weights[n] = interpolation_on(state[n].graph, state[n].source, K);
+        parallel::for_each(node_count, 1, [&](std::size_t n) {
+            if (is_gathered[n]) weights[n] = interpolation_on(state[n].graph, state[n].source, K);
+        });
     };
     interpolate();
     for (int level = 1; level <= sparse.levels && static_cast<std::size_t>(shot) < sparse.budget; ++level) {
         size *= 0.5;
-        std::vector<std::pair<double, std::pair<std::size_t, std::uint32_t>>> wanted;  // score, (node, vertex)
-        for (std::size_t n = 0; n < node_count; ++n) {
-            if (!gathered(n)) continue;
+        std::vector<std::vector<std::pair<double, std::uint32_t>>> candidates(node_count);  // per node: score, vertex
+        parallel::for_each(node_count, 1, [&](std::size_t n) {
+            if (!is_gathered[n]) return;
             const NodeState& s = state[n];
             const Interpolation& w = weights[n];
             std::vector<double> score(s.source.size(), 0.0);
@@ -390,8 +400,11 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
                 if (worst > sparse.tolerance) score[v] = worst;
                 if (s.contact[v]) score[v] = 1.0 + worst;  // before the others
             }
-            for (const auto& [sc, v] : pick_per_cell(welded.nodes[n], s, size, score)) wanted.push_back({sc, {n, v}});
-        }
+            candidates[n] = pick_per_cell(welded.nodes[n], s, size, score);
+        });
+        std::vector<std::pair<double, std::pair<std::size_t, std::uint32_t>>> wanted;  // score, (node, vertex)
+        for (std::size_t n = 0; n < node_count; ++n)
+            for (const auto& [sc, v] : candidates[n]) wanted.push_back({sc, {n, v}});
         if (wanted.empty()) break;
         std::stable_sort(wanted.begin(), wanted.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
         const std::size_t room = sparse.budget - static_cast<std::size_t>(shot);
@@ -410,15 +423,16 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     }
 
     // The others: their elements' light and the gathered points' correction (below).
-    for (std::size_t n = 0; n < node_count; ++n) {
-        if (!gathered(n)) continue;
+    std::vector<std::size_t> interpolated(node_count, 0), unreached(node_count, 0);
+    parallel::for_each(node_count, 1, [&](std::size_t n) {
+        if (!is_gathered[n]) return;
         const NodeState& s = state[n];
         const Interpolation& w = weights[n];
         for (std::size_t v = 0; v < s.source.size(); ++v) {
             if (s.source[v]) continue;
-            ++result.interpolated;
+            ++interpolated[n];
             if (w.start[v] == w.start[v + 1]) {
-                ++result.unreached;
+                ++unreached[n];
                 continue;
             }
             // Its elements' light, corrected by the gathered points' correction of theirs: the
@@ -436,6 +450,10 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
             current.irradiance[n][v] = H;
             current.radiosity[n][v] = e[n][v] + r[n][v] * H;
         }
+    });
+    for (std::size_t n = 0; n < node_count; ++n) {
+        result.interpolated += interpolated[n];
+        result.unreached += unreached[n];
     }
     // The points that saw mostly backs take their seen neighbours' light, as in a full gather, so
     // that no triangle carries their unseen darkness (the ceiling above a lamp) into the light.
