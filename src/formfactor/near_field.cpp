@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/parallel.h"
 #include "formfactor/analytic.h"
 
 namespace hemirad::formfactor {
@@ -20,8 +21,10 @@ void NearFieldEngine::shoot(const ShotRequest& request, ShotResult& out) {
 
 void NearFieldEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) {
     inner_->shoot_batch(shots, out);
-    for (std::size_t i = 0; i < shots.size(); ++i)
+    // Each row on its own (the host's threads).
+    parallel::for_each(shots.size(), 1, [&](std::size_t i) {
         if (shots[i].shooter.kind == Shooter::Kind::patch) correct(shots[i].shooter.patch, out[i]);
+    });
 }
 
 void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
@@ -48,7 +51,7 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     // hemicube's ΣF is exact (the cells tile the hemisphere), and the flux books and the
     // measured hit fraction (to which the ambient term is very sensitive as ρ → 1) rely on it.
     double near_before = 0.0, near_after = 0.0, far = 0.0;
-    near_.clear();
+    std::vector<std::size_t> near;  // row positions of the receivers corrected, ascending
     for (std::size_t i = 0; i < out.size(); ++i) {
         if (out.F[i] == 0.0) continue;  // unseen: occluded, behind, or coplanar
         const mesh::Element& e = mesh_.elements[out.element[i]];
@@ -67,19 +70,19 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
         near_before += out.F[i];
         out.F[i] = visible * to_shooter(e.centroid, e.normal) * e.area / shooter.area;
         near_after += out.F[i];
-        near_.push_back(i);
+        near.push_back(i);
     }
     const double far_scale = far > 0.0 ? (far + near_before - near_after) / far : -1.0;
     if (far_scale >= 0.0) {
         for (std::size_t i = 0, n = 0; i < out.size(); ++i) {
-            if (n < near_.size() && near_[n] == i) {
+            if (n < near.size() && near[n] == i) {
                 ++n;
                 continue;
             }
             if (out.F[i] != 0.0) out.F[i] *= far_scale;
         }
     } else if (near_after > 0.0) {
-        for (std::size_t i : near_) out.F[i] *= near_before / near_after;
+        for (std::size_t i : near) out.F[i] *= near_before / near_after;
     }
 }
 

@@ -30,7 +30,6 @@ private:
     const mesh::Mesh& mesh_;
     std::unique_ptr<Engine> inner_;
     double reach_;
-    std::vector<std::size_t> near_;  // row positions of the receivers corrected in the current shot, ascending
 
     void correct(std::uint32_t patch, ShotResult& out);  // the inner engine's shot, in place
 };

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "core/timing.h"
 #include "hemicube_types.h"
 

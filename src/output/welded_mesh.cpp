@@ -9,6 +9,7 @@
 #include <unordered_map>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "core/rng.h"
 
 namespace hemirad::output {
@@ -344,17 +345,29 @@ WeldedMesh weld(std::size_t node_count, const mesh::Mesh& mesh, const std::vecto
         throw InternalError(
             fmt::format("output: {} radiosity values for {} elements", radiosity.size(), mesh.elements.size()));
     }
-    std::vector<NodeWelder> welders(node_count);
+    // Each node's elements in mesh order, then the nodes welded on the host's threads.
+    std::vector<std::uint32_t> count(node_count + 1, 0);
     for (std::size_t i = 0; i < mesh.elements.size(); ++i) {
         const mesh::Element& element = mesh.elements[i];
         if (element.node >= node_count) {
             throw InternalError(fmt::format("output: element {} names node {} of {}", i, element.node, node_count));
         }
-        welders[element.node].add(element, static_cast<std::uint32_t>(i));
+        ++count[element.node + 1];
+    }
+    for (std::size_t n = 0; n < node_count; ++n) count[n + 1] += count[n];
+    std::vector<std::uint32_t> of_node(mesh.elements.size());
+    {
+        std::vector<std::uint32_t> next(count.begin(), count.end() - 1);
+        for (std::size_t i = 0; i < mesh.elements.size(); ++i)
+            of_node[next[mesh.elements[i].node]++] = static_cast<std::uint32_t>(i);
     }
     WeldedMesh welded;
-    welded.nodes.reserve(node_count);
-    for (NodeWelder& welder : welders) welded.nodes.push_back(welder.finish());
+    welded.nodes.resize(node_count);
+    parallel::for_each(node_count, 1, [&](std::size_t n) {
+        NodeWelder welder;
+        for (std::uint32_t j = count[n]; j < count[n + 1]; ++j) welder.add(mesh.elements[of_node[j]], of_node[j]);
+        welded.nodes[n] = welder.finish();
+    });
     set_vertex_values(welded, vertex_values ? *vertex_values : output::vertex_values(welded, mesh, radiosity));
     return welded;
 }
@@ -364,7 +377,7 @@ VertexValues vertex_values(const WeldedMesh& welded, const mesh::Mesh& mesh, con
         throw InternalError(fmt::format("output: {} values for {} elements", values.size(), mesh.elements.size()));
     }
     VertexValues out(welded.nodes.size());
-    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
+    parallel::for_each(welded.nodes.size(), 1, [&](std::size_t n) {
         const WeldedNode& node = welded.nodes[n];
         std::vector<glm::dvec3>& at = out[n];
         at.resize(node.positions.size());
@@ -385,7 +398,7 @@ VertexValues vertex_values(const WeldedMesh& welded, const mesh::Mesh& mesh, con
             at[v] = weight > 0.0 ? weighted / weight : last > first ? plain / double(last - first) : glm::dvec3(0.0);
         }
         for (const WeldedNode::Halfway& h : node.halfway) at[h.vertex] = 0.5 * (at[h.a] + at[h.b]);
-    }
+    });
     return out;
 }
 
