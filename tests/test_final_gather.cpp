@@ -611,3 +611,39 @@ TEST_CASE("final gather: drawn cells of a cluster: a face cut in four is one, tw
     CHECK(cells[2].first == 5);
     CHECK(cells[2].count == 1);
 }
+
+TEST_CASE("final gather: the light is the same whatever batch the engine prefers", "[gather]") {
+    // An engine on a GPU asks for hundreds of points a call (formfactor::Engine::preferred_batch);
+    // rows kept for the later passes are kept in order from the first whatever the batches, here
+    // with a budget that keeps only some of them.
+    class Preferring : public formfactor::Engine {
+    public:
+        Preferring(const mesh::Mesh& m, std::size_t batch, std::size_t& largest)
+            : inner_(m, formfactor::Settings{32, 1}), batch_(batch), largest_(largest) {}
+        std::string name() const override { return "preferring"; }
+        void shoot(const formfactor::ShotRequest& r, formfactor::ShotResult& out) override { inner_.shoot(r, out); }
+        void shoot_batch(const std::vector<formfactor::ShotRequest>& s, std::vector<formfactor::ShotResult>& out) override {
+            largest_ = std::max(largest_, s.size());
+            inner_.shoot_batch(s, out);
+        }
+        std::size_t preferred_batch() const override { return batch_; }
+
+    private:
+        formfactor::ReferenceEngine inner_;
+        std::size_t batch_;
+        std::size_t& largest_;
+    };
+    const PatternedCornell c;
+    std::size_t small_calls = 0, large_calls = 0;
+    const Gathered small = gather(
+        c.scene, c.mesh, c.radiosity,
+        [&](const mesh::Mesh& d) { return std::make_unique<Preferring>(d, 1, small_calls); }, 3, 20000);
+    const Gathered large = gather(
+        c.scene, c.mesh, c.radiosity,
+        [&](const mesh::Mesh& d) { return std::make_unique<Preferring>(d, 300, large_calls); }, 3, 20000);
+    CHECK(small_calls == solve::GatherSettings{}.batch);  // the settings' batch is the least
+    CHECK(large_calls == 300);
+    REQUIRE(small.light.irradiance.size() == large.light.irradiance.size());
+    CHECK(small.light.irradiance == large.light.irradiance);
+    CHECK(small.light.radiosity == large.light.radiosity);
+}

@@ -31,6 +31,7 @@ public:
         for (const formfactor::ShotResult& r : out) observer_(r);
     }
     const std::vector<std::int32_t>* last_ids(std::size_t i) const override { return inner_->last_ids(i); }
+    std::size_t preferred_batch() const override { return inner_->preferred_batch(); }
 
 private:
     std::unique_ptr<formfactor::Engine> inner_;

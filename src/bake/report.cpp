@@ -40,6 +40,10 @@ ordered_json device_json(const Record& r) {
         out["members"] = members;
     }
     out["ranks"] = dist::size();
+    // The shots a call of the matrix rows, refinement and the gather: the engine's preferred batch
+    // (a GPU's from its compute units) or --batch, whichever is more.
+    out["batch"] = std::max({r.lit.solved.preferred_batch, formfactor::Engine::kDefaultBatch,
+                             std::size_t(std::max(1, r.plan.o.batch))});
     return out;
 }
 

@@ -158,6 +158,7 @@ Solved solve(const mesh::Mesh& mesh, const scene::Scene& scene, const std::strin
                                        max_passes_for(c.o, mesh.patches.size()), c.threshold, s.error),
                            false);
     out.formfactor_seconds = engine.seconds();
+    out.preferred_batch = engine.preferred_batch();
     if (engines.choice().verifier) out.verified = engines.choice().verifier->summary();  // the engine ends with this call
     if (row_cache) out.row_cache = row_cache->stats();
     out.solve_seconds = seconds_since(t0) - engine.seconds();

@@ -104,6 +104,9 @@ struct Solution {
 struct Solved {
     Solution solution;
     double formfactor_seconds = 0.0, solve_seconds = 0.0;
+    // Shots a call the engine asked for (formfactor::Engine::preferred_batch): the matrix rows,
+    // refinement's re-gathers and the gather's points go in batches of at least this.
+    std::size_t preferred_batch = 0;
     std::optional<formfactor::VerifySummary> verified;      // what --verify compared
     std::optional<formfactor::RowCacheStats> row_cache;     // the progressive solve's
 };

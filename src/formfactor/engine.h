@@ -149,6 +149,12 @@ public:
         out.resize(shots.size());
         for (std::size_t i = 0; i < shots.size(); ++i) shoot(shots[i], out[i]);
     }
+    // The shots one shoot_batch should carry to keep the engine busy, for callers whose results
+    // do not depend on how they batch (the gather's points, refinement's re-gathers, the matrix
+    // solver's rows; not the progressive solver, whose batch picks its shooters): the OpenCL
+    // engine's from its device, kDefaultBatch otherwise.
+    static constexpr std::size_t kDefaultBatch = 64;
+    virtual std::size_t preferred_batch() const { return kDefaultBatch; }
     // The id buffer of shot i of the last shoot_batch (a shoot() is a batch of one): element
     // index, −1 empty, −2 blocker, cells in DeltaFormFactors order; for a directional shot the
     // owner of each cell of its grid (parallel.h: a record, −1 none), row-major. nullptr where the

@@ -23,6 +23,7 @@ public:
     void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return inner_->last_ids(i); }
+    std::size_t preferred_batch() const override { return inner_->preferred_batch(); }
 
     static constexpr double kDefaultReach = 4.0;
 

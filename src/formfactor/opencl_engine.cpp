@@ -571,6 +571,21 @@ std::size_t OpenCLEngine::raster_group_size() const {
                                                               : tuning_.tile * tuning_.tile);
 }
 
+std::size_t OpenCLEngine::preferred_batch() const {
+    constexpr std::size_t kShotsPerUnit = 8, kMostPreferred = 1024;
+    // The host holds a batch's rows: at most an entry (12 bytes) per element each, kept within
+    // 512 MiB (a 1M-element scene: the default 64).
+    constexpr double kRowBytes = 512.0 * (1 << 20);
+    std::size_t batch = kDefaultBatch;
+    if (context_.info().type == "gpu") {
+        batch = std::clamp<std::size_t>(kShotsPerUnit * std::size_t(std::max(0, context_.info().compute_units)),
+                                        kDefaultBatch, kMostPreferred);
+        const double rows = kRowBytes / (12.0 * std::max<double>(1.0, double(mesh_.elements.size())));
+        batch = std::max(kDefaultBatch, std::min(batch, static_cast<std::size_t>(rows)));
+    }
+    return batch;  // (a batch past what the device's memory holds runs as several launches)
+}
+
 std::size_t OpenCLEngine::max_batch() const {
     return std::min(batch_limit_, memory_batch());
 }

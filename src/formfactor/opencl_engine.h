@@ -122,6 +122,10 @@ public:
     const std::string& build_options() const { return options_; }
     // The most shots one launch runs: from the memory budget, lowered where the device ran out.
     std::size_t max_batch() const;
+    // A GPU's: eight shots a compute unit (132 on an H200: 1,024, the cap), as long as their rows
+    // fit 512 MiB of the host's memory; a CPU device's kDefaultBatch (PoCL gains nothing past it:
+    // bench/results/throughput_batches.md).
+    std::size_t preferred_batch() const override;
 
     // The per-shot buffers one launch may hold: on a CPU (host memory) 16 MiB, since a shot of a
     // few thousand elements already gives its cores hundreds of work-groups and more shots only

@@ -43,6 +43,7 @@ public:
     // The id buffer of shot i of the last batch where the inner engine shot it; nullptr for a
     // row that came from the memo.
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override;
+    std::size_t preferred_batch() const override { return inner_->preferred_batch(); }
 
     const RowCacheStats& stats() const { return stats_; }
     // Bytes a kept row takes: its entries, and the bookkeeping around them.

@@ -136,4 +136,11 @@ void ShardedEngine::shoot_batch(const std::vector<ShotRequest>& shots, std::vect
     if (fatal) std::rethrow_exception(fatal);
 }
 
+std::size_t ShardedEngine::preferred_batch() const {
+    std::size_t batch = 0;
+    for (const Slot& slot : slots_)
+        if (slot.live) batch += slot.member.engine->preferred_batch();
+    return std::max<std::size_t>(kDefaultBatch, batch);
+}
+
 }  // namespace hemirad::formfactor

@@ -52,6 +52,8 @@ public:
     void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
 
+    // The live members' together.
+    std::size_t preferred_batch() const override;
     std::size_t members() const { return slots_.size(); }
     std::size_t live() const;
     // A member takes 1 / (kShareOfRest × live members) of the shots left (at least one): the

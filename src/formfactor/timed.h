@@ -14,6 +14,7 @@ class TimedEngine final : public Engine {
 public:
     explicit TimedEngine(Engine& inner) : inner_(inner) {}
     std::string name() const override { return inner_.name(); }
+    std::size_t preferred_batch() const override { return inner_.preferred_batch(); }
     using Engine::shoot;
     void shoot(const ShotRequest& request, ShotResult& out) override {
         const auto t0 = Clock::now();

@@ -44,6 +44,7 @@ public:
     void shoot(const ShotRequest& request, ShotResult& out) override;
     void shoot_batch(const std::vector<ShotRequest>& shots, std::vector<ShotResult>& out) override;
     const std::vector<std::int32_t>* last_ids(std::size_t i = 0) const override { return engine_->last_ids(i); }
+    std::size_t preferred_batch() const override { return engine_->preferred_batch(); }
     const VerifySummary& summary() const { return summary_; }
 
 private:

@@ -381,7 +381,9 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     constexpr double kHiddenBlocked = 0.5;
     std::vector<char> hidden(total, 0);
     const int passes = std::max(1, settings.passes);
-    const std::size_t batch = static_cast<std::size_t>(std::max(1, settings.batch));
+    // The light does not depend on the batching (rows are kept in order from the first): as many
+    // points as the engine likes in flight.
+    const std::size_t batch = std::max(static_cast<std::size_t>(std::max(1, settings.batch)), engine.preferred_batch());
     std::vector<formfactor::ShotRequest> requests;
     std::vector<formfactor::ShotResult> results;
     // The first pass's rows, kept for the later passes: the same point, frame and drawn mesh give
