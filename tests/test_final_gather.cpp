@@ -32,7 +32,7 @@ struct Gathered {
 // drawn mesh.
 template <class Make>
 Gathered gather(const scene::Scene& s, const mesh::Mesh& m, const std::vector<glm::dvec3>& radiosity, Make make,
-                int passes = 1, std::size_t kept_entries = solve::kMaxKeptEntries) {
+                int passes = 1, std::size_t kept_entries = solve::kMaxKeptEntries, bool engine_batch = false) {
     Gathered g;
     g.welded = output::weld(s.nodes.size(), m, radiosity);
     const auto all = [](std::size_t) { return true; };
@@ -42,6 +42,7 @@ Gathered gather(const scene::Scene& s, const mesh::Mesh& m, const std::vector<gl
     solve::GatherSettings settings;
     settings.passes = passes;
     settings.kept_entries = kept_entries;
+    settings.engine_batch = engine_batch;
     const std::vector<glm::dvec3> irradiance(m.elements.size(), glm::dvec3(0.0));
     REQUIRE(solve::final_gather(m, g.welded, all, radiosity, irradiance, {}, drawn, *engine, settings, g.light));
     return g;
@@ -637,13 +638,71 @@ TEST_CASE("final gather: the light is the same whatever batch the engine prefers
     std::size_t small_calls = 0, large_calls = 0;
     const Gathered small = gather(
         c.scene, c.mesh, c.radiosity,
-        [&](const mesh::Mesh& d) { return std::make_unique<Preferring>(d, 1, small_calls); }, 3, 20000);
+        [&](const mesh::Mesh& d) { return std::make_unique<Preferring>(d, 1, small_calls); }, 3, 20000, true);
     const Gathered large = gather(
         c.scene, c.mesh, c.radiosity,
-        [&](const mesh::Mesh& d) { return std::make_unique<Preferring>(d, 300, large_calls); }, 3, 20000);
+        [&](const mesh::Mesh& d) { return std::make_unique<Preferring>(d, 300, large_calls); }, 3, 20000, true);
     CHECK(small_calls == solve::GatherSettings{}.batch);  // the settings' batch is the least
     CHECK(large_calls == 300);
     REQUIRE(small.light.irradiance.size() == large.light.irradiance.size());
     CHECK(small.light.irradiance == large.light.irradiance);
     CHECK(small.light.radiosity == large.light.radiosity);
+}
+
+TEST_CASE("final gather: a vertex outside a closed double-sided curved surface gathers none of its inside",
+          "[gather]") {
+    // A closed cylinder of 24 facets (sides smooth-shaded: their vertex normals are the mean of
+    // two facets') of a double-sided material, alone in space. Its inside (the reversed copies)
+    // holds radiosity 10, its outside 0: a point on the outside sees only empty space, and the
+    // slivers of its own outside its smoothed normal tilts up, so it gathers (nearly) nothing.
+    // Moved toward its triangles' centroids, a side vertex's point lay inside the curve and looked
+    // out through the inside's light (10, the bug a closed emitting cylinder showed: walls 60%
+    // too bright after four passes).
+    scene::Scene s;
+    const std::uint32_t grey = add_material(s, glm::dvec3(0.5), glm::dvec3(0.0), /*double_sided=*/true);
+    s.nodes.push_back({"cylinder", 0});
+    constexpr int kSegments = 24;
+    const auto rim = [](int i, double y) {
+        const double a = 2.0 * M_PI * i / kSegments;
+        return glm::dvec3(std::cos(a), y, std::sin(a));
+    };
+    const auto triangle = [&](glm::dvec3 a, glm::dvec3 b, glm::dvec3 c) {
+        s.triangles.push_back({{a, b, c}, {glm::dvec3(0.5), glm::dvec3(0.5), glm::dvec3(0.5)}, grey, 0, 0});
+    };
+    for (int i = 0; i < kSegments; ++i) {  // outward-facing: counter-clockwise seen from outside
+        triangle(rim(i, -1), rim(i + 1, 1), rim(i + 1, -1));
+        triangle(rim(i, -1), rim(i, 1), rim(i + 1, 1));
+        triangle({0, 1, 0}, rim(i + 1, 1), rim(i, 1));
+        triangle({0, -1, 0}, rim(i, -1), rim(i + 1, -1));
+    }
+    finish(s);
+    mesh::Settings ms;
+    ms.patch_size = 0.6;
+    ms.element_size = 0.3;
+    const mesh::Mesh m = mesh::build(s, ms);
+    std::vector<glm::dvec3> radiosity(m.elements.size(), glm::dvec3(0.0));
+    std::size_t inside = 0;
+    for (std::size_t k = 0; k < m.elements.size(); ++k)
+        if (m.elements[k].back) radiosity[k] = glm::dvec3(10.0), ++inside;
+    REQUIRE(inside * 2 == m.elements.size());
+    const Gathered g = gather(s, m, radiosity, [](const mesh::Mesh& d) {
+        return std::make_unique<formfactor::ReferenceEngine>(d, formfactor::Settings{64, 1});
+    });
+    // The outside's vertices: those whose normal points away from the axis (or the caps' up and
+    // down) at the side's and caps' outer positions.
+    const output::WeldedNode& node = g.welded.nodes[0];
+    double most = 0.0;
+    int outside = 0;
+    for (std::size_t v = 0; v < node.positions.size(); ++v) {
+        const glm::dvec3 p = node.positions[v], n = node.normals[v];
+        const glm::dvec3 out = std::abs(p.y) > 1.0 - 1e-9 && std::hypot(p.x, p.z) < 1.0 - 1e-9
+                                   ? glm::dvec3(0.0, p.y, 0.0)
+                                   : glm::dvec3(p.x, 0.0, p.z);
+        if (glm::dot(n, out) <= 0.0) continue;  // the inside's
+        ++outside;
+        most = std::max(most, g.light.irradiance[0][v].x);
+    }
+    CAPTURE(outside, most);
+    CHECK(outside > 50);
+    CHECK(most < 0.5);  // (10 with the points inside the curve)
 }

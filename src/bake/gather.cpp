@@ -70,6 +70,7 @@ Lit refine(const LightContext& c, Lit lit, EngineStack& engines) {
         rs.contrast = o.contrast;
         rs.max_levels = o.refine_levels;
         rs.batch = std::max(o.batch, 64);
+        rs.engine_batch = true;
         rs.max_elements = refinement_room(c.meshed.shape, c.meshed.solver, c.plan.memory_limit.bytes);
         rs.cancelled = [] { return cancel::requested(); };
         const mesh::Texturing texturing(c.scene);
@@ -171,6 +172,7 @@ void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded
     std::unique_ptr<formfactor::Engine> gather_engine = engines.gather(drawn, o.gather);
     solve::GatherSettings gs;
     gs.batch = std::max(o.batch, 64);
+    gs.engine_batch = true;
     gs.passes = o.gather_passes;
     // The later passes re-use the first's rows, within the progressive solve's row-cache budget
     // (its cache is gone by now).

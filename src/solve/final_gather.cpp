@@ -106,10 +106,34 @@ std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
             for (const auto& [edge, count_of] : uses)
                 if (count_of == 1) rim[edge >> 32] = rim[edge & 0xffffffffu] = 1;
         }
+        // On a convex curve the centroids lie behind the surface: a point moved toward them would
+        // look out from under its own triangles (of a double-sided surface, at their other side's
+        // light: a closed emitting cylinder's outer vertices gathered its inside, twice the lamp).
+        // It is raised along the normal onto the plane of every triangle around it that it lies
+        // behind (by more than rounding; never on a flat or concave surface).
+        std::vector<double> raise(node.positions.size(), 0.0);
+        std::vector<glm::dvec3> moved(node.positions.size());
+        for (std::size_t v = 0; v < node.positions.size(); ++v) {
+            moved[v] = node.positions[v];
+            if (count[v] > 0) moved[v] += (rim[v] ? kGatherRimInset : kGatherInset) * (around[v] / double(count[v]) - node.positions[v]);
+        }
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+            const std::uint32_t* v = &node.indices[3 * t];
+            const glm::dvec3 a = node.positions[v[0]], b = node.positions[v[1]], c = node.positions[v[2]];
+            const glm::dvec3 cross = glm::cross(b - a, c - a);
+            const double length = glm::length(cross);
+            if (!(length > 0.0)) continue;
+            const glm::dvec3 n = cross / length;
+            const double size = std::max({glm::length(b - a), glm::length(c - b), glm::length(a - c)});
+            for (int k = 0; k < 3; ++k) {
+                const double behind = -glm::dot(n, moved[v[k]] - node.positions[v[k]]);
+                const double facing = glm::dot(n, node.normals[v[k]]);
+                if (behind > 1e-9 * size && facing > 0.1) raise[v[k]] = std::max(raise[v[k]], behind / facing);
+            }
+        }
         for (std::size_t v = 0; v < node.positions.size(); ++v) {
             mesh::GatherPoint p;
-            p.position = node.positions[v];
-            if (count[v] > 0) p.position += (rim[v] ? kGatherRimInset : kGatherInset) * (around[v] / double(count[v]) - node.positions[v]);
+            p.position = moved[v] + raise[v] * node.normals[v];
             p.normal = node.normals[v];
             points.push_back(p);
         }
@@ -201,7 +225,7 @@ bool face_outline(const mesh::Mesh& mesh, std::uint32_t first, std::uint32_t cou
         i = j;
     }
     if (once.size() != 3 && once.size() != 4) return false;
-    // Counter-clockwise about the face's normal, from the least corner.
+    // Counter-clockwise about the face's normal: by their angle about the corners' centre.
     const glm::dvec3 normal = mesh.elements[first].normal;
     glm::dvec3 centre(0.0);
     for (const glm::dvec3& c : once) centre += c / double(once.size());
@@ -383,7 +407,8 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     const int passes = std::max(1, settings.passes);
     // The light does not depend on the batching (rows are kept in order from the first): as many
     // points as the engine likes in flight.
-    const std::size_t batch = std::max(static_cast<std::size_t>(std::max(1, settings.batch)), engine.preferred_batch());
+    const std::size_t batch = std::max(static_cast<std::size_t>(std::max(1, settings.batch)),
+                                       settings.engine_batch ? engine.preferred_batch() : 1);
     std::vector<formfactor::ShotRequest> requests;
     std::vector<formfactor::ShotResult> results;
     // The first pass's rows, kept for the later passes: the same point, frame and drawn mesh give

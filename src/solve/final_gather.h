@@ -96,6 +96,7 @@ inline constexpr std::size_t kMaxKeptEntries = std::size_t{32} << 20;
 struct GatherSettings {
     std::size_t kept_entries = kMaxKeptEntries;  // of the first pass's rows, kept for the later passes
     int batch = 64;   // shots per engine call
+    bool engine_batch = false;  // ... or the engine's preferred batch where larger (Engine::preferred_batch)
     int passes = 1;   // gathers; each after the first draws the last one's light (see final_gather)
     // Vertices whose light is already known (a gather of the same surfaces cut coarser, see
     // refine_gather): per node and vertex of the welded mesh, known[n][v] != 0 marks one, whose

@@ -79,6 +79,7 @@ MatrixSettings matrix_settings(double threshold, int batch) {
     MatrixSettings s;
     s.tolerance = std::min(1e-4, threshold * 1e-2);
     s.batch = std::max(batch, 64);
+    s.engine_batch = true;
     return s;
 }
 
@@ -130,7 +131,8 @@ void Matrix::solve(const std::function<void(long, long)>& progress) {
 
 bool Matrix::shoot_rows(const std::function<void(long, long)>& progress) {
     // Rows do not depend on the batching: as many as the engine likes in flight.
-    const std::size_t batch = std::max(static_cast<std::size_t>(std::max(1, settings_.batch)), engine_.preferred_batch());
+    const std::size_t batch = std::max(static_cast<std::size_t>(std::max(1, settings_.batch)),
+                                       settings_.engine_batch ? engine_.preferred_batch() : 1);
     const long total = static_cast<long>(active_.size());
     std::vector<std::uint32_t> pending;  // all active patches, or those a loaded state lacks
     for (std::uint32_t p : active_)

@@ -25,6 +25,7 @@ struct MatrixSettings {
     int max_iterations = 1000;  // Gauss–Seidel sweeps at most
     // Rows shot per engine call: one launch per kernel stage on the OpenCL engine.
     int batch = 64;
+    bool engine_batch = false;  // rows per engine call: batch, or the engine's preferred batch where larger
     // Every ρ and E has r = g = b: solve one channel (a third of K's memory and time) and copy
     // it to the other two. The constructor throws std::invalid_argument if the scene is not grey.
     bool grey = false;

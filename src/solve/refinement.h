@@ -32,6 +32,7 @@ struct RefineSettings {
     double min_size = 0.0;  // elements whose longest edge is at most this are not split
     int max_levels = 2;     // splits of one original element at most
     int batch = 64;         // re-gather shots per engine call
+    bool engine_batch = false;  // ... or the engine's preferred batch where larger (Engine::preferred_batch)
     // The re-gather shoots again the emitters (whose direct light casts the sharp shadows), then
     // the patches that shot the most light until all of them cover this share of the light shot;
     // max_shooters at most. What the others shot reaches each parent's children evenly: it is
