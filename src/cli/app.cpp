@@ -170,8 +170,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->transform(integer_in(1, 256))
         ->capture_default_str();
     bake.add_option("--threads", o.threads,
-                    "host threads for the stages the host runs (meshing, contact lines, the gather's rows, "
-                    "interpolation, output); 0: every core. The bytes baked are the same for any count")
+                    "host threads for the stages the host runs in parallel (contact lines, the gather's drawing "
+                    "and rows, its interpolation, welding, the render); 0: every core. The bytes baked are the "
+                    "same for any count")
         ->transform(integer_in(0, 4096))
         ->capture_default_str();
     bake.add_option("--solver", o.solver,
