@@ -642,7 +642,7 @@ TEST_CASE("final gather: the light is the same whatever batch the engine prefers
     const Gathered large = gather(
         c.scene, c.mesh, c.radiosity,
         [&](const mesh::Mesh& d) { return std::make_unique<Preferring>(d, 300, large_calls); }, 3, 20000, true);
-    CHECK(small_calls == solve::GatherSettings{}.batch);  // the settings' batch is the least
+    CHECK(small_calls == std::size_t(solve::GatherSettings{}.batch));  // the settings' batch is the least
     CHECK(large_calls == 300);
     REQUIRE(small.light.irradiance.size() == large.light.irradiance.size());
     CHECK(small.light.irradiance == large.light.irradiance);

@@ -11,7 +11,6 @@
 #include "bench/image.h"
 #include "formfactor/analytic.h"
 #include "formfactor/reference.h"
-#include "image/image.h"
 #include "mesh/mesh.h"
 #include "output/welded_mesh.h"
 #include "scene/scene.h"
@@ -180,17 +179,10 @@ TEST_CASE("sparse gather: the Cornell box with a third of its vertices shot, aga
         o.quiet = true;
         o.no_checkpoint = true;
         bake::run(o);
-        const image::FloatImage exr = image::read_exr(dir / name / "render.exr");
-        std::vector<float> rgb(std::size_t(exr.width) * exr.height * 3);
-        const std::size_t n = exr.channels.size();
-        const int r = exr.channel("R"), g = exr.channel("G"), b = exr.channel("B");
-        for (std::size_t p = 0; p < std::size_t(exr.width) * exr.height; ++p) {
-            rgb[3 * p + 0] = exr.values[p * n + std::size_t(r)];
-            rgb[3 * p + 1] = exr.values[p * n + std::size_t(g)];
-            rgb[3 * p + 2] = exr.values[p * n + std::size_t(b)];
-        }
+        int width = 0, height = 0;
+        const std::vector<float> rgb = bench::read_rgb(dir / name / "render.exr", width, height);
         std::ifstream in(dir / name / "report.json");
-        return std::pair(bench::compare_pixels(rgb, exr.width, exr.height, reference).rms, nlohmann::json::parse(in));
+        return std::pair(bench::compare_pixels(rgb, width, height, reference).rms, nlohmann::json::parse(in));
     };
     const auto [none, none_report] = bake_rms("none", -1, 0);
     const auto [sparse, report] = bake_rms("sparse", 4000, -1);

@@ -28,23 +28,6 @@ double luminance(double r, double g, double b) { return 0.2126 * r + 0.7152 * g 
 
 glm::dvec3 vec3(const ordered_json& j) { return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()}; }
 
-// Linear RGB of an EXR file (render.exr), as floats.
-std::vector<float> read_rgb(const fs::path& file, int& width, int& height) {
-    const image::FloatImage all = image::read_exr(file);
-    const int r = all.channel("R"), g = all.channel("G"), b = all.channel("B");
-    if (r < 0 || g < 0 || b < 0) throw InputError(fmt::format("{}: no R, G and B channels", file.string()));
-    width = all.width;
-    height = all.height;
-    const std::size_t n = all.channels.size();
-    std::vector<float> rgb(std::size_t(width) * height * 3);
-    for (std::size_t p = 0; p < std::size_t(width) * height; ++p) {
-        rgb[3 * p + 0] = all.values[p * n + std::size_t(r)];
-        rgb[3 * p + 1] = all.values[p * n + std::size_t(g)];
-        rgb[3 * p + 2] = all.values[p * n + std::size_t(b)];
-    }
-    return rgb;
-}
-
 // An image of the reference's size, or an InternalError (the bench renders at the reference's width).
 void check_same_size(const std::vector<float>& rgb, int width, int height, const ImageReference& ref) {
     if (width != ref.width || height != ref.height || rgb.size() != std::size_t(width) * height * 3)
@@ -64,6 +47,22 @@ struct Run {
 };
 
 }  // namespace
+
+std::vector<float> read_rgb(const fs::path& file, int& width, int& height) {
+    const image::FloatImage all = image::read_exr(file);
+    const int r = all.channel("R"), g = all.channel("G"), b = all.channel("B");
+    if (r < 0 || g < 0 || b < 0) throw InputError(fmt::format("{}: no R, G and B channels", file.string()));
+    width = all.width;
+    height = all.height;
+    const std::size_t n = all.channels.size();
+    std::vector<float> rgb(std::size_t(width) * height * 3);
+    for (std::size_t p = 0; p < std::size_t(width) * height; ++p) {
+        rgb[3 * p + 0] = all.values[p * n + std::size_t(r)];
+        rgb[3 * p + 1] = all.values[p * n + std::size_t(g)];
+        rgb[3 * p + 2] = all.values[p * n + std::size_t(b)];
+    }
+    return rgb;
+}
 
 ImageReference load_image_reference(const std::string& dir) {
     ImageReference r;

@@ -5,6 +5,7 @@
 // bench/make_references.sh into bench/reference/<scene>/ and committed).
 #pragma once
 
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <ostream>
 #include <string>
@@ -26,6 +27,10 @@ struct ImageReference {
 // Reads `dir`/reference.exr and `dir`/reference.json. Throws InputError naming the file when one
 // is missing or not a reference.
 ImageReference load_image_reference(const std::string& dir);
+
+// The linear RGB of an EXR file (a bake's render.exr), as floats, row 0 at the top; its size in
+// `width` and `height`. Throws InputError naming the file without R, G and B channels.
+std::vector<float> read_rgb(const std::filesystem::path& file, int& width, int& height);
 
 // Per-pixel error of a linear RGB image (same size, row 0 at the top) against the reference, over
 // the reference's interior pixels (all samples on one face that does not emit): relative error of

@@ -3,6 +3,7 @@
 // engine, and decorators (near field, verification).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -155,6 +156,12 @@ public:
     // engine's from its device, kDefaultBatch otherwise.
     static constexpr std::size_t kDefaultBatch = 64;
     virtual std::size_t preferred_batch() const { return kDefaultBatch; }
+    // Shots a call for a caller that asks for `batch` (at least one) and, where `engine_batch`,
+    // also takes the engine's preferred batch when that is larger.
+    std::size_t batch_for(int batch, bool engine_batch) const {
+        const std::size_t asked = static_cast<std::size_t>(batch > 1 ? batch : 1);
+        return engine_batch ? std::max(asked, preferred_batch()) : asked;
+    }
     // The id buffer of shot i of the last shoot_batch (a shoot() is a batch of one): element
     // index, −1 empty, −2 blocker, cells in DeltaFormFactors order; for a directional shot the
     // owner of each cell of its grid (parallel.h: a record, −1 none), row-major. nullptr where the

@@ -43,13 +43,9 @@ std::vector<double> delta_table(int n, Weights weights) {
     std::vector<double> table(3u * static_cast<std::size_t>(n) * n);
     const double cell = 2.0 / n;  // cell size on the unit-distance face plane
     const glm::dvec3 up{0.0, 0.0, 1.0};
-    const auto rows = [n](int face) { return face == 0 ? n : n / 2; };
-    const auto offset = [n](int face) {
-        return face == 0 ? 0 : static_cast<std::size_t>(n) * n + static_cast<std::size_t>(face - 1) * n * (n / 2);
-    };
     std::vector<std::pair<int, int>> all_rows;  // (face, j)
     for (int face = 0; face < kFaces; ++face)
-        for (int j = 0; j < rows(face); ++j) all_rows.push_back({face, j});
+        for (int j = 0; j < DeltaFormFactors::face_rows(n, face); ++j) all_rows.push_back({face, j});
     parallel::for_each(all_rows.size(), 8, [&](std::size_t r) {
         const auto [face, j] = all_rows[r];
         const double t0 = face == 0 ? -1.0 : 0.0;  // side faces start at the base plane
@@ -58,7 +54,7 @@ std::vector<double> delta_table(int n, Weights weights) {
             const double t_lo = t0 + j * cell, t_hi = t0 + (j + 1) * cell;
             const glm::dvec3 corners[4] = {from_face(face, {s_lo, t_lo, 1.0}), from_face(face, {s_hi, t_lo, 1.0}),
                                            from_face(face, {s_hi, t_hi, 1.0}), from_face(face, {s_lo, t_hi, 1.0})};
-            table[offset(face) + static_cast<std::size_t>(j) * n + i] =
+            table[DeltaFormFactors::face_offset(n, face) + static_cast<std::size_t>(j) * n + i] =
                 weights == Weights::form_factor
                     ? point_to_polygon(up, corners, 4)
                     : (solid_angle(corners[0], corners[1], corners[2]) + solid_angle(corners[0], corners[2], corners[3])) /

@@ -37,9 +37,14 @@ public:
     explicit DeltaFormFactors(int n, Weights weights = Weights::form_factor);  // n even, >= 2
     int n() const { return n_; }
     // Cell (i, j) of a face: i along u (0..n−1), j along v (0..n−1 on top, 0..n/2−1 on sides).
-    int rows(int face) const { return face == 0 ? n_ : n_ / 2; }
+    int rows(int face) const { return face_rows(n_, face); }
     double at(int face, int i, int j) const { return (*table_)[offset(face) + static_cast<std::size_t>(j) * n_ + i]; }
-    std::size_t offset(int face) const { return face == 0 ? 0 : static_cast<std::size_t>(n_) * n_ + static_cast<std::size_t>(face - 1) * n_ * (n_ / 2); }
+    std::size_t offset(int face) const { return face_offset(n_, face); }
+    // The same at resolution n.
+    static int face_rows(int n, int face) { return face == 0 ? n : n / 2; }
+    static std::size_t face_offset(int n, int face) {
+        return face == 0 ? 0 : static_cast<std::size_t>(n) * n + static_cast<std::size_t>(face - 1) * n * (n / 2);
+    }
     std::size_t cells() const { return 3u * static_cast<std::size_t>(n_) * n_; }
     const std::vector<double>& table() const { return *table_; }
     double sum() const;

@@ -295,9 +295,13 @@ mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {
         const std::uint32_t index = static_cast<std::uint32_t>(out.patches.size());
         for (const DrawnCell& cell : cells[p]) {
             mesh::Element e = mesh.elements[cell.first];  // node, material, sides as its elements'
-            if (cell.count > 1) {
-                const bool cell_patch = !q.cluster();
-                e.poly = cell.poly;
+            if (cell.count > 1 && !q.cluster()) {  // a cell patch: the patch's own
+                e.poly = q.poly;
+                e.normal = q.normal;
+                e.centroid = q.centroid;
+                e.area = q.area;
+                e.emission = q.emission;
+            } else if (cell.count > 1) {  // a cluster's face: its elements' area-weighted means
                 glm::dvec3 emission(0.0), centroid(0.0);
                 double area = 0.0;
                 for (std::uint32_t k = cell.first; k < cell.first + cell.count; ++k) {
@@ -306,10 +310,10 @@ mesh::Mesh gather_mesh(const mesh::Mesh& mesh) {
                     centroid += f.area * f.centroid;
                     area += f.area;
                 }
-                e.area = cell_patch ? q.area : area;
-                e.normal = cell_patch ? q.normal : e.normal;
-                e.centroid = cell_patch ? q.centroid : centroid / area;
-                e.emission = cell_patch ? q.emission : emission / area;
+                e.poly = cell.poly;
+                e.centroid = centroid / area;
+                e.area = area;
+                e.emission = emission / area;
             }
             e.patch = index;
             out.elements.push_back(e);
@@ -407,8 +411,7 @@ bool final_gather(const mesh::Mesh& mesh, const output::WeldedMesh& welded,
     const int passes = std::max(1, settings.passes);
     // The light does not depend on the batching (rows are kept in order from the first): as many
     // points as the engine likes in flight.
-    const std::size_t batch = std::max(static_cast<std::size_t>(std::max(1, settings.batch)),
-                                       settings.engine_batch ? engine.preferred_batch() : 1);
+    const std::size_t batch = engine.batch_for(settings.batch, settings.engine_batch);
     std::vector<formfactor::ShotRequest> requests;
     std::vector<formfactor::ShotResult> results;
     // The first pass's rows, kept for the later passes: the same point, frame and drawn mesh give

@@ -131,8 +131,7 @@ void Matrix::solve(const std::function<void(long, long)>& progress) {
 
 bool Matrix::shoot_rows(const std::function<void(long, long)>& progress) {
     // Rows do not depend on the batching: as many as the engine likes in flight.
-    const std::size_t batch = std::max(static_cast<std::size_t>(std::max(1, settings_.batch)),
-                                       settings_.engine_batch ? engine_.preferred_batch() : 1);
+    const std::size_t batch = engine_.batch_for(settings_.batch, settings_.engine_batch);
     const long total = static_cast<long>(active_.size());
     std::vector<std::uint32_t> pending;  // all active patches, or those a loaded state lacks
     for (std::uint32_t p : active_)

@@ -168,9 +168,7 @@ RefineResult refine(mesh::Mesh mesh, std::vector<glm::dvec3> irradiance, const s
         std::vector<formfactor::ShotRequest> requests;
         std::vector<formfactor::ShotResult> results;
         long shots = 0;
-        const std::size_t batch =
-            std::max(static_cast<std::size_t>(std::max(1, settings.batch)),
-                     settings.engine_batch ? engine->preferred_batch() : 1);
+        const std::size_t batch = engine->batch_for(settings.batch, settings.engine_batch);
         for (std::size_t first = 0; !sun_only && first < shooters.size(); first += batch) {
             if (settings.cancelled && settings.cancelled()) break;
             requests.clear();
