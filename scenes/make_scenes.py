@@ -16,6 +16,8 @@ writes, next to this script:
                        chains, in the closed room
     lit_room.gltf      the closed room lit by a point and a spot light (KHR_lights_punctual),
                        with a repeated floor texture, an alpha-masked card and an emissive sign
+    leaf_canopy.gltf   300 double-sided leaf cards in a crown, 160 glowing ones in a dense crown by
+                       a wall and 48 emitting lantern cards, none sharing an edge, in the closed room
     atrium.gltf        a 6 m x 4 m x 6 m atrium lit only by the sun (a KHR_lights_punctual
                        directional light) through a 2 m x 2 m opening in its roof, with a block
                        in the sunlit patch; bake it with --sky for the sky through the opening
@@ -110,6 +112,11 @@ def faces_direction(d):
     return ("direction", tuple(unit(d)))
 
 
+def faces_half(d):
+    """Front faces into the half-space along direction d (a leaf facing up, tilted up to 90 degrees)."""
+    return ("half", tuple(unit(d)))
+
+
 def closed_outward():
     """The node's triangles form a closed surface facing out (checked as a whole: every edge
     matched by its reverse, and a positive enclosed volume), for shapes like a torus."""
@@ -126,6 +133,8 @@ def check_rule(rule, n, centroid):
         return dot(n, sub(centroid, p)) > 0.0
     if kind == "direction":
         return dot(n, p) > 0.999
+    if kind == "half":
+        return dot(n, p) > 0.0
     raise ValueError(kind)
 
 
@@ -1011,6 +1020,123 @@ SKY_FLOOR_HALF, SKY_LAMP_HALF, SKY_LAMP_HEIGHT, SKY_LAMP_GAP = 2.0, 0.25, 1.0, 0
 SKY_LAMP_DIM, SKY_LAMP_BRIGHT = 1.0, 10.0
 
 
+# The leaf canopy: small double-sided cards, none sharing an edge, scattered in a crown and on a
+# lantern ring, in the closed room under its ceiling panel.
+CANOPY_LEAVES, CANOPY_LEAF_SIDE, CANOPY_LEAF_TILT = 300, 0.08, 35.0
+CANOPY_CENTRE, CANOPY_RADII = (-0.7, 1.3, -0.7), (0.75, 0.45, 0.75)
+LANTERNS, LANTERN_SIDE, LANTERN_TILT = 48, 0.06, 20.0
+LANTERN_CENTRE, LANTERN_RADIUS = (0.9, 0.9, 0.6), 0.35
+GLOW_LEAVES, GLOW_LEAF_SIDE, GLOW_LEAF_TILT = 160, 0.06, 35.0
+GLOW_CENTRE, GLOW_RADII = (1.2, 1.6, -1.9), (0.4, 0.3, 0.35)
+
+
+def scattered_cards(rng, count, side, tilt, up, inside, placed, gap):
+    """`count` square cards of edge `side` with random centres (inside(rng) draws one), at least
+    `gap` from every centre in `placed` (so that no two touch), each facing `up` (+1 or -1 in y)
+    tilted up to `tilt` degrees at a random azimuth and spun at random about its normal."""
+    cards = []
+    while len(cards) < count:
+        c = inside(rng)
+        if any(norm(sub(c, q)) < gap for q in placed):
+            continue
+        placed.append(c)
+        theta, phi, spin = math.radians(tilt) * math.sqrt(rng.random()), 2 * math.pi * rng.random(), 2 * math.pi * rng.random()
+        n = (math.sin(theta) * math.cos(phi), up * math.cos(theta), math.sin(theta) * math.sin(phi))
+        a = unit(cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 0.0, 1.0)))
+        b = cross(n, a)
+        u = tuple(math.cos(spin) * a[k] + math.sin(spin) * b[k] for k in range(3))
+        v = cross(n, u)
+        h = side / 2.0
+        cards.append([tuple(c[k] + su * h * u[k] + sv * h * v[k] for k in range(3))
+                      for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    return cards
+
+
+def make_leaf_canopy(path):
+    """300 double-sided green leaf cards in a crown, 160 double-sided glowing leaf cards in a dense
+    crown by the north-east walls and 48 double-sided emitting lantern cards on a ring, no two
+    sharing an edge, in the closed room lit by its ceiling panel."""
+    import random
+
+    rng = random.Random(1)
+    inside = (0.0, ROOM_Y / 2.0, 0.0)
+    b = GltfBuilder(
+        {
+            "title": "Leaf canopy",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres",
+            "layout": "the closed room (4 x 2.5 x 5 m, x in [-2, 2], y in [0, 2.5], z in [-2.5, 2.5]), walls "
+                      "reflectance 0.7, floor (0.5, 0.45, 0.4), a 0.6 m ceiling panel (emission x 10) facing down",
+            "leaves": "node 'leaves': 300 double-sided 8 cm square cards, reflectance (0.25, 0.55, 0.2), centred "
+                      "in an ellipsoid at (-0.7, 1.3, -0.7) with radii (0.75, 0.45, 0.75), facing up tilted up to "
+                      "35 degrees; centres at least 12 cm apart, so none touch",
+            "lanterns": "node 'lanterns': 48 double-sided 6 cm cards emitting (1, 0.6, 0.3) x 3, reflectance 0.5, "
+                        "on a 0.35 m ring around (0.9, 0.9, 0.6), heights 0.7 to 1.1 m, facing down tilted up to 20 "
+                        "degrees",
+            "glow": "node 'glow': 160 double-sided 6 cm cards emitting (1, 0.5, 0.2), reflectance (0.3, 0.5, 0.2), "
+                    "centred in an ellipsoid at (1.2, 1.6, -1.9) with radii (0.4, 0.3, 0.35), 0.25 m from the north "
+                    "wall, facing up tilted up to 35 degrees; centres at least 8.5 cm apart (a dense crown that "
+                    "glows, as exported trees at night do)",
+            "purpose": "many small faces of one material that share no edge (a tree's leaves, strings of lights), "
+                       "which hemirad clusters across their gaps; a path-traced reference "
+                       "(bench/reference/leaf_canopy) measures what that costs",
+        }
+    )
+    b.material("wall_grey", (0.7, 0.7, 0.7))
+    b.material("floor", (0.5, 0.45, 0.4))
+    b.material("light", (0.8, 0.8, 0.8), emission=(1.0, 1.0, 1.0), strength=10.0)
+    b.material("leaf", (0.25, 0.55, 0.2), double_sided=True)
+    b.material("lantern", (0.5, 0.5, 0.5), emission=(1.0, 0.6, 0.3), strength=3.0, double_sided=True)
+    b.material("glow", (0.3, 0.5, 0.2), emission=(1.0, 0.5, 0.2), double_sided=True)
+    rules = {}
+    hx, hz = ROOM_X / 2.0, ROOM_Z / 2.0
+    shell = box_faces(-hx, hx, 0.0, ROOM_Y, -hz, hz)
+    for name in ("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west"):
+        rules[name] = faces_towards(inside)
+        b.mesh_node(name, [orient_quad(shell[name], rules[name])], "floor" if name == "floor" else "wall_grey")
+    ly, lh = ROOM_Y - 0.01, 0.3
+    rules["light"] = faces_direction((0.0, -1.0, 0.0))
+    b.mesh_node("light", [orient_quad([(-lh, ly, -lh), (lh, ly, -lh), (lh, ly, lh), (-lh, ly, lh)], rules["light"])],
+                "light")
+
+    def in_ellipsoid(centre, radii):
+        def draw(r):
+            while True:
+                p = [2.0 * r.random() - 1.0 for _ in range(3)]
+                if dot(p, p) <= 1.0:
+                    return tuple(centre[k] + radii[k] * p[k] for k in range(3))
+        return draw
+
+    def on_ring(r):
+        a = 2 * math.pi * r.random()
+        return (LANTERN_CENTRE[0] + LANTERN_RADIUS * math.cos(a), 0.7 + 0.4 * r.random(),
+                LANTERN_CENTRE[2] + LANTERN_RADIUS * math.sin(a))
+
+    placed = []
+    rules["leaves"] = faces_half((0.0, 1.0, 0.0))
+    leaves = scattered_cards(rng, CANOPY_LEAVES, CANOPY_LEAF_SIDE, CANOPY_LEAF_TILT, 1.0,
+                             in_ellipsoid(CANOPY_CENTRE, CANOPY_RADII), placed, 0.12)
+    b.mesh_node("leaves", [orient_quad(q, rules["leaves"]) for q in leaves], "leaf")
+    rules["lanterns"] = faces_half((0.0, -1.0, 0.0))
+    lanterns = scattered_cards(rng, LANTERNS, LANTERN_SIDE, LANTERN_TILT, -1.0, on_ring, placed, 0.09)
+    b.mesh_node("lanterns", [orient_quad(q, rules["lanterns"]) for q in lanterns], "lantern")
+
+    rules["glow"] = faces_half((0.0, 1.0, 0.0))
+    glow = scattered_cards(rng, GLOW_LEAVES, GLOW_LEAF_SIDE, GLOW_LEAF_TILT, 1.0, in_ellipsoid(GLOW_CENTRE, GLOW_RADII),
+                           placed, 0.085)
+    b.mesh_node("glow", [orient_quad(q, rules["glow"]) for q in glow], "glow")
+    assert_inside_room([v for q in leaves + lanterns + glow for v in q], 0.2)
+
+    cam_pos = (0.0, 1.5, hz - 0.2)
+    target = (0.0, 1.0, -0.5)
+    b.camera_node("camera", "room", 1.0, 4.0 / 3.0, 0.01, cam_pos, rotation=look_at_quat(cam_pos, target))
+    b.write(path)
+    d = unit(sub(target, cam_pos))
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, d, cross(unit(cross(d, (0, 1, 0))), d)),
+                   closed_groups=[("floor", "ceiling", "wall_north", "wall_south", "wall_east", "wall_west")],
+                   double_sided=("leaf", "lantern", "glow"))
+
+
 def make_lamp_facing_sky(path):
     """A lamp whose brighter side faces the open sky, above a floor: two one-sided squares back to
     back, 1 mm apart, the upper facing up (exitance 10), the lower facing the floor (exitance 1),
@@ -1270,6 +1396,7 @@ def main():
         ("curved_objects.gltf", make_curved_objects),
         ("lit_room.gltf", make_lit_room),
         ("atrium.gltf", make_atrium),
+        ("leaf_canopy.gltf", make_leaf_canopy),
     ):
         path = os.path.join(HERE, name)
         make(path)  # writes the file, reads it back and checks it (raises AssertionError on failure)

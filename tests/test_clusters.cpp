@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "formfactor/analytic.h"
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
@@ -269,4 +270,157 @@ TEST_CASE("no cluster shoots from across another face: a ball resting on the flo
         bad += !ok;
     }
     CHECK(bad == 0);
+}
+
+namespace {
+
+// A square card of side `side` centred at `c`, facing unit `n` (counter-clockwise seen from it),
+// in an existing node.
+void add_card(scene::Scene& s, dvec3 c, dvec3 n, double side, std::uint32_t material, std::uint32_t node) {
+    const dvec3 u = glm::normalize(glm::cross(n, std::abs(n.x) < 0.9 ? dvec3(1, 0, 0) : dvec3(0, 0, 1)));
+    const dvec3 v = glm::cross(n, u), h = 0.5 * side * u, k = 0.5 * side * v;
+    scene::add_quad_to(s, c - h - k, c + h - k, c + h + k, c - h + k, material, node, node);
+}
+
+std::uint32_t add_node(scene::Scene& s, const std::string& name) {
+    const auto node = static_cast<std::uint32_t>(s.nodes.size());
+    s.nodes.push_back({name, static_cast<int>(node)});
+    return node;
+}
+
+// Per patch, its elements' (material, node) and count.
+std::size_t patches_of_node(const mesh::Mesh& m, std::uint32_t node) {
+    std::size_t n = 0;
+    for (const mesh::Patch& p : m.patches) n += p.node == node;
+    return n;
+}
+
+}  // namespace
+
+TEST_CASE("faces apart join one cluster: one material and node, next to it, within the cone, seeing its point",
+          "[clusters]") {
+    scene::Scene s;
+    const std::uint32_t a = scene::add_material(s, dvec3(0.5), dvec3(0.0));
+    const std::uint32_t b = scene::add_material(s, dvec3(0.3), dvec3(0.0));
+    const std::uint32_t wall = scene::add_material(s, dvec3(0.6), dvec3(0.0));
+    const std::uint32_t leaf = scene::add_material(s, dvec3(0.4), dvec3(0.0), true);
+    const dvec3 up(0, 0, 1);
+    // Four cards 0.2 apart (sharing no edge; within twice their radii, 0.28, of each other), a
+    // card of another material beside them, one turned 40° away, one 0.6 off (in the radius, not
+    // next to any), one 3 m off: the four are one patch, the others one each.
+    const std::uint32_t cards = add_node(s, "cards");
+    for (const dvec3 c : {dvec3(0, 0, 0), dvec3(0.2, 0, 0), dvec3(0, 0.2, 0), dvec3(0.2, 0.2, 0)}) add_card(s, c, up, 0.1, a, cards);
+    add_card(s, {0.1, -0.15, 0}, up, 0.1, b, cards);
+    const double t = glm::radians(40.0);
+    add_card(s, {0.1, 0.35, 0}, {0, std::sin(t), std::cos(t)}, 0.1, a, cards);
+    add_card(s, {-0.6, 0, 0}, up, 0.1, a, cards);
+    add_card(s, {3, 0, 0}, up, 0.1, a, cards);
+    // Two cards 0.26 apart on either side of a wall of several patches (x = 5): their joint point
+    // would be in the wall, so they stay apart. Two double-sided ones with a small card of their
+    // own material between them (x = 8): such siblings (a crown's leaves) do not block, so they
+    // join; two one-sided ones with one between them (x = 11) do not (a closed solid's skin).
+    const std::uint32_t walled = add_node(s, "walled");
+    add_card(s, {4.87, 0, 0}, up, 0.1, a, walled);
+    add_card(s, {5.13, 0, 0}, up, 0.1, a, walled);
+    scene::add_quad(s, {5, -1, -1}, {5, 1, -1}, {5, 1, 1}, {5, -1, 1}, wall, "wall");
+    const std::uint32_t siblings = add_node(s, "siblings");
+    add_card(s, {7.87, 0, 0}, up, 0.1, leaf, siblings);
+    add_card(s, {8.13, 0, 0}, up, 0.1, leaf, siblings);
+    add_card(s, {8, 0, 0.05}, {1, 0, 0}, 0.1, leaf, siblings);
+    const std::uint32_t skin = add_node(s, "skin");
+    add_card(s, {10.87, 0, 0}, up, 0.1, a, skin);
+    add_card(s, {11.13, 0, 0}, up, 0.1, a, skin);
+    add_card(s, {11, 0, 0.05}, {1, 0, 0}, 0.1, a, skin);
+    scene::finish(s);
+
+    mesh::Settings settings{1.0, 1.0};
+    settings.cluster_apart = true;
+    const mesh::Mesh m = mesh::build(s, settings);
+    settings.cluster_apart = false;
+    const mesh::Mesh connected = mesh::build(s, settings);
+    CHECK(patches_of_node(connected, cards) == 8);
+    CHECK(patches_of_node(m, cards) == 5);  // the four, b's card, the turned one, the two off
+    CHECK(patches_of_node(m, walled) == 2);
+    CHECK(patches_of_node(m, siblings) == 4);  // both sides: the two facing up joined; the one facing +x apart
+    CHECK(patches_of_node(m, skin) == 3);
+    CHECK(m.joined_clusters == 3);  // the four cards; the siblings' front and back
+    CHECK(connected.joined_clusters == 0);
+    for (const mesh::Patch& p : m.patches) {
+        if (p.element_count == 4) {  // the four cards: their centroid, their normal, their area
+            CHECK(p.node == cards);
+            CHECK(p.cluster());
+            CHECK(p.area == Approx(0.04));
+            CHECK(glm::length(p.centroid - dvec3(0.1, 0.1, 0)) < 2e-5);  // a margin in front
+            CHECK(p.centroid.z > 0.0);
+            CHECK(glm::dot(p.normal, up) == Approx(1.0));
+        }
+        for (std::uint32_t k = p.first_element; k < p.first_element + p.element_count; ++k)
+            CHECK(m.elements[k].material == m.elements[p.first_element].material);
+    }
+}
+
+TEST_CASE("emitting cards apart, joined, light a floor within a point source's error of their exact form factors",
+          "[clusters]") {
+    // Twelve 5 cm lamp cards scattered 1 m above a black floor, facing down, tilted up to 15°: they
+    // join into a few clusters, each shooting their light from one point. The floor's irradiance
+    // is compared with Σ E · F(element centroid → card), exact point-to-polygon form factors.
+    scene::Scene s;
+    const double E = 2.0;
+    const std::uint32_t lamp = scene::add_material(s, dvec3(0.0), dvec3(E));
+    const std::uint32_t black = scene::add_material(s, dvec3(0.0), dvec3(0.0));
+    scene::add_quad(s, {-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}, black, "floor");
+    const std::uint32_t cards = add_node(s, "cards");
+    std::uint64_t state = 12345;
+    const auto next = [&] {  // a fixed sequence in [0, 1)
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return double(state >> 11) / double(1ull << 53);
+    };
+    std::vector<mesh::Polygon> lamps;
+    for (int i = 0; i < 12; ++i) {  // on a 4 × 3 grid of 10 cm cells, none shading another
+        const dvec3 c(-0.15 + 0.1 * (i % 4) + 0.04 * next() - 0.02, -0.1 + 0.1 * (i / 4) + 0.04 * next() - 0.02, 1.0);
+        const double tilt = glm::radians(15.0) * next(), azimuth = 2 * M_PI * next();
+        const dvec3 n(std::sin(tilt) * std::cos(azimuth), std::sin(tilt) * std::sin(azimuth), -std::cos(tilt));
+        add_card(s, c, n, 0.05, lamp, cards);
+        const scene::Triangle& t0 = s.triangles[s.triangles.size() - 2];
+        const scene::Triangle& t1 = s.triangles.back();
+        mesh::Polygon q;
+        q.n = 4;
+        q.v = {t0.p[0], t0.p[1], t0.p[2], t1.p[2]};
+        lamps.push_back(q);
+    }
+    scene::finish(s);
+    // Each card its own shooter: only the hemicube's error. Joined: fewer shooters (one-sided
+    // cards between two block their joint point), each from the mean of its cards' points, a point
+    // source for the floor beyond the near field's reach (4 × the cluster's radius). Measured:
+    // 0.26% mean, 0.86% worst apart; 0.52% and 1.9% joined in 9 shooters (2.2% and 5.7% in 2
+    // before one-sided siblings blocked; 3.7% and 8.1% when the point was raised in front of every
+    // card's plane, 66% when it lay behind the middle card). Double-sided cards joined lose 18% of
+    // this floor's light: not understood yet, so joining is not the default.
+    for (const bool apart : {false, true}) {
+        mesh::Settings settings{0.5, 0.125};
+        settings.cluster_apart = apart;
+        const mesh::Mesh m = mesh::build(s, settings);
+        CAPTURE(apart, patches_of_node(m, cards));
+        const std::size_t shooters = patches_of_node(m, cards);
+        CHECK((apart ? shooters < 12 : shooters == 12));
+        formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{256, 7}));
+        solve::Progressive solver(m, engine, {1e-6, 100000});
+        while (solver.step()) {
+        }
+        REQUIRE(solver.converged());
+        const std::vector<dvec3> H = solver.irradiance(false);
+        double worst = 0.0, error = 0.0, total = 0.0;
+        for (std::size_t k = 0; k < m.elements.size(); ++k) {
+            const mesh::Element& e = m.elements[k];
+            if (e.node != 0) continue;  // the floor
+            double exact = 0.0;
+            for (const mesh::Polygon& q : lamps) exact += E * formfactor::point_to_polygon(e.centroid, e.normal, q);
+            worst = std::max(worst, std::abs(H[k].x - exact) / exact);
+            error += std::abs(H[k].x - exact) * e.area;
+            total += exact * e.area;
+        }
+        CAPTURE(worst, error / total);
+        CHECK(error / total < (apart ? 0.01 : 0.005));
+        CHECK(worst < (apart ? 0.03 : 0.015));
+    }
 }

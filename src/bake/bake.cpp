@@ -194,6 +194,7 @@ Setup set_up(const Plan& p, scene::Scene& scene) {
         o.element_size > 0.0 ? o.element_size : s.mesh_settings.patch_size / p.quality->elements_per_patch_edge;
     // The exact unoccluded engine integrates over each patch's polygon: clusters only for the hemicube.
     s.mesh_settings.cluster = s.effects.occlusion.on;
+    s.mesh_settings.cluster_apart = o.cluster_apart;
     if (s.mesh_settings.element_size > s.mesh_settings.patch_size)
         throw InputError(fmt::format("--element-size {} is larger than the patch size {}", s.mesh_settings.element_size,
                                      s.mesh_settings.patch_size));

@@ -61,6 +61,7 @@ ordered_json settings_json(const Record& r) {
         {"max_passes", max_passes_for(o, L.mesh.patches.size())},
         {"batch", o.batch},
         {"threads", parallel::threads()},
+        {"cluster_apart", S.mesh_settings.cluster && S.mesh_settings.cluster_apart},
         {"gather", o.gather},
         {"gather_passes", o.gather_passes},
         {"gather_refine", o.gather_refine},
@@ -183,6 +184,7 @@ ordered_json make_report(const Record& r) {
                         {"clusters", L.mesh.clusters},
                         {"split_clusters", L.mesh.split_clusters},
                         {"moved_clusters", L.mesh.moved_clusters},
+                        {"joined_clusters", L.mesh.joined_clusters},
                         {"texture_splits", L.mesh.texture_splits},
                         {"mask_holes", L.mesh.holes},
                         // Emitter patches an emissive texture's edge crosses, split into a

@@ -94,7 +94,8 @@ private:
     std::size_t at_ = 0;
 };
 
-constexpr std::uint32_t kLitFormat = 1;
+// 2: the mesh holds joined_clusters.
+constexpr std::uint32_t kLitFormat = 2;
 
 template <class IO, class M>
 void mesh_io(IO& io, M& mesh) {
@@ -108,6 +109,7 @@ void mesh_io(IO& io, M& mesh) {
     io.item(mesh.clusters);
     io.item(mesh.split_clusters);
     io.item(mesh.moved_clusters);
+    io.item(mesh.joined_clusters);
     io.item(mesh.texture_splits);
     io.item(mesh.holes);
 }

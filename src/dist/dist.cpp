@@ -92,7 +92,7 @@ std::string pack_mesh(const mesh::Mesh& m) {
     w.put_vector(m.directions);
     w.put_vector(m.gather_points);
     w.put_vector(m.elements);
-    for (const std::size_t n : {m.dropped_triangles, m.quads, m.clusters, m.split_clusters, m.moved_clusters,
+    for (const std::size_t n : {m.dropped_triangles, m.quads, m.clusters, m.split_clusters, m.moved_clusters, m.joined_clusters,
                                 m.texture_splits, m.holes, m.emission_splits, m.emission_unsplit})
         w.put<std::uint64_t>(n);
     return w.take();
@@ -106,7 +106,7 @@ mesh::Mesh unpack_mesh(const std::string& bytes) {
     m.directions = r.get_vector<mesh::DirectionalShooter>();
     m.gather_points = r.get_vector<mesh::GatherPoint>();
     m.elements = r.get_vector<mesh::Element>();
-    for (std::size_t* n : {&m.dropped_triangles, &m.quads, &m.clusters, &m.split_clusters, &m.moved_clusters,
+    for (std::size_t* n : {&m.dropped_triangles, &m.quads, &m.clusters, &m.split_clusters, &m.moved_clusters, &m.joined_clusters,
                            &m.texture_splits, &m.holes, &m.emission_splits, &m.emission_unsplit})
         *n = static_cast<std::size_t>(r.get<std::uint64_t>());
     if (!r.done()) throw InternalError("dist: a mesh message is longer than its mesh");

@@ -31,15 +31,23 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     const mesh::Patch& shooter = mesh_.patches[patch];
     // The shooter's polygons: its cell, or a cluster's elements.
     std::vector<const mesh::Polygon*> shape;
+    std::vector<glm::dvec3> facing;  // their normals
     if (shooter.cluster()) {
-        for (std::uint32_t k = shooter.first_element; k < shooter.first_element + shooter.element_count; ++k)
+        for (std::uint32_t k = shooter.first_element; k < shooter.first_element + shooter.element_count; ++k) {
             shape.push_back(&mesh_.elements[k].poly);
+            facing.push_back(mesh_.elements[k].normal);
+        }
     } else {
         shape.push_back(&shooter.poly);
+        facing.push_back(shooter.normal);
     }
-    const auto to_shooter = [&shape](const glm::dvec3& x, const glm::dvec3& normal) {
+    // Of a cluster of parts apart, only the polygons whose fronts face x send it light: parts
+    // spread around their point, and a receiver among them may lie behind some (the wall below a
+    // crown's upturned leaves, which their backs, another patch, light).
+    const auto to_shooter = [&](const glm::dvec3& x, const glm::dvec3& normal) {
         double f = 0.0;
-        for (const mesh::Polygon* poly : shape) f += point_to_polygon(x, normal, *poly);
+        for (std::size_t j = 0; j < shape.size(); ++j)
+            if (!shooter.apart || glm::dot(x - shape[j]->v[0], facing[j]) > 0.0) f += point_to_polygon(x, normal, *shape[j]);
         return f;
     };
     double radius = 0.0;
@@ -55,8 +63,24 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     for (std::size_t i = 0; i < out.size(); ++i) {
         if (out.F[i] == 0.0) continue;  // unseen: occluded, behind, or coplanar
         const mesh::Element& e = mesh_.elements[out.element[i]];
-        if (e.patch == patch) {  // a cluster's own element (a concave one sees itself): part of its
-            far += out.F[i];     // shape, so no point-to-shooter factor; the hemicube's value stands
+        if (e.patch == patch && !shooter.apart) {  // a cluster's own element (a concave one sees
+            far += out.F[i];  // itself): part of its shape, no point-to-shooter factor; the hemicube's value stands
+            continue;
+        }
+        if (e.patch == patch) {
+            // A cluster of parts apart shoots from among them, so its own elements near that point
+            // took its light (a crown came out mottled); each gets what the cluster's other faces
+            // that face it send it, unoccluded (its own face lies in its plane and sends nothing).
+            near_before += out.F[i];
+            double f = 0.0;
+            for (std::uint32_t k = shooter.first_element; k < shooter.first_element + shooter.element_count; ++k) {
+                const mesh::Element& g = mesh_.elements[k];
+                if (g.source != e.source && glm::dot(e.centroid - g.poly.v[0], g.normal) > 0.0)
+                    f += point_to_polygon(e.centroid, e.normal, g.poly);
+            }
+            out.F[i] = f * e.area / shooter.area;
+            near_after += out.F[i];
+            near.push_back(i);
             continue;
         }
         const glm::dvec3 d = e.centroid - shooter.centroid;
@@ -71,6 +95,15 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
         out.F[i] = visible * to_shooter(e.centroid, e.normal) * e.area / shooter.area;
         near_after += out.F[i];
         near.push_back(i);
+    }
+    if (shooter.apart && far + near_after > 0.0) {
+        // A cluster of parts apart shoots from among its parts (a crown's middle), where the near
+        // receivers fill most of the point's hemicube and the exact factors give them far less:
+        // the rest, laid on the few far receivers seen through the gaps, lit them many times
+        // over (a blob on the wall behind a tree). The total is kept by scaling every receiver.
+        const double scale = (far + near_before) / (far + near_after);
+        for (std::size_t i = 0; i < out.size(); ++i) out.F[i] *= scale;
+        return;
     }
     const double far_scale = far > 0.0 ? (far + near_before - near_after) / far : -1.0;
     if (far_scale >= 0.0) {

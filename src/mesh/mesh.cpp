@@ -10,11 +10,13 @@
 #include <cstring>
 #include <limits>
 #include <map>
+#include <memory>
 #include <optional>
 #include <unordered_map>
 #include <utility>
 
 #include "core/error.h"
+#include "core/parallel.h"
 #include "mesh/refine.h"
 #include "mesh/texturing.h"
 
@@ -406,7 +408,7 @@ std::vector<Piece> pieces_of(const std::vector<Part>& parts, const scene::Scene&
 // of its own (split_emitter).
 void append_patch(Mesh& mesh, const std::vector<Part>& parts, const std::vector<Piece>& pieces, bool whole,
                   const scene::Material& mat, bool back, const std::optional<dvec3>& from,
-                  const Polygon* cell = nullptr) {
+                  const Polygon* cell = nullptr, bool apart = false) {
     const std::size_t count = pieces.size();
     if (mesh.patches.size() >= std::numeric_limits<std::uint32_t>::max() ||
         mesh.elements.size() + count >= std::numeric_limits<std::uint32_t>::max())
@@ -464,6 +466,7 @@ void append_patch(Mesh& mesh, const std::vector<Part>& parts, const std::vector<
         }
         patch.centroid = from ? *from : centroid + lift * patch.normal;
         patch.area = area;
+        patch.apart = apart;
         ++mesh.clusters;
     }
     patch.emission = emitted / area;
@@ -507,7 +510,8 @@ struct Shooting {
 // (uneven_emission) is appended as one patch per element, each shooting its own light from its
 // own centroid, while `budget` lasts.
 void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const scene::Scene& scene,
-                  const Texturing& texturing, EmitterBudget& budget, const std::optional<dvec3>& from = std::nullopt) {
+                  const Texturing& texturing, EmitterBudget& budget,
+                  const std::optional<std::array<dvec3, 2>>& from = std::nullopt, bool apart = false) {
     const scene::Material& mat = scene.materials[patches.front().front().face->src[0]->material];
     const double sides = mat.double_sided ? 2.0 : 1.0;
     std::vector<Shooting> shooting;
@@ -532,7 +536,8 @@ void append_sides(Mesh& mesh, const std::vector<std::vector<Part>>& patches, con
     }
     const auto append = [&](const Shooting& s, bool back) {
         const Polygon* cell = s.cell ? &*s.cell : nullptr;
-        append_patch(mesh, patches[s.part], s.pieces, s.whole, mat, back, cell ? std::nullopt : from, cell);
+        const std::optional<dvec3> point = from && !cell ? std::optional<dvec3>((*from)[back ? 1 : 0]) : std::nullopt;
+        append_patch(mesh, patches[s.part], s.pieces, s.whole, mat, back, point, cell, apart && !cell);
     };
     const std::size_t front = mesh.patches.size();
     for (const Shooting& s : shooting) append(s, false);
@@ -555,6 +560,8 @@ struct Clusters {
     std::vector<std::int64_t> of;
     std::vector<std::vector<std::size_t>> faces;
     std::vector<std::int64_t> from;  // per cluster: the face from whose centroid it shoots, or −1
+    std::vector<char> apart;         // per cluster: whether it took clusters apart from it (join_clusters_apart)
+    std::vector<std::array<dvec3, 2>> points;  // per cluster that did: where its front and back shoot from
     // Per side, as Mesh::clusters: halvings of curved clusters and flat ones that shoot from a
     // face's centroid instead (split_blocked_clusters).
     std::size_t split = 0, moved = 0;
@@ -624,6 +631,8 @@ Clusters cluster_faces(const std::vector<Face>& faces, const std::vector<Grid>& 
         c.faces.push_back(std::move(members));
     }
     c.from.assign(c.faces.size(), -1);
+    c.apart.assign(c.faces.size(), 0);
+    c.points.resize(c.faces.size());
     return c;
 }
 
@@ -788,64 +797,104 @@ std::vector<std::size_t> halve(std::vector<std::size_t>& members, const std::vec
     return upper_half;
 }
 
+// The mean plane of a cluster's faces: area centroid, unit mean normal (front side).
+struct Aim {
+    dvec3 centroid{0.0}, normal{0.0};
+};
+Aim aim_of(const std::vector<const Shape*>& shapes) {
+    dvec3 weighted_normal{0.0}, weighted_centroid{0.0};
+    double area = 0.0;
+    for (const Shape* sh : shapes) {
+        weighted_normal += sh->area * sh->normal;
+        weighted_centroid += sh->area * sh->centroid;
+        area += sh->area;
+    }
+    return {weighted_centroid / area, glm::normalize(weighted_normal)};
+}
+
+// Where a cluster shoots from on one side (+1 front, −1 back, Patch): its area centroid raised
+// along its mean normal until it is in front of every face's plane (a back side's planes and mean
+// normal are the front's reversed).
+dvec3 shooting_point(const std::vector<const Shape*>& shapes, const Aim& aim, double side) {
+    double lift = 0.0;
+    for (const Shape* sh : shapes)
+        lift = std::max(lift, plane_lift(sh->centroid, side * sh->normal, aim.centroid, side * aim.normal));
+    return aim.centroid + side * lift * aim.normal;
+}
+
+// Whether a cluster's faces see its shooting point: the segments from faces' centroids to the
+// point, both ends moved a margin (far above the engines' clip distance) along the side's normal,
+// so that faces meeting the cluster's plane at an edge or in contact with it do not count.
+class Clearance {
+public:
+    explicit Clearance(const std::vector<Face>& faces) : faces_(faces) {
+        dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
+        for (const Face& face : faces)
+            for (int k = 0; k < face.poly.n; ++k) {
+                lo = glm::min(lo, face.poly.v[std::size_t(k)]);
+                hi = glm::max(hi, face.poly.v[std::size_t(k)]);
+            }
+        const double extent = std::max({std::abs(lo.x), std::abs(lo.y), std::abs(lo.z), std::abs(hi.x),
+                                        std::abs(hi.y), std::abs(hi.z), 1e-30});
+        margin_ = 1e-6 * extent;
+        bvh_ = std::make_unique<FaceBvh>(faces, 1e-9 * extent);
+    }
+    double margin() const { return margin_; }
+    // Whether the segment from `from` to `point`, both moved along `normal` by the margin, meets
+    // a face f for which other(f) holds.
+    template <class Other>
+    bool blocked(const dvec3& from, const dvec3& point, const dvec3& normal, Other other) const {
+        const dvec3 off = margin_ * normal, a = from + off, b = point + off;
+        return bvh_->any(a, b, [&](std::uint32_t f) { return other(f) && segment_meets(a, b, faces_[f].poly); });
+    }
+
+private:
+    const std::vector<Face>& faces_;
+    double margin_ = 0.0;
+    std::unique_ptr<FaceBvh> bvh_;
+};
+
+// The index in `shapes` of the one whose centroid is nearest `point` (the first of equals).
+std::size_t nearest_to(const std::vector<const Shape*>& shapes, const dvec3& point) {
+    std::size_t nearest = 0;
+    for (std::size_t i = 1; i < shapes.size(); ++i)
+        if (glm::length(shapes[i]->centroid - point) < glm::length(shapes[nearest]->centroid - point)) nearest = i;
+    return nearest;
+}
+
 // A cluster shoots from one point (Patch): its area centroid raised along its mean normal until
 // it is in front of every face's plane. Where that point lies across other geometry (the bottom
 // cap of a ball resting on a floor shoots from under the floor, a rock's cap through the terrain
 // it sinks into, a wall clustered across a cornice from inside the cornice), its shots would see
 // the outside of the scene, another room or the inside of a solid. A flat cluster then shoots from
 // the centroid of its face nearest the point; a curved one is halved, and each half checked again.
-// Checked for each side the material has: the segment from
-// the centroid of the cluster's face nearest the point to the point, both moved along the side's
-// normal by a margin (far above the engines' clip distance), must meet no face outside the cluster.
-void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& scene, Clusters& c) {
-    if (std::none_of(c.faces.begin(), c.faces.end(), [](const auto& m) { return m.size() > 1; })) return;
-    dvec3 lo{std::numeric_limits<double>::max()}, hi{-std::numeric_limits<double>::max()};
-    for (const Face& face : faces)
-        for (int k = 0; k < face.poly.n; ++k) {
-            lo = glm::min(lo, face.poly.v[std::size_t(k)]);
-            hi = glm::max(hi, face.poly.v[std::size_t(k)]);
-        }
-    const double extent = std::max({std::abs(lo.x), std::abs(lo.y), std::abs(lo.z), std::abs(hi.x), std::abs(hi.y),
-                                    std::abs(hi.z), 1e-30});
-    const double margin = 1e-6 * extent;
-    const FaceBvh bvh(faces, 1e-9 * extent);
-
+// Checked for each side the material has: the segment from the centroid of the cluster's face
+// nearest the point to the point must meet no face outside the cluster (Clearance).
+void split_blocked_clusters(const std::vector<Face>& faces, const std::vector<Shape>& shape,
+                            const scene::Scene& scene, const Clearance& clearance, Clusters& c) {
     // Settles cluster `id`: returns false when it was halved, so that its first half (which keeps
     // the id) is checked again. The second half gets a new id past the others, checked in its
     // turn, so c.of always tells a cluster's own faces from the rest.
     const auto settle = [&](std::size_t id) {
         std::vector<std::size_t>& members = c.faces[id];
         if (members.size() < 2) return true;
-        dvec3 weighted_normal{0.0}, weighted_centroid{0.0};
-        double area = 0.0;
-        std::vector<Shape> shapes;
+        std::vector<const Shape*> shapes;
         shapes.reserve(members.size());
-        for (const std::size_t f : members) {
-            shapes.push_back(shape_of(faces[f].poly));
-            weighted_normal += shapes.back().area * shapes.back().normal;
-            weighted_centroid += shapes.back().area * shapes.back().centroid;
-            area += shapes.back().area;
-        }
-        const dvec3 centroid = weighted_centroid / area, normal = glm::normalize(weighted_normal);
+        for (const std::size_t f : members) shapes.push_back(&shape[f]);
+        const Aim aim = aim_of(shapes);
         const bool double_sided = scene.materials[faces[members.front()].src[0]->material].double_sided;
         bool flat = true;  // every face in the mean plane
-        for (const Shape& sh : shapes)
-            flat = flat && glm::dot(sh.normal, normal) > kCoplanarDot && std::abs(glm::dot(sh.centroid - centroid, normal)) <= margin;
+        for (const Shape* sh : shapes)
+            flat = flat && glm::dot(sh->normal, aim.normal) > kCoplanarDot &&
+                   std::abs(glm::dot(sh->centroid - aim.centroid, aim.normal)) <= clearance.margin();
         bool blocked = false;
         std::size_t nearest = 0;  // of the point, on the side found blocked
         for (const double side : {1.0, -1.0}) {
             if (side < 0.0 && !double_sided) break;
-            double lift = 0.0;
-            for (const Shape& sh : shapes)  // a back side's planes and mean normal are the front's reversed
-                lift = std::max(lift, plane_lift(sh.centroid, side * sh.normal, centroid, side * normal));
-            const dvec3 point = centroid + side * lift * normal;
-            nearest = 0;
-            for (std::size_t i = 1; i < shapes.size(); ++i)
-                if (glm::length(shapes[i].centroid - point) < glm::length(shapes[nearest].centroid - point)) nearest = i;
-            // Both ends a margin in front, so that faces meeting the cluster's plane at an edge
-            // or in contact with it do not count.
-            const dvec3 off = side * margin * normal, a = shapes[nearest].centroid + off, b = point + off;
-            blocked = bvh.any(a, b, [&](std::uint32_t f) { return c.of[f] != std::int64_t(id) && segment_meets(a, b, faces[f].poly); });
+            const dvec3 point = shooting_point(shapes, aim, side);
+            nearest = nearest_to(shapes, point);
+            blocked = clearance.blocked(shapes[nearest]->centroid, point, side * aim.normal,
+                                        [&](std::uint32_t f) { return c.of[f] != std::int64_t(id); });
             if (blocked) break;
         }
         if (!blocked) return true;
@@ -859,15 +908,254 @@ void split_blocked_clusters(const std::vector<Face>& faces, const scene::Scene& 
         }
         // A curved one is cut in two across its longest extent, at the median face; each half
         // is checked again (and cut again if it is blocked), down to single faces if need be.
-        std::vector<std::size_t> second = halve(members, shapes);
+        std::vector<Shape> copies;
+        for (const Shape* sh : shapes) copies.push_back(*sh);
+        std::vector<std::size_t> second = halve(members, copies);
         for (const std::size_t f : second) c.of[f] = static_cast<std::int64_t>(c.faces.size());
         c.faces.push_back(std::move(second));  // invalidates members
         c.from.push_back(-1);
+        c.apart.push_back(0);
+        c.points.emplace_back();
         c.split += double_sided ? 2 : 1;
         return false;
     };
     for (std::size_t id = 0; id < c.faces.size();)
         if (settle(id)) ++id;
+}
+
+// At most this many parts join one cluster: each joining checks every part's sight of the point
+// again, so a crown of n parts costs n² checks.
+constexpr std::size_t kMaxParts = 32;
+
+// Clusters of faces apart (Settings::cluster_apart): each settled cluster, in order, takes in
+// whole the later clusters (parts) of its material and node that
+// - fit it as its own faces do: every face within kClusterCos of its first face's normal and
+//   within half a patch diagonal of that face's centroid;
+// - lie next to it: a face within twice the two faces' radii of one of its faces (a crown of
+//   leaves, a grille; not two lamps a metre apart);
+// - and, joined, still see its point: on each side, the segment from each part's face nearest
+//   the point to the point meets no face but the small ones of its own material and node
+//   (Clearance; the other leaves of a crown stand between any point and some leaves).
+// The joined cluster shoots, on each side, from the area-weighted mean of its parts' own points
+// (each raised in front of its own faces' planes only: raised in front of every part's plane, a
+// crown's point sat a tilted leaf's height nearer what it lit), moved in front of any of its
+// faces that the line along its normal crosses. A part that fails stays as it was, so joining
+// never cuts a cluster. Flat clusters that shoot from one of their faces (moved) join nothing.
+void join_clusters_apart(const std::vector<Face>& faces, const std::vector<Shape>& shape,
+                         const scene::Scene& scene, const Settings& settings, const Clearance& clearance,
+                         Clusters& c) {
+    const double radius = settings.patch_size * std::sqrt(0.5);
+    if (!std::isfinite(radius) || c.faces.empty()) return;
+    // Clusters by material, node and cell (side `radius`) of their first face's centroid: the
+    // clusters a first face may take lie in the 27 cells around its own.
+    struct CellKey {
+        std::uint32_t material, node;
+        std::int64_t x, y, z;
+        bool operator==(const CellKey& o) const {
+            return material == o.material && node == o.node && x == o.x && y == o.y && z == o.z;
+        }
+    };
+    struct CellHash {
+        std::size_t operator()(const CellKey& k) const {
+            std::uint64_t h = 1469598103934665603ull ^ (std::uint64_t(k.material) << 32 | k.node);
+            for (const std::int64_t v : {k.x, k.y, k.z}) h = (h ^ std::uint64_t(v)) * 1099511628211ull;
+            return static_cast<std::size_t>(h ^ (h >> 29));
+        }
+    };
+    const auto cell_of = [&](std::size_t f) {
+        const dvec3& p = shape[f].centroid;
+        const auto at = [&](double v) { return static_cast<std::int64_t>(std::floor(v / radius)); };
+        return CellKey{faces[f].src[0]->material, faces[f].src[0]->node, at(p.x), at(p.y), at(p.z)};
+    };
+    std::unordered_map<CellKey, std::vector<std::size_t>, CellHash> cells;
+    for (std::size_t id = 0; id < c.faces.size(); ++id)
+        if (!c.faces[id].empty() && c.from[id] < 0) cells[cell_of(c.faces[id].front())].push_back(id);
+
+    std::vector<double> reach_of(faces.size(), 0.0);  // per face: centroid to farthest corner
+    for (std::size_t f = 0; f < faces.size(); ++f)
+        for (int k = 0; k < faces[f].poly.n; ++k)
+            reach_of[f] = std::max(reach_of[f], glm::length(faces[f].poly.v[std::size_t(k)] - shape[f].centroid));
+    // A part's faces, area and shooting point on each side, as a cluster of its own.
+    struct Part {
+        std::vector<std::size_t> faces;
+        std::vector<const Shape*> shapes;
+        double area = 0.0;
+        std::array<dvec3, 2> point{};
+        // A sphere around its faces' centroids, and the largest of its faces' radii: two parts
+        // farther apart than these allow have no faces next to each other.
+        dvec3 centre{0.0};
+        double radius = 0.0, reach = 0.0;
+    };
+    const auto part_of = [&](std::size_t id) {
+        Part part;
+        part.faces = c.faces[id];
+        for (const std::size_t f : c.faces[id]) {
+            part.shapes.push_back(&shape[f]);
+            part.area += shape[f].area;
+        }
+        const Aim aim = aim_of(part.shapes);
+        part.point = {shooting_point(part.shapes, aim, 1.0), shooting_point(part.shapes, aim, -1.0)};
+        part.centre = aim.centroid;
+        for (std::size_t i = 0; i < part.faces.size(); ++i) {
+            part.radius = std::max(part.radius, glm::length(part.shapes[i]->centroid - part.centre));
+            part.reach = std::max(part.reach, reach_of[part.faces[i]]);
+        }
+        return part;
+    };
+    std::vector<std::int64_t> group(c.faces.size(), -1);  // per cluster: the cluster that took it
+    std::vector<std::size_t> near, checked, taken;
+    std::vector<Part> parts, candidates;
+    std::vector<char> settled;
+    for (std::size_t id = 0; id < c.faces.size(); ++id) {
+        if (group[id] >= 0 || c.faces[id].empty() || c.from[id] >= 0) continue;
+        group[id] = static_cast<std::int64_t>(id);
+        const Shape& first = shape[c.faces[id].front()];
+        const std::uint32_t material = faces[c.faces[id].front()].src[0]->material;
+        const std::uint32_t node = faces[c.faces[id].front()].src[0]->node;
+        const bool double_sided = scene.materials[material].double_sided;
+        const auto fits = [&](std::size_t f) {
+            if (glm::dot(shape[f].normal, first.normal) < kClusterCos) return false;
+            for (int k = 0; k < faces[f].poly.n; ++k)
+                if (glm::length(faces[f].poly.v[std::size_t(k)] - first.centroid) > radius) return false;
+            return true;
+        };
+        // Faces that may stand between a part and the point: other materials' and nodes', faces
+        // of several patches (walls), and one-sided ones (a closed solid's skin: a cloud's lumps,
+        // whose insides the point would see); small double-sided faces of its own material and
+        // node (the other leaves of a crown) may not, or no crown would ever join.
+        const auto blocks = [&](std::uint32_t f) {
+            return c.of[f] < 0 || !double_sided || faces[f].src[0]->material != material ||
+                   faces[f].src[0]->node != node;
+        };
+        near.clear();
+        const CellKey at = cell_of(c.faces[id].front());
+        for (std::int64_t dx = -1; dx <= 1; ++dx)
+            for (std::int64_t dy = -1; dy <= 1; ++dy)
+                for (std::int64_t dz = -1; dz <= 1; ++dz) {
+                    const auto it = cells.find({at.material, at.node, at.x + dx, at.y + dy, at.z + dz});
+                    if (it == cells.end()) continue;
+                    for (const std::size_t h : it->second)
+                        if (h > id && group[h] < 0) near.push_back(h);
+                }
+        std::sort(near.begin(), near.end());
+        near.erase(std::remove_if(near.begin(), near.end(),
+                                  [&](std::size_t h) { return !std::all_of(c.faces[h].begin(), c.faces[h].end(), fits); }),
+                   near.end());
+        parts.assign(1, part_of(id));
+        taken.assign(1, id);
+        dvec3 weighted_normal{0.0};
+        for (const Shape* sh : parts.front().shapes) weighted_normal += sh->area * sh->normal;
+        std::array<dvec3, 2> point_sum{parts.front().area * parts.front().point[0],
+                                       parts.front().area * parts.front().point[1]};
+        double area = parts.front().area;
+        std::array<dvec3, 2> point = parts.front().point;
+        // The parts' mean point may lie behind a face of one of them (the middle leaf of a row),
+        // whose back would then fill the hemicube: moved along `n` in front of every face that
+        // the line through it along `n` crosses, and a margin more.
+        const auto clear_of_parts = [&](const dvec3& p, const dvec3& n) {
+            const double reach = 4.0 * radius;
+            double lift = 0.0;
+            for (const Part& part : parts)
+                for (const std::size_t f : part.faces)
+                    if (segment_meets(p - reach * n, p + reach * n, faces[f].poly))
+                        lift = std::max(lift, plane_lift(shape[f].centroid,
+                                                         glm::dot(shape[f].normal, n) >= 0.0 ? shape[f].normal : -shape[f].normal,
+                                                         p, n));
+            return p + (lift + clearance.margin()) * n;
+        };
+        // A part joins only next to the cluster: one of its faces within twice the two faces'
+        // radii (centroid to farthest corner) of one of the cluster's, so a crown of leaves or a
+        // grille joins while lamps a metre apart on a wall do not (their light would leave from
+        // the wall between them). Whether `part` is next to parts [from, end).
+        const auto next_to = [&](const Part& part, std::size_t from) {
+            for (std::size_t p = from; p < parts.size(); ++p) {
+                if (glm::length(part.centre - parts[p].centre) - part.radius - parts[p].radius >
+                    2.0 * (part.reach + parts[p].reach))
+                    continue;
+                for (std::size_t i = 0; i < part.faces.size(); ++i)
+                    for (std::size_t j = 0; j < parts[p].faces.size(); ++j)
+                        if (glm::length(part.shapes[i]->centroid - parts[p].shapes[j]->centroid) <=
+                            2.0 * (reach_of[part.faces[i]] + reach_of[parts[p].faces[j]]))
+                            return true;
+            }
+            return false;
+        };
+        // Tries the candidate part k, next to the cluster: whether it joined.
+        const auto join = [&](std::size_t k) {
+            parts.push_back(candidates[k]);
+            const Part& added = parts.back();
+            dvec3 normal = weighted_normal;
+            for (const Shape* sh : added.shapes) normal += sh->area * sh->normal;
+            const double joint_area = area + added.area;
+            std::array<dvec3, 2> joint{};
+            bool clear = true;
+            for (std::size_t side = 0; side < 2 && clear; ++side) {
+                const dvec3 n = (side == 0 ? 1.0 : -1.0) * glm::normalize(normal);
+                joint[side] = clear_of_parts((point_sum[side] + added.area * added.point[side]) / joint_area, n);
+                if (side == 1 && !double_sided) break;  // no back patch: its point is never used
+                for (std::size_t i = 0; i < parts.size() && clear; ++i) {
+                    const Shape& from = *parts[i].shapes[nearest_to(parts[i].shapes, joint[side])];
+                    clear = !clearance.blocked(from.centroid, joint[side], n, blocks);
+                }
+            }
+            if (!clear) {
+                parts.pop_back();
+                return false;
+            }
+            group[near[k]] = static_cast<std::int64_t>(id);
+            taken.push_back(near[k]);
+            weighted_normal = normal;
+            for (std::size_t side = 0; side < 2; ++side) point_sum[side] += added.area * added.point[side];
+            area = joint_area;
+            point = joint;
+            return true;
+        };
+        // In order, each candidate once it is next to the cluster; one not yet next to it is
+        // checked again, against the parts that joined since, while parts join. One that is next
+        // to it but would block its point (or be blocked) stays out.
+        candidates.clear();
+        for (const std::size_t h : near) candidates.push_back(part_of(h));
+        checked.assign(near.size(), 0);
+        settled.assign(near.size(), 0);
+        for (bool joined = true; joined && parts.size() < kMaxParts;) {
+            joined = false;
+            for (std::size_t k = 0; k < near.size() && parts.size() < kMaxParts; ++k) {
+                if (settled[k]) continue;
+                const bool next = next_to(candidates[k], checked[k]);
+                checked[k] = parts.size();
+                if (!next) continue;
+                settled[k] = 1;
+                joined = join(k) || joined;
+            }
+        }
+        if (taken.size() < 2) continue;
+        c.apart[id] = 1;
+        c.points[id] = point;
+        for (std::size_t i = 1; i < taken.size(); ++i) {
+            for (const std::size_t f : c.faces[taken[i]]) {
+                c.of[f] = static_cast<std::int64_t>(id);
+                c.faces[id].push_back(f);
+            }
+            c.faces[taken[i]].clear();
+        }
+    }
+    // The clusters left, renumbered in order.
+    std::vector<std::int64_t> index(c.faces.size(), -1);
+    Clusters kept;
+    kept.split = c.split;
+    kept.moved = c.moved;
+    for (std::size_t id = 0; id < c.faces.size(); ++id) {
+        if (c.faces[id].empty()) continue;
+        index[id] = static_cast<std::int64_t>(kept.faces.size());
+        kept.faces.push_back(std::move(c.faces[id]));
+        kept.from.push_back(c.from[id]);
+        kept.apart.push_back(c.apart[id]);
+        kept.points.push_back(c.points[id]);
+    }
+    for (std::size_t f = 0; f < c.of.size(); ++f)
+        if (c.of[f] >= 0) c.of[f] = index[std::size_t(c.of[f])];
+    kept.of = std::move(c.of);
+    c = std::move(kept);
 }
 
 // A directed edge a→b of a triangle, qualified by what may be paired with it.
@@ -1034,9 +1322,19 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         grids.push_back(grid_of(faces[f].poly, coarse[f] ? whole : settings));
     }
     Clusters clusters = cluster_faces(faces, grids, settings, coarse);
-    split_blocked_clusters(faces, scene, clusters);
+    if (settings.cluster) {
+        std::vector<Shape> shape(faces.size());
+        parallel::for_each(faces.size(), 4096, [&](std::size_t f) { shape[f] = shape_of(faces[f].poly); });
+        const Clearance clearance(faces);
+        split_blocked_clusters(faces, shape, scene, clearance, clusters);
+        if (settings.cluster_apart) join_clusters_apart(faces, shape, scene, settings, clearance, clusters);
+    }
     mesh.split_clusters = clusters.split;
     mesh.moved_clusters = clusters.moved;
+    for (std::size_t id = 0; id < clusters.faces.size(); ++id)
+        if (clusters.apart[id])
+            mesh.joined_clusters +=
+                scene.materials[faces[clusters.faces[id].front()].src[0]->material].double_sided ? 2 : 1;
     Counts counts;
     for (std::size_t f = 0; f < faces.size(); ++f) {
         const double sides = scene.materials.at(faces[f].src[0]->material).double_sided ? 2.0 : 1.0;
@@ -1066,9 +1364,15 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         for (const std::size_t g : members) cells.push_back(face_cells(grids[g]));
         std::vector<Part> parts;
         for (std::size_t i = 0; i < members.size(); ++i) parts.push_back({&faces[members[i]], &cells[i].front()});
-        const std::int64_t from = clusters.from[std::size_t(clusters.of[f])];
-        append_sides(mesh, {parts}, scene, texturing, budget,
-                     from >= 0 ? std::optional<dvec3>(shape_of(faces[std::size_t(from)].poly).centroid) : std::nullopt);
+        const auto id = std::size_t(clusters.of[f]);
+        std::optional<std::array<dvec3, 2>> from;
+        if (clusters.from[id] >= 0) {
+            const dvec3 centroid = shape_of(faces[std::size_t(clusters.from[id])].poly).centroid;
+            from = std::array<dvec3, 2>{centroid, centroid};
+        } else if (clusters.apart[id]) {
+            from = clusters.points[id];
+        }
+        append_sides(mesh, {parts}, scene, texturing, budget, from, clusters.apart[id] != 0);
     }
     return mesh;
 }

@@ -51,7 +51,9 @@ inline constexpr std::uint32_t kNoSource = 0xffffffffu;
 // normal from its area centroid, raised where needed to be in front of all of its elements'
 // planes. Where that point lies across another face, a flat cluster shoots from its face nearest
 // the point instead (a wall clustered across a cornice), a curved one is halved until its halves'
-// points are clear (a ball's bottom cap on a floor).
+// points are clear (a ball's bottom cap on a floor). A cluster may also hold clusters apart from
+// it, next to it (Settings::cluster_apart: a crown's leaves), and then shoots from the mean of its
+// parts' points (`apart`).
 struct Patch {
     Polygon poly;              // the cell; n = 0 for a cluster of faces (see elements)
     glm::dvec3 normal{0.0};    // unit: the cell's normal, or a cluster's area-weighted mean
@@ -64,6 +66,10 @@ struct Patch {
     // The same surface facing the other way (doubleSided), or kNoPatch. A cell's shot skips its
     // twin's elements as its own (all in its base plane); a cluster's skips neither.
     std::uint32_t twin = kNoPatch;
+    // A cluster that took in clusters apart from it (Settings::cluster_apart): it shoots from the
+    // mean of its parts' points, and its own elements get their siblings' light, not the point's
+    // (formfactor::NearFieldEngine).
+    bool apart = false;
     bool cluster() const { return poly.n == 0; }
 };
 
@@ -98,6 +104,12 @@ struct Settings {
     // so that the shooter count follows the scene's area, not its triangle count. Off: a patch
     // per small face (what meshes were before clusters).
     bool cluster = true;
+    // Clusters also take whole clusters nearby that share no edge with them (the same material
+    // and node, normals within kClusterCos, within half a patch diagonal) where every part still
+    // sees the joined cluster's shooting point: a tree's leaves, a grille, a string of lights
+    // shoot as one patch, not one each. Off (the default, `--cluster-apart` turns it on):
+    // connected faces only.
+    bool cluster_apart = false;
 };
 
 // Faces of a cluster have normals within this cosine (25°) of its first face's normal: close
@@ -118,6 +130,7 @@ struct Mesh {
     std::size_t clusters = 0;           // patches that are clusters of several faces (per side)
     std::size_t split_clusters = 0;     // halvings of curved clusters (per side): see Patch
     std::size_t moved_clusters = 0;     // flat clusters that shoot from a face's centroid: see Patch
+    std::size_t joined_clusters = 0;    // clusters that took in clusters apart from them (per side): Settings::cluster_apart
     std::size_t texture_splits = 0;     // elements split where an emissive texture or MASK coverage changes (once for both sides)
     std::size_t holes = 0;              // elements left out as MASK holes (once for both sides)
     // Patches whose elements' emission differs (an emissive texture's edge crosses them), each

@@ -42,6 +42,7 @@ Refined split_elements(const Mesh& mesh, const std::vector<bool>& split, const T
     out.mesh.clusters = mesh.clusters;
     out.mesh.split_clusters = mesh.split_clusters;
     out.mesh.moved_clusters = mesh.moved_clusters;
+    out.mesh.joined_clusters = mesh.joined_clusters;
     out.mesh.texture_splits = mesh.texture_splits;
     out.mesh.holes = mesh.holes;
     std::size_t count = mesh.elements.size();
