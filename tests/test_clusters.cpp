@@ -364,63 +364,66 @@ TEST_CASE("emitting cards apart, joined, light a floor within a point source's e
     // Twelve 5 cm lamp cards scattered 1 m above a black floor, facing down, tilted up to 15°: they
     // join into a few clusters, each shooting their light from one point. The floor's irradiance
     // is compared with Σ E · F(element centroid → card), exact point-to-polygon form factors.
-    scene::Scene s;
-    const double E = 2.0;
-    const std::uint32_t lamp = scene::add_material(s, dvec3(0.0), dvec3(E));
-    const std::uint32_t black = scene::add_material(s, dvec3(0.0), dvec3(0.0));
-    scene::add_quad(s, {-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}, black, "floor");
-    const std::uint32_t cards = add_node(s, "cards");
-    std::uint64_t state = 12345;
-    const auto next = [&] {  // a fixed sequence in [0, 1)
-        state = state * 6364136223846793005ull + 1442695040888963407ull;
-        return double(state >> 11) / double(1ull << 53);
-    };
-    std::vector<mesh::Polygon> lamps;
-    for (int i = 0; i < 12; ++i) {  // on a 4 × 3 grid of 10 cm cells, none shading another
-        const dvec3 c(-0.15 + 0.1 * (i % 4) + 0.04 * next() - 0.02, -0.1 + 0.1 * (i / 4) + 0.04 * next() - 0.02, 1.0);
-        const double tilt = glm::radians(15.0) * next(), azimuth = 2 * M_PI * next();
-        const dvec3 n(std::sin(tilt) * std::cos(azimuth), std::sin(tilt) * std::sin(azimuth), -std::cos(tilt));
-        add_card(s, c, n, 0.05, lamp, cards);
-        const scene::Triangle& t0 = s.triangles[s.triangles.size() - 2];
-        const scene::Triangle& t1 = s.triangles.back();
-        mesh::Polygon q;
-        q.n = 4;
-        q.v = {t0.p[0], t0.p[1], t0.p[2], t1.p[2]};
-        lamps.push_back(q);
-    }
-    scene::finish(s);
-    // Each card its own shooter: only the hemicube's error. Joined: fewer shooters (one-sided
-    // cards between two block their joint point), each from the mean of its cards' points, a point
-    // source for the floor beyond the near field's reach (4 × the cluster's radius). Measured:
-    // 0.26% mean, 0.86% worst apart; 0.52% and 1.9% joined in 9 shooters (2.2% and 5.7% in 2
-    // before one-sided siblings blocked; 3.7% and 8.1% when the point was raised in front of every
-    // card's plane, 66% when it lay behind the middle card). Double-sided cards joined lose 18% of
-    // this floor's light: not understood yet, so joining is not the default.
-    for (const bool apart : {false, true}) {
-        mesh::Settings settings{0.5, 0.125};
-        settings.cluster_apart = apart;
-        const mesh::Mesh m = mesh::build(s, settings);
-        CAPTURE(apart, patches_of_node(m, cards));
-        const std::size_t shooters = patches_of_node(m, cards);
-        CHECK((apart ? shooters < 12 : shooters == 12));
-        formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{256, 7}));
-        solve::Progressive solver(m, engine, {1e-6, 100000});
-        while (solver.step()) {
+    // Each card its own shooter: only the hemicube's error. Joined: each shooter from the mean of
+    // its cards' points, a point source for the floor beyond the near field's reach (4 × the
+    // cluster's radius). Measured, one-sided cards: 0.26% mean, 0.86% worst apart; 0.52% and 1.9%
+    // joined in 9 shooters (one-sided cards between two block their joint point; 3.7% and 8.1%
+    // when the point was raised in front of every card's plane, 66% when it lay behind the middle
+    // card). Double-sided: 0.32% and 1.2% apart; 2.3% and 5.8% joined in 2 shooters a side (17.7%
+    // while the near field let each card's other side, in its plane, take the card's light).
+    for (const bool double_sided : {false, true}) {
+        scene::Scene s;
+        const double E = 2.0;
+        const std::uint32_t lamp = scene::add_material(s, dvec3(0.0), dvec3(E), double_sided);
+        const std::uint32_t black = scene::add_material(s, dvec3(0.0), dvec3(0.0));
+        scene::add_quad(s, {-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}, black, "floor");
+        const std::uint32_t cards = add_node(s, "cards");
+        std::uint64_t state = 12345;
+        const auto next = [&] {  // a fixed sequence in [0, 1)
+            state = state * 6364136223846793005ull + 1442695040888963407ull;
+            return double(state >> 11) / double(1ull << 53);
+        };
+        std::vector<mesh::Polygon> lamps;
+        for (int i = 0; i < 12; ++i) {  // on a 4 × 3 grid of 10 cm cells, none shading another
+            const dvec3 c(-0.15 + 0.1 * (i % 4) + 0.04 * next() - 0.02, -0.1 + 0.1 * (i / 4) + 0.04 * next() - 0.02, 1.0);
+            const double tilt = glm::radians(15.0) * next(), azimuth = 2 * M_PI * next();
+            const dvec3 n(std::sin(tilt) * std::cos(azimuth), std::sin(tilt) * std::sin(azimuth), -std::cos(tilt));
+            add_card(s, c, n, 0.05, lamp, cards);
+            const scene::Triangle& t0 = s.triangles[s.triangles.size() - 2];
+            const scene::Triangle& t1 = s.triangles.back();
+            mesh::Polygon q;
+            q.n = 4;
+            q.v = {t0.p[0], t0.p[1], t0.p[2], t1.p[2]};
+            lamps.push_back(q);
         }
-        REQUIRE(solver.converged());
-        const std::vector<dvec3> H = solver.irradiance(false);
-        double worst = 0.0, error = 0.0, total = 0.0;
-        for (std::size_t k = 0; k < m.elements.size(); ++k) {
-            const mesh::Element& e = m.elements[k];
-            if (e.node != 0) continue;  // the floor
-            double exact = 0.0;
-            for (const mesh::Polygon& q : lamps) exact += E * formfactor::point_to_polygon(e.centroid, e.normal, q);
-            worst = std::max(worst, std::abs(H[k].x - exact) / exact);
-            error += std::abs(H[k].x - exact) * e.area;
-            total += exact * e.area;
+        scene::finish(s);
+        const std::size_t sides = double_sided ? 2 : 1;
+        for (const bool apart : {false, true}) {
+            mesh::Settings settings{0.5, 0.125};
+            settings.cluster_apart = apart;
+            const mesh::Mesh m = mesh::build(s, settings);
+            const std::size_t shooters = patches_of_node(m, cards);
+            CAPTURE(double_sided, apart, shooters);
+            CHECK((apart ? shooters <= (double_sided ? 4u : 9u) : shooters == 12 * sides));
+            formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{256, 7}));
+            solve::Progressive solver(m, engine, {1e-6, 100000});
+            while (solver.step()) {
+            }
+            REQUIRE(solver.converged());
+            const std::vector<dvec3> H = solver.irradiance(false);
+            double worst = 0.0, error = 0.0, total = 0.0;
+            for (std::size_t k = 0; k < m.elements.size(); ++k) {
+                const mesh::Element& e = m.elements[k];
+                if (e.node != 0) continue;  // the floor
+                double exact = 0.0;
+                for (const mesh::Polygon& q : lamps) exact += E * formfactor::point_to_polygon(e.centroid, e.normal, q);
+                worst = std::max(worst, std::abs(H[k].x - exact) / exact);
+                error += std::abs(H[k].x - exact) * e.area;
+                total += exact * e.area;
+            }
+            CAPTURE(worst, error / total);
+            CHECK(error / total < (!apart ? 0.005 : double_sided ? 0.03 : 0.01));
+            CHECK(worst < (!apart ? 0.015 : double_sided ? 0.07 : 0.03));
         }
-        CAPTURE(worst, error / total);
-        CHECK(error / total < (apart ? 0.01 : 0.005));
-        CHECK(worst < (apart ? 0.03 : 0.015));
     }
 }

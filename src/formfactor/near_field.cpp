@@ -44,10 +44,17 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     // Of a cluster of parts apart, only the polygons whose fronts face x send it light: parts
     // spread around their point, and a receiver among them may lie behind some (the wall below a
     // crown's upturned leaves, which their backs, another patch, light).
-    const auto to_shooter = [&](const glm::dvec3& x, const glm::dvec3& normal) {
+    // A receiver on the same face as one of them (a double-sided card's other side, lying in its
+    // plane) takes nothing from it: in the plane, rounding could let the polygon pass the test
+    // and count as filling the receiver's whole hemisphere.
+    const auto to_shooter = [&](const mesh::Element& e) {
         double f = 0.0;
-        for (std::size_t j = 0; j < shape.size(); ++j)
-            if (!shooter.apart || glm::dot(x - shape[j]->v[0], facing[j]) > 0.0) f += point_to_polygon(x, normal, *shape[j]);
+        for (std::size_t j = 0; j < shape.size(); ++j) {
+            if (shooter.apart && (mesh_.elements[shooter.first_element + j].source == e.source ||
+                                  !(glm::dot(e.centroid - shape[j]->v[0], facing[j]) > 0.0)))
+                continue;
+            f += point_to_polygon(e.centroid, e.normal, *shape[j]);
+        }
         return f;
     };
     double radius = 0.0;
@@ -92,7 +99,7 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
             continue;
         }
         near_before += out.F[i];
-        out.F[i] = visible * to_shooter(e.centroid, e.normal) * e.area / shooter.area;
+        out.F[i] = visible * to_shooter(e) * e.area / shooter.area;
         near_after += out.F[i];
         near.push_back(i);
     }
