@@ -79,13 +79,7 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
             // took its light (a crown came out mottled); each gets what the cluster's other faces
             // that face it send it, unoccluded (its own face lies in its plane and sends nothing).
             near_before += out.F[i];
-            double f = 0.0;
-            for (std::uint32_t k = shooter.first_element; k < shooter.first_element + shooter.element_count; ++k) {
-                const mesh::Element& g = mesh_.elements[k];
-                if (g.source != e.source && glm::dot(e.centroid - g.poly.v[0], g.normal) > 0.0)
-                    f += point_to_polygon(e.centroid, e.normal, g.poly);
-            }
-            out.F[i] = f * e.area / shooter.area;
+            out.F[i] = to_shooter(e) * e.area / shooter.area;
             near_after += out.F[i];
             near.push_back(i);
             continue;
