@@ -31,15 +31,11 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     const mesh::Patch& shooter = mesh_.patches[patch];
     // The shooter's polygons: its cell, or a cluster's elements.
     std::vector<const mesh::Polygon*> shape;
-    std::vector<glm::dvec3> facing;  // their normals
     if (shooter.cluster()) {
-        for (std::uint32_t k = shooter.first_element; k < shooter.first_element + shooter.element_count; ++k) {
+        for (std::uint32_t k = shooter.first_element; k < shooter.first_element + shooter.element_count; ++k)
             shape.push_back(&mesh_.elements[k].poly);
-            facing.push_back(mesh_.elements[k].normal);
-        }
     } else {
         shape.push_back(&shooter.poly);
-        facing.push_back(shooter.normal);
     }
     // Of a cluster of parts apart, only the polygons whose fronts face x send it light: parts
     // spread around their point, and a receiver among them may lie behind some (the wall below a
@@ -50,9 +46,8 @@ void NearFieldEngine::correct(std::uint32_t patch, ShotResult& out) {
     const auto to_shooter = [&](const mesh::Element& e) {
         double f = 0.0;
         for (std::size_t j = 0; j < shape.size(); ++j) {
-            if (shooter.apart && (mesh_.elements[shooter.first_element + j].source == e.source ||
-                                  !(glm::dot(e.centroid - shape[j]->v[0], facing[j]) > 0.0)))
-                continue;
+            const mesh::Element* g = shooter.apart ? &mesh_.elements[shooter.first_element + j] : nullptr;
+            if (g && (g->source == e.source || !(glm::dot(e.centroid - g->poly.v[0], g->normal) > 0.0))) continue;
             f += point_to_polygon(e.centroid, e.normal, *shape[j]);
         }
         return f;

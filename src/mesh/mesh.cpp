@@ -777,18 +777,18 @@ bool segment_meets(const dvec3& a, const dvec3& b, const Polygon& poly) {
 // Cuts a cluster's faces (with their shapes) in two across the longest side of the box of their
 // centroids, at the median: `members` keeps the lower half, the upper one is returned. Both keep
 // the faces' order, and ties go by that order, so the cut is the same on every run.
-std::vector<std::size_t> halve(std::vector<std::size_t>& members, const std::vector<Shape>& shapes) {
-    dvec3 lo = shapes.front().centroid, hi = lo;
-    for (const Shape& sh : shapes) {
-        lo = glm::min(lo, sh.centroid);
-        hi = glm::max(hi, sh.centroid);
+std::vector<std::size_t> halve(std::vector<std::size_t>& members, const std::vector<const Shape*>& shapes) {
+    dvec3 lo = shapes.front()->centroid, hi = lo;
+    for (const Shape* sh : shapes) {
+        lo = glm::min(lo, sh->centroid);
+        hi = glm::max(hi, sh->centroid);
     }
     const dvec3 extent = hi - lo;
     const int axis = extent.x >= extent.y && extent.x >= extent.z ? 0 : (extent.y >= extent.z ? 1 : 2);
     std::vector<std::size_t> rank(members.size());
     for (std::size_t i = 0; i < rank.size(); ++i) rank[i] = i;
     std::stable_sort(rank.begin(), rank.end(),
-                     [&](std::size_t a, std::size_t b) { return shapes[a].centroid[axis] < shapes[b].centroid[axis]; });
+                     [&](std::size_t a, std::size_t b) { return shapes[a]->centroid[axis] < shapes[b]->centroid[axis]; });
     std::vector<bool> upper(members.size(), false);
     for (std::size_t i = members.size() / 2; i < rank.size(); ++i) upper[rank[i]] = true;
     std::vector<std::size_t> lower_half, upper_half;
@@ -908,9 +908,7 @@ void split_blocked_clusters(const std::vector<Face>& faces, const std::vector<Sh
         }
         // A curved one is cut in two across its longest extent, at the median face; each half
         // is checked again (and cut again if it is blocked), down to single faces if need be.
-        std::vector<Shape> copies;
-        for (const Shape* sh : shapes) copies.push_back(*sh);
-        std::vector<std::size_t> second = halve(members, copies);
+        std::vector<std::size_t> second = halve(members, shapes);
         for (const std::size_t f : second) c.of[f] = static_cast<std::int64_t>(c.faces.size());
         c.faces.push_back(std::move(second));  // invalidates members
         c.from.push_back(-1);
@@ -1322,7 +1320,9 @@ Mesh build(const scene::Scene& scene, const Settings& settings, const std::funct
         grids.push_back(grid_of(faces[f].poly, coarse[f] ? whole : settings));
     }
     Clusters clusters = cluster_faces(faces, grids, settings, coarse);
-    if (settings.cluster) {
+    // The shooting points need checking only where a cluster has several faces, or may join others.
+    const bool several = std::any_of(clusters.faces.begin(), clusters.faces.end(), [](const auto& m) { return m.size() > 1; });
+    if (settings.cluster && (several || settings.cluster_apart)) {
         std::vector<Shape> shape(faces.size());
         parallel::for_each(faces.size(), 4096, [&](std::size_t f) { shape[f] = shape_of(faces[f].poly); });
         const Clearance clearance(faces);
