@@ -499,11 +499,15 @@ TEST_CASE("an existing output directory keeps the user's files", "[cli]") {
 
 TEST_CASE("previews are written every K passes", "[cli]") {
     TempDir dir;
+    const std::vector<std::string> args = {"--hemicube", "32", "--patch-size", "1.0", "--element-size", "0.5",
+                                           "--max-passes", "120", "--preview-every", "50", "--image-width", "32",
+                                           "--quiet"};
+    // One shooter a step: a preview at exactly every 50th pass.
     const fs::path out = dir / "out";
-    const json report = bake_ok(dir, kClosedRoom, out,
-                                {"--hemicube", "32", "--patch-size", "1.0", "--element-size", "0.5", "--max-passes",
-                                 "120", "--preview-every", "50", "--image-width", "32", "--quiet"});
+    const json report = bake_ok(dir, kClosedRoom, out, concat(args, {"--batch", "1"}));
     REQUIRE(report.at("passes").get<long>() == 120);  // closed_room does not converge in 120 passes
+    CHECK(report.at("steps").at("count") == 120);
+    CHECK(report.at("steps").at("largest") == 1);
     REQUIRE(fs::is_directory(out / "preview"));
     CHECK(listing(out / "preview") == std::set<std::string>{"pass_000050.png", "pass_000100.png"});
     CHECK(listing(out) ==
@@ -511,6 +515,29 @@ TEST_CASE("previews are written every K passes", "[cli]") {
     const ImageData preview = read_image(out / "preview" / "pass_000100.png");
     CHECK(preview.width == 32);
     CHECK(preview.height == 24);
+
+    // By default a step may take several shooters: a preview after the step that crosses each
+    // multiple of 50, named by that step's last pass, and the bake's numbers as without previews.
+    const fs::path shared = dir / "shared", plain = dir / "plain";
+    const json s = bake_ok(dir, kClosedRoom, shared, args);
+    REQUIRE(s.at("steps").at("largest").get<long>() > 1);
+    const std::set<std::string> names = listing(shared / "preview");
+    REQUIRE(names.size() == 2);
+    long k = 50;
+    for (const std::string& name : names) {
+        CAPTURE(name);
+        REQUIRE(name.size() == std::string("pass_000000.png").size());
+        const long pass = std::stol(name.substr(5, 6));
+        CHECK(pass >= k);
+        CHECK(pass < k + s.at("steps").at("largest").get<long>());
+        k += 50;
+    }
+    std::vector<std::string> without = args;
+    const auto flag = std::find(without.begin(), without.end(), "--preview-every");
+    REQUIRE(flag != without.end());
+    without.erase(flag, flag + 2);
+    bake_ok(dir, kClosedRoom, plain, concat(without, {"--solver", "progressive"}));  // auto: progressive with previews
+    CHECK(read_text(plain / "baked.bin") == read_text(shared / "baked.bin"));
 }
 
 TEST_CASE("devices and help and a missing subcommand", "[cli]") {
@@ -649,7 +676,9 @@ namespace {
 // ignored, and `max_passes` > 0 lets the bake end by itself.
 RunResult interrupted_bake(const TempDir& dir, const std::string& out, const std::string& signal = "INT",
                            const std::string& ignore = "", int max_passes = 0) {
-    const std::string preview = out + "/preview/pass_000002.png";
+    // The first preview says the solve is under way (a step may shoot several passes: its name
+    // is the step's last).
+    const std::string previews = out + "/preview";
     std::string script = (ignore.empty() ? "" : "trap '' " + ignore + "; ") + "env --default-signal=INT" +
                          (ignore.empty() ? ",HUP " : " ") + shell_quote(HEMIRAD_EXE);
     for (const std::string& a : {std::string("bake"), kClosedRoom.string(), std::string("-o"), out,
@@ -658,8 +687,8 @@ RunResult interrupted_bake(const TempDir& dir, const std::string& out, const std
                                  std::string("--image-width"), std::string("32"), std::string("--quiet")})
         script += " " + shell_quote(a);
     if (max_passes > 0) script += " --max-passes " + std::to_string(max_passes);
-    script += " & pid=$!; i=0; while [ ! -e " + shell_quote(preview) +
-              " ] && [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; kill -" + signal + " $pid && echo signal-sent; wait $pid";
+    script += " & pid=$!; i=0; while [ -z \"$(ls " + shell_quote(previews) +
+              " 2>/dev/null)\" ] && [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; kill -" + signal + " $pid && echo signal-sent; wait $pid";
     return run_shell(dir, script);
 }
 

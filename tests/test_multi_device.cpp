@@ -31,15 +31,23 @@ TEST_CASE("multi-device: two devices, and the reference with one, bake byte for 
     HEMIRAD_SKIP_ABSENT(two_pocl_devices());
     const TempDir dir;
     const std::vector<std::string> args = concat(kFast, {"--solver", "progressive"});
-    const fs::path one = dir / "one", all = dir / "all", mixed = dir / "mixed", planned = dir / "planned";
-    bake_ok(dir, kClosedRoom, one, concat(args, {"--device", "opencl:0.0", "--batch", "32"}));
+    const fs::path one = dir / "one", all = dir / "all", mixed = dir / "mixed", fixed = dir / "fixed",
+                   fixed_all = dir / "fixed_all";
+    // Without --batch: a step shoots the patches that hold about as much as the most, whatever
+    // the devices, so one device and two bake the same bytes.
+    const json o = bake_ok(dir, kClosedRoom, one, concat(args, {"--device", "opencl:0.0"}));
+    CHECK(o["settings"]["batch"] == 256);
+    CHECK(o["settings"]["batch_share"] == 0.5);
+    CHECK_FALSE(o["device"].contains("members"));
+    // Its steps took several shooters: fewer engine calls than passes.
+    CHECK(o["steps"]["largest"].get<long>() > 1);
+    CHECK(o["steps"]["count"].get<long>() < o["passes"].get<long>());
 
-    // --device all without --batch plans 16 shots per device: the batch of `one`.
     RunResult r = run_hemirad(dir, bake_args(kClosedRoom, all, concat(args, {"--device", "all"})), kTwoDevices);
     INFO("stderr: " << r.err);
     REQUIRE(r.code == 0);
     const json report = read_json(all / "report.json");
-    CHECK(report["settings"]["batch"] == 32);
+    CHECK(report["settings"]["batch"] == 256);
     CHECK(report["device"]["id"] == "opencl:0.0,opencl:0.1");
     REQUIRE(report["device"]["members"].size() == 2);
     long shots = 0;
@@ -52,14 +60,20 @@ TEST_CASE("multi-device: two devices, and the reference with one, bake byte for 
     CHECK(read_text(all / "baked.bin") == read_text(one / "baked.bin"));
 
     // The scalar reference beside a device: the reference's bits, so the same bytes.
-    const json m = bake_ok(dir, kClosedRoom, mixed, concat(args, {"--device", "ref,opencl:0.0", "--batch", "32"}));
+    const json m = bake_ok(dir, kClosedRoom, mixed, concat(args, {"--device", "ref,opencl:0.0"}));
     CHECK(m["device"]["backend"] == "ref+opencl");
     CHECK(read_text(mixed / "baked.bin") == read_text(one / "baked.bin"));
 
-    // One device at the planned batch of one: a batch of 1, other bytes (the order of shooting).
-    const json p = bake_ok(dir, kClosedRoom, planned, concat(args, {"--device", "opencl:0.0"}));
-    CHECK(p["settings"]["batch"] == 1);
-    CHECK_FALSE(p["device"].contains("members"));
+    // A batch given is the top K each step, the same on one device and two; another order of
+    // shooting than the default's, so other bytes.
+    const json f = bake_ok(dir, kClosedRoom, fixed, concat(args, {"--device", "opencl:0.0", "--batch", "32"}));
+    CHECK(f["settings"]["batch"] == 32);
+    CHECK(f["settings"]["batch_share"] == 0.0);
+    CHECK(f["steps"]["largest"] == 32);
+    r = run_hemirad(dir, bake_args(kClosedRoom, fixed_all, concat(args, {"--device", "all", "--batch", "32"})), kTwoDevices);
+    REQUIRE(r.code == 0);
+    CHECK(read_text(fixed_all / "baked.bin") == read_text(fixed / "baked.bin"));
+    CHECK(read_text(fixed / "baked.bin") != read_text(one / "baked.bin"));
 }
 
 TEST_CASE("multi-device: a sunlit bake sends its suns' parallel shots to the devices like any shots, byte for byte as one "

@@ -3,6 +3,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <tuple>
+#include <utility>
+#include <vector>
 
 #include "formfactor/near_field.h"
 #include "formfactor/reference.h"
@@ -250,4 +254,112 @@ TEST_CASE("holders: before the first pass a lit wall's patches hold the light, t
     // The first shot takes a lit patch's light and sends half of what lands back unshot, spread
     // over the walls it reached: more patches hold light now.
     CHECK(solver.holders(0.0) > long(emitted.size()));
+}
+
+namespace {
+
+// Passes batches on to an engine and keeps each batch's shooters, in order.
+class BatchRecorder final : public formfactor::Engine {
+public:
+    explicit BatchRecorder(formfactor::Engine& inner) : inner_(inner) {}
+    std::string name() const override { return "recorder"; }
+    void shoot(const formfactor::ShotRequest& request, formfactor::ShotResult& out) override { inner_.shoot(request, out); }
+    void shoot_batch(const std::vector<formfactor::ShotRequest>& shots, std::vector<formfactor::ShotResult>& out) override {
+        batches.emplace_back();
+        for (const formfactor::ShotRequest& r : shots) batches.back().push_back(r.shooter.patch);
+        inner_.shoot_batch(shots, out);
+    }
+    std::vector<std::vector<std::uint32_t>> batches;
+
+private:
+    formfactor::Engine& inner_;
+};
+
+}  // namespace
+
+TEST_CASE("batch share: a step shoots the patches holding about as much as the most, alone the one that holds most",
+          "[solver]") {
+    // A unit box of grey walls, its ceiling a lamp (E 2) cut into equal patches; in the second
+    // scene also a wall ten times as bright (E 20).
+    scene::Scene s;
+    const auto wall = test::add_material(s, glm::dvec3(0.5), glm::dvec3(0.0));
+    const auto lamp = test::add_material(s, glm::dvec3(0.5), glm::dvec3(2.0));
+    const auto bright = test::add_material(s, glm::dvec3(0.5), glm::dvec3(20.0));
+    const mesh::Settings ms{0.25, 0.125};
+    const auto solve_first_steps = [&](const scene::Scene& scene, double share, int batch) {
+        const mesh::Mesh m = mesh::build(scene, ms);
+        formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{32, 1}));
+        BatchRecorder recorder(engine);
+        solve::Settings settings{1e-3, 200000};
+        settings.batch = batch;
+        settings.batch_share = share;
+        solve::Progressive solver(m, recorder, settings);
+        for (int i = 0; i < 2; ++i) REQUIRE(solver.step());
+        std::vector<std::uint32_t> lit;  // the patches that emit, in order
+        for (std::uint32_t p = 0; p < m.patches.size(); ++p)
+            if (m.patches[p].emission.x > 0.0) lit.push_back(p);
+        return std::make_pair(recorder.batches, lit);
+    };
+    {
+        // Every lamp patch holds the same flux and nothing else holds any: the first step shoots
+        // them all, in index order (ties to the lower index).
+        const scene::Scene one = test::closed_box({1, 1, 1}, [&](int face) { return face == 5 ? lamp : wall; }, s);
+        const auto [batches, lit] = solve_first_steps(one, 0.5, 256);
+        REQUIRE(lit.size() == 16);
+        CHECK(batches.front() == lit);
+        // ... but no more than the batch's cap.
+        const auto [capped, lit_again] = solve_first_steps(one, 0.5, 5);
+        CHECK(capped.front() == std::vector<std::uint32_t>(lit_again.begin(), lit_again.begin() + 5));
+    }
+    {
+        // A wall ten times as bright: its patches go first, together, and the lamp's, holding a
+        // tenth of their flux, wait (a fixed batch of 32 would have taken them along).
+        const scene::Scene two = test::closed_box(
+            {1, 1, 1}, [&](int face) { return face == 5 ? lamp : face == 0 ? bright : wall; }, s);
+        const auto [batches, lit] = solve_first_steps(two, 0.5, 256);
+        REQUIRE(lit.size() == 32);
+        const std::vector<std::uint32_t> bright_patches(lit.begin(), lit.begin() + 16);  // x0 comes first
+        CHECK(batches.front() == bright_patches);
+        const auto [fixed, lit_fixed] = solve_first_steps(two, 0.0, 32);
+        CHECK(fixed.front().size() == 32);
+    }
+}
+
+TEST_CASE("batch share: the solve converges to Southwell's answer, within what a change of seed moves it", "[solver]") {
+    scene::Scene s;
+    const auto wall = test::add_material(s, glm::dvec3(0.6, 0.5, 0.4), glm::dvec3(0.0));
+    const auto lamp = test::add_material(s, glm::dvec3(0.5), glm::dvec3(4.0, 3.0, 2.0));
+    s = test::closed_box({1.0, 0.8, 1.2}, [&](int face) { return face == 3 ? lamp : wall; }, s);
+    const mesh::Mesh m = mesh::build(s, {0.2, 0.1});
+    const auto solve_with = [&](double share, int batch, std::uint64_t seed) {
+        formfactor::NearFieldEngine engine(m, std::make_unique<formfactor::ReferenceEngine>(m, formfactor::Settings{64, seed}));
+        solve::Settings settings{1e-3, 200000};
+        settings.batch = batch;
+        settings.batch_share = share;
+        solve::Progressive solver(m, engine, settings);
+        long steps = 0;
+        while (solver.step()) ++steps;
+        REQUIRE(solver.converged());
+        return std::make_tuple(solver.irradiance(true), solver.passes(), steps);
+    };
+    // Flux-weighted relative difference of two irradiance solutions.
+    const auto apart = [&](const std::vector<glm::dvec3>& a, const std::vector<glm::dvec3>& b) {
+        double diff = 0.0, total = 0.0;
+        for (std::size_t k = 0; k < a.size(); ++k) {
+            const double area = m.elements[k].area;
+            for (int c = 0; c < 3; ++c) {
+                diff += std::abs(a[k][c] - b[k][c]) * area;
+                total += b[k][c] * area;
+            }
+        }
+        return diff / total;
+    };
+    const auto [southwell, southwell_passes, southwell_steps] = solve_with(0.0, 1, 1);
+    const auto [shared, shared_passes, shared_steps] = solve_with(0.5, 256, 1);
+    const auto [reseeded, reseeded_passes, reseeded_steps] = solve_with(0.0, 1, 2);
+    CAPTURE(southwell_passes, shared_passes, shared_steps, apart(shared, southwell), apart(reseeded, southwell));
+    CHECK(southwell_steps == southwell_passes);
+    CHECK(shared_steps * 4 < shared_passes);                    // several shooters a step
+    CHECK(shared_passes < southwell_passes + southwell_passes / 4);  // and not many more shots
+    CHECK(apart(shared, southwell) < apart(reseeded, southwell));
 }

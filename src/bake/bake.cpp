@@ -51,11 +51,15 @@ Options complete_options(const Options& options, const QualityPreset& quality) {
     if (o.hemicube == 0) o.hemicube = quality.hemicube;
     if (o.threshold < 0.0) o.threshold = quality.threshold;
     if (o.hemicube % 2 != 0) throw InputError(fmt::format("--hemicube {}: must be even", o.hemicube));
-    // Several devices or ranks share each batch: the top-K shooters grow with them.
+    // Without --batch, the progressive solver's steps take the shooters that hold about as much
+    // as the first (kBatchShare), and the engine calls of the matrix rows, refinement and the
+    // gather grow with the devices or ranks that share them (none of which changes a number).
     // A resumed bake keeps its checkpoint's batch, on any number of them.
     if (!o.batch_given) {
-        const std::optional<int> resumed = o.resume.empty() ? std::nullopt : checkpoint_batch(o.resume);
-        o.batch = resumed ? *resumed : planned_batch(device_count(o.device) + EngineChoice::remote_ranks());
+        const CheckpointBatch planned{planned_batch(device_count(o.device) + EngineChoice::remote_ranks()), kBatchShare};
+        const CheckpointBatch b = o.resume.empty() ? planned : checkpoint_batch(o.resume).value_or(planned);
+        o.batch = b.share > 0.0 ? planned.batch : b.batch;
+        o.batch_share = b.share;
     }
     if (o.contrast < 0.0) o.contrast = quality.contrast;
     if (o.gather < 0) o.gather = quality.gather;
@@ -314,7 +318,9 @@ std::string checkpoint_fingerprint(const Plan& p, const Setup& s, const Meshed& 
     if (m.solver == "matrix")
         return bake_fingerprint(m.mesh, fmt::format("{}, matrix rows of {}", form_factors,
                                                     s.direct_only ? "the emitters" : "every patch that holds light"));
-    return bake_fingerprint(m.mesh, fmt::format("{}, batch {}, threshold {:.17g}", form_factors, o.batch, s.threshold));
+    const std::string share = o.batch_share > 0.0 ? fmt::format(" within {:.17g} of the largest", o.batch_share) : "";
+    return bake_fingerprint(m.mesh, fmt::format("{}, batch {}{}, threshold {:.17g}", form_factors, progressive_batch(o), share,
+                                                s.threshold));
 }
 
 // Work that would take minutes is said before it starts (by the model of 2 CPU cores).

@@ -222,7 +222,7 @@ Stage checkpoint_stage(const std::string& state) {
 
 std::string stage_state(const std::string& state) { return state.empty() ? state : state.substr(1); }
 
-std::optional<int> checkpoint_batch(const fs::path& file) {
+std::optional<CheckpointBatch> checkpoint_batch(const fs::path& file) {
     try {
         const std::string bytes = read_head(RegularFile(file, file.string()));
         if (bytes.compare(0, sizeof kMagic - 1, kMagic) != 0) return std::nullopt;
@@ -230,10 +230,13 @@ std::optional<int> checkpoint_batch(const fs::path& file) {
         std::uint32_t format = 0;
         std::string saved;
         if (!s.read(format) || format != kFormat || !s.read_string(saved)) return std::nullopt;
-        static const std::regex kBatch(R"(, batch (\d{1,3}), )");
+        static const std::regex kBatch(R"(, batch (\d{1,3})(?: within ([0-9.eE+-]{1,32}) of the largest)?, )");
         std::smatch m;
         if (!std::regex_search(saved, m, kBatch)) return std::nullopt;
-        return std::stoi(m[1]);
+        CheckpointBatch b;
+        b.batch = std::stoi(m[1]);
+        if (m[2].matched) b.share = std::stod(m[2]);
+        return b;
     } catch (const std::exception&) {
         return std::nullopt;  // read_checkpoint says what is wrong with it
     }

@@ -52,10 +52,16 @@ std::string stage_state(const std::string& state);
 // cut short, or belongs to another scene or settings.
 std::string read_checkpoint(const std::filesystem::path& file, const std::string& fingerprint);
 
-// The batch a progressive bake's checkpoint was made with (its fingerprint says), or nullopt for
-// a matrix bake's or a file that is no readable checkpoint: a resumed bake that is not given
-// --batch takes it, so that it may resume with another number of devices or ranks.
-std::optional<int> checkpoint_batch(const std::filesystem::path& file);
+// The batch a progressive bake's checkpoint was made with (its fingerprint says): `batch`
+// shooters a step, or with share > 0 those holding that share of the largest unshot flux
+// (Options::batch_share); nullopt for a matrix bake's or a file that is no readable checkpoint.
+// A resumed bake that is not given --batch takes it, so that it may resume with another number
+// of devices or ranks.
+struct CheckpointBatch {
+    int batch = 1;
+    double share = 0.0;
+};
+std::optional<CheckpointBatch> checkpoint_batch(const std::filesystem::path& file);
 
 // Loads a state from read_checkpoint (stage `solving`) into the solver; InputError naming `file`
 // if it is damaged.

@@ -28,6 +28,10 @@ struct Options {
     double threshold = -1.0;      // < 0: from the quality
     long max_passes = -1;         // < 0: kDefaultMaxPasses or twice the patches, whichever is more (max_passes_for)
     int batch = 1;                // shooters per engine call (the top-K unshot patches)
+    // > 0: the progressive solver's steps take the patches that hold at least this share of the
+    // largest unshot flux, up to kSharedBatch (solve::Settings::batch_share), not the top `batch`:
+    // kBatchShare without --batch, 0 with it.
+    double batch_share = 0.0;
     int threads = 0;              // host threads of the host stages (core/parallel.h); 0: every core
     bool batch_given = false;     // --batch was given; else several devices or ranks raise it (planned_batch)
     int gather = -1;              // final gather hemicube N (0: none); < 0: from the quality
@@ -80,6 +84,17 @@ struct Options {
 // shooting does, so a bake matches another with the same batch byte for byte.
 inline constexpr std::size_t kShotsPerMember = 16;
 int planned_batch(std::size_t members);
+
+// Without --batch, a progressive step shoots every patch that holds at least kBatchShare of the
+// largest unshot flux, up to kSharedBatch of them (solve::Settings::batch_share), whatever the
+// devices or ranks: the bytes are the same on any number of them. Measured in bench/results
+// (README, "Shooters that hold about as much go together").
+inline constexpr double kBatchShare = 0.5;
+inline constexpr int kSharedBatch = 256;
+// The progressive solver's batch and share for `options` (batch_share > 0: kSharedBatch).
+inline int progressive_batch(const Options& options) {
+    return options.batch_share > 0.0 ? kSharedBatch : options.batch;
+}
 
 // The progressive solver's cap on passes for a mesh of `patches` patches: options.max_passes, or
 // where it is < 0 (not given), 100,000 or twice the patches, whichever is more.

@@ -59,7 +59,8 @@ ordered_json settings_json(const Record& r) {
         {"element_size", S.mesh_settings.element_size},
         {"threshold", S.threshold},
         {"max_passes", max_passes_for(o, L.mesh.patches.size())},
-        {"batch", o.batch},
+        {"batch", M.solver == "progressive" ? progressive_batch(o) : o.batch},
+        {"batch_share", o.batch_share},
         {"threads", parallel::threads()},
         {"cluster_apart", S.mesh_settings.cluster && S.mesh_settings.cluster_apart},
         {"gather", o.gather},
@@ -207,6 +208,10 @@ ordered_json make_report(const Record& r) {
     }
     report["plan"] = plan_json(r);
     report["passes"] = L.solved.solution.passes;
+    // The progressive solver's steps (this run's, from a --resume on): engine calls, each of the
+    // shooters taken together, and the most one took.
+    if (L.solved.solution.steps > 0)
+        report["steps"] = {{"count", L.solved.solution.steps}, {"largest", L.solved.solution.largest_step}};
     if (L.solved.solution.resumed_from >= 0) report["resumed_from_pass"] = L.solved.solution.resumed_from;
     // "checkpoint" (where the bake kept one): {"file", "automatic" (the cache folder's, removed
     // once the outputs are committed; false: --checkpoint FILE, kept), "why"}. "resumed" (where it

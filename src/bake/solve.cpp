@@ -1,6 +1,7 @@
 // Stage "solve" (see solve.h).
 #include "bake/solve.h"
 
+#include <algorithm>
 #include <fmt/core.h>
 
 #include "bake/checkpoint.h"
@@ -87,7 +88,8 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
     solve::Settings settings;
     settings.threshold = c.threshold;
     settings.max_passes = max_passes_for(o, mesh.patches.size());
-    settings.batch = o.batch;
+    settings.batch = progressive_batch(o);
+    settings.batch_share = o.batch_share;
     solve::Progressive solver(mesh, engine, settings, direct);
     Solution solution;
     if (!c.resume_state.empty()) {
@@ -97,7 +99,9 @@ Solution solve_progressively(const mesh::Mesh& mesh, formfactor::Engine& engine,
     // Preview frames and checkpoints: one each time the passes cross a multiple of K.
     long previews = o.preview_every > 0 ? solver.passes() / o.preview_every : 0;
     long checkpointed = solver.passes();  // the passes of the last checkpoint written or resumed
-    while (solver.step()) {
+    for (long before = solver.passes(); solver.step(); before = solver.passes()) {
+        ++solution.steps;
+        solution.largest_step = std::max(solution.largest_step, solver.passes() - before);
         save_if_stopping(c, solver, solver.passes(), checkpointed);
         cancel::check();
         c.progress.passes(solver, c.threshold);

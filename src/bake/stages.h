@@ -92,6 +92,9 @@ struct Solution {
     std::vector<glm::dvec3> shot;  // per patch, the radiosity it shot in all
     solve::Energy energy;
     long passes = 0;  // hemicubes shot by the solver
+    // The progressive solver's steps in this run (from a --resume on): each one engine call of
+    // the shooters it took together (Settings::batch_share), and the most one took.
+    long steps = 0, largest_step = 0;
     bool converged = false;
     double error = 0.0;
     double unshot_fraction = 0.0;

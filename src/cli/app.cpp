@@ -166,9 +166,9 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
         ->transform(integer_from(0L));
     bake.add_option("--batch", o.batch,
                     "shoot the K patches with the most unshot flux together (one launch on OpenCL); "
-                    "each still shoots its flux at the time it is applied")
-        ->transform(integer_in(1, 256))
-        ->capture_default_str();
+                    "each still shoots its flux at the time it is applied (default: those holding at least half "
+                    "the largest unshot flux, up to 256)")
+        ->transform(integer_in(1, 256));
     bake.add_flag("--cluster-apart", o.cluster_apart,
                   "small faces of one material and node that share no edge but lie next to each other (a tree's "
                   "leaves, a grille) join one shooter where they face the same way and see its point: far fewer "

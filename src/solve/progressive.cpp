@@ -114,12 +114,19 @@ bool Progressive::step() {
 
     // The patches with the most unshot flux, most first; ties go to the lower index. Each is taken
     // off the tree while the next is found, then put back: apply() updates it when it shoots.
+    // With batch_share, those after the first only while they hold that share of its flux.
     long count = std::max(1, settings_.batch);
     if (settings_.max_passes > 0) count = std::min(count, settings_.max_passes - passes_);
     std::vector<formfactor::ShotRequest> requests;
+    double first_flux = 0.0;
     while (static_cast<long>(requests.size()) < count) {
         if (nothing_unshot()) break;
         const std::size_t best = pick_.top();
+        if (requests.empty()) {
+            first_flux = flux_key(best);
+        } else if (settings_.batch_share > 0.0 && !(flux_key(best) >= settings_.batch_share * first_flux)) {
+            break;
+        }
         // The k-th shot of a patch takes the counter (the hemicube's rotation) of its
         // (k mod rotations)-th: the first are the passes' own, later ones repeat those rows.
         const std::uint64_t pass = static_cast<std::uint64_t>(passes_) + requests.size();

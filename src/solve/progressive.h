@@ -31,6 +31,13 @@ struct Settings {
     // together (one launch on the OpenCL engine), then are applied in turn, each shooting
     // the unshot flux it holds by then. 1 is Southwell's order exactly.
     int batch = 1;
+    // With batch_share > 0, a step takes after its first shooter only the patches that hold at
+    // least this share of the first's unshot flux (still `batch` at most): where many patches
+    // hold about as much (a scene's lamps, a lit wall's patches) they go together, and where one
+    // holds most, it goes alone, as Southwell's order would have it. The rule reads only the
+    // solve's state, so the shooters, and the bytes, are the same on every device and number of
+    // devices or ranks.
+    double batch_share = 0.0;
     // Rotations of a patch's hemicube: its k-th shot takes the shot counter (the rotation) of its
     // (k mod rotations)-th, so that a patch which shoots again and again (light trapped between a
     // few patches) cycles through this many rows, which an engine may keep

@@ -44,6 +44,11 @@ assert ids[1:] == ["rank 1", "rank 2"], ids
 assert all(m["shots"] > 0 for m in d["members"]), d["members"]
 print("ok: 3 members each took shots:", [m["shots"] for m in d["members"]])
 PY
+  # The progressive solver's default batch (the patches that hold about as much as the most)
+  # does not grow with the ranks: the same bytes as one process.
+  mpi 2 "$exe" bake "$lit" -o lit_default_n2 --solver progressive --quality draft --quiet
+  "$exe" bake "$lit" -o lit_default_one --solver progressive --quality draft --quiet
+  same lit_default_n2 lit_default_one
   # Punctual lights and the progressive solver, at a batch given.
   mpi 3 "$exe" bake "$lit" -o lit_n3 --solver progressive --batch 8 --quality draft --quiet
   "$exe" bake "$lit" -o lit_one --solver progressive --batch 8 --quality draft --quiet
