@@ -162,7 +162,7 @@ BakeShape plan_shape(const Plan& p, const scene::Scene& scene, const Setup& s) {
     const Options& o = p.o;
     BakeShape shape;
     shape.hemicube = o.hemicube;
-    shape.batch = o.batch;
+    shape.batch = progressive_batch(o);
     shape.matrix = s.matrix;
     shape.opencl = s.effects.occlusion.on && may_use_opencl(o.device);
     shape.fallback_copy = shape.opencl && o.device == "auto";

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "core/memory.h"
 #include "formfactor/opencl_engine.h"
@@ -104,8 +105,11 @@ MemoryEstimate estimate_memory(const BakeShape& s, const std::string& solver) {
     if (matrix) {
         m.parts.push_back({"matrix", solve::Matrix::estimate_bytes(P, E, s.matrix)});
     } else {
+        // A step's rows, up to s.batch of them, each sparse: an element index and an F for at
+        // most every element, or every cell of the hemicube (3N²).
+        const double row_entries = std::min(E, 3.0 * s.hemicube * s.hemicube);
         m.parts.push_back({"solver", E * kProgressivePerElement + P * kProgressivePerPatch +
-                                         std::max(1, s.batch) * E * sizeof(double)});
+                                         std::max(1, s.batch) * row_entries * (sizeof(std::uint32_t) + sizeof(double))});
         m.parts.push_back({"row cache", row_cache_bytes(s)});
     }
     if (s.refine_levels > 0) {
