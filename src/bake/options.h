@@ -87,8 +87,8 @@ int planned_batch(std::size_t members);
 
 // Without --batch, a progressive step shoots every patch that holds at least kBatchShare of the
 // largest unshot flux, up to kSharedBatch of them (solve::Settings::batch_share), whatever the
-// devices or ranks: the bytes are the same on any number of them. Measured in bench/results
-// (README, "Shooters that hold about as much go together").
+// devices or ranks: the bytes are the same on any number of them. Measured in the README's
+// "Shooters that hold about as much go together" (bake timings, not a bench/ run).
 inline constexpr double kBatchShare = 0.5;
 inline constexpr int kSharedBatch = 256;
 // The progressive solver's batch and share for `options` (batch_share > 0: kSharedBatch).
