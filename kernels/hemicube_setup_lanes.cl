@@ -73,6 +73,9 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
                            normal_z * (shot->origin[2] - vload8(2, group->centroid));
     const llong is_back = facing < 0.0;
     llong live = (n_lanes > 0) & ~mine & ~(is_back & has_twin);
+    // A group of backs whose twins face the shooter (the mesh keeps fronts and backs apart, so
+    // from any point such groups are common), or of the shooter's own: nothing to set up.
+    if (!any_of8(live)) return;
 
     // to_local, four vertices (a triangle's last repeated: the same values, the same bits).
     ldouble lx[4], ly[4], lz[4];

@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "mesh/mesh.h"
+#include "scene/builder.h"
 
 using glm::dvec3;
 using hemirad::mesh::build;
@@ -338,6 +339,52 @@ TEST_CASE("doubleSided materials get a reversed twin of every patch and element"
     for (std::size_t p = 0; p < 4; ++p) {
         CHECK(both.patches[p + 4].normal == -both.patches[p].normal);
         CHECK(glm::dot(winding_normal(both.patches[p + 4].poly), both.patches[p + 4].normal) > 0.999999);
+    }
+}
+
+TEST_CASE("every front comes before every back, each back its front's twin", "[mesh]") {
+    // One-sided and doubleSided faces in turn, large (several patches) and small (a cluster each):
+    // setup's lane groups take the elements in mesh order, so fronts and backs must not mix.
+    Scene s;
+    const std::uint32_t one = hemirad::scene::add_material(s, dvec3(0.5), dvec3(0.0), false);
+    const std::uint32_t two = hemirad::scene::add_material(s, dvec3(0.5), dvec3(0.0), true);
+    for (int i = 0; i < 6; ++i) {
+        const double x = 2.0 * i;
+        hemirad::scene::add_quad(s, {x, 0, 0}, {x + 1.5, 0, 0}, {x + 1.5, 1.5, 0}, {x, 1.5, 0}, i % 2 ? one : two,
+                                 "large");
+        hemirad::scene::add_quad(s, {x, 3, 0}, {x + 0.2, 3, 0}, {x + 0.2, 3.2, 0}, {x, 3.2, 0}, i % 3 ? two : one,
+                                 "small");
+    }
+    hemirad::scene::finish(s);
+    const Mesh m = build(s, Settings{0.5, 0.25});
+    std::size_t last_front = 0, first_back = m.elements.size(), backs = 0, twinned_fronts = 0;
+    for (std::size_t k = 0; k < m.elements.size(); ++k) {
+        const Element& e = m.elements[k];
+        if (e.back) {
+            first_back = std::min(first_back, k);
+            ++backs;
+        } else if (e.has_twin) {
+            last_front = std::max(last_front, k);
+            ++twinned_fronts;
+        }
+    }
+    REQUIRE(backs > 0);
+    CHECK(backs == twinned_fronts);
+    CHECK(last_front < first_back);
+    for (std::size_t p = 0; p < m.patches.size(); ++p) {
+        const Patch& patch = m.patches[p];
+        const bool back = m.elements[patch.first_element].back;
+        if (patch.twin == hemirad::mesh::kNoPatch) {
+            CHECK_FALSE(m.elements[patch.first_element].has_twin);
+            continue;
+        }
+        const Patch& twin = m.patches[patch.twin];
+        REQUIRE(twin.twin == p);
+        CHECK(m.elements[twin.first_element].back != back);
+        CHECK(twin.element_count == patch.element_count);
+        CHECK(twin.normal == -patch.normal);
+        for (std::uint32_t i = 0; i < patch.element_count; ++i)
+            CHECK(m.elements[twin.first_element + i].centroid == m.elements[patch.first_element + i].centroid);
     }
 }
 
