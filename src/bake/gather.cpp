@@ -205,11 +205,12 @@ void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded
         g.sparse_unreached = sg.unreached;
         g.sparse_capped = sg.capped;
         g.sparse_budget = ss.budget;
-        const std::string allowed = o.gather_points >= 0
-                                        ? std::string("--gather-points allows")
-                                        : fmt::format("the time model allows ({:.0f} s by constants fitted on one 2-core machine; "
-                                                      "report.json's estimate has the measured time)",
-                                                      kGatherSeconds);
+        const std::string allowed =
+            o.gather_points >= 0 ? std::string("--gather-points allows")
+                                 : fmt::format(
+                                       "the time model allows ({:.0f} s by constants fitted on one 2-core machine; "
+                                       "report.json's estimate has the measured time)",
+                                       kGatherSeconds);
         const std::string unreached =
             sg.unreached > 0 ? fmt::format(" ({} on surfaces with no point keep their elements' light)", sg.unreached)
                              : std::string();
