@@ -561,8 +561,8 @@ void append_sides(Mesh& mesh, std::vector<std::vector<PatchCells>> cells, std::v
 // Appends the back sides append_sides kept, in order, each side's patches the other's twins. The
 // mesh holds every front before every back, so that setup's lane groups (HR_SETUP_LANES elements
 // in mesh order) mostly hold one side: from any point one side faces away and is its twin's to
-// draw, and a group of such lanes is dropped whole (with a face's back beside its front, half of
-// every group was such lanes: the fantasy inn's gather, 48% of the lanes it set up).
+// draw, and a group of such lanes is dropped whole (with a face's back beside its front they were
+// mixed into the groups: 48% of the lanes the fantasy inn's gather set up).
 void append_backs(Mesh& mesh, const std::vector<BackSides>& backs) {
     for (const BackSides& b : backs) {
         const std::size_t back = mesh.patches.size();
