@@ -516,6 +516,17 @@ struct BackSides {
     std::size_t front = 0;  // the first of the front patches
 };
 
+// Appends one side (`back`) of a face's shooting patches, from `from`'s point for that side.
+void append_side(Mesh& mesh, const std::vector<std::vector<Part>>& patches, const std::vector<Shooting>& shooting,
+                 const scene::Material& mat, const std::optional<std::array<dvec3, 2>>& from, bool apart, bool back) {
+    for (const Shooting& sh : shooting) {
+        const Polygon* cell = sh.cell ? &*sh.cell : nullptr;
+        const std::optional<dvec3> point =
+            from && !cell ? std::optional<dvec3>((*from)[back ? 1 : 0]) : std::nullopt;
+        append_patch(mesh, patches[sh.part], sh.pieces, sh.whole, mat, back, point, cell, apart && !cell);
+    }
+}
+
 // Appends a face's patches (or a cluster's one patch) on its front and, for a doubleSided
 // material, keeps what its back needs in `backs` (append_backs appends every back after every
 // front). A patch all of whose elements are MASK holes is left out on both sides. A patch whose
@@ -549,11 +560,7 @@ void append_sides(Mesh& mesh, std::vector<std::vector<PatchCells>> cells, std::v
         shooting.push_back({i, std::move(pieces), w, std::nullopt});
     }
     const std::size_t front = mesh.patches.size();
-    for (const Shooting& sh : shooting) {
-        const Polygon* cell = sh.cell ? &*sh.cell : nullptr;
-        const std::optional<dvec3> point = from && !cell ? std::optional<dvec3>((*from)[0]) : std::nullopt;
-        append_patch(mesh, patches[sh.part], sh.pieces, sh.whole, mat, false, point, cell, apart && !cell);
-    }
+    append_side(mesh, patches, shooting, mat, from, apart, false);
     if (!mat.double_sided || shooting.empty()) return;
     backs.push_back({std::move(cells), std::move(patches), std::move(shooting), &mat, from, apart, front});
 }
@@ -566,12 +573,7 @@ void append_sides(Mesh& mesh, std::vector<std::vector<PatchCells>> cells, std::v
 void append_backs(Mesh& mesh, const std::vector<BackSides>& backs) {
     for (const BackSides& b : backs) {
         const std::size_t back = mesh.patches.size();
-        for (const Shooting& sh : b.shooting) {
-            const Polygon* cell = sh.cell ? &*sh.cell : nullptr;
-            const std::optional<dvec3> point = b.from && !cell ? std::optional<dvec3>((*b.from)[1]) : std::nullopt;
-            append_patch(mesh, b.patches[sh.part], sh.pieces, sh.whole, *b.material, true, point, cell,
-                         b.apart && !cell);
-        }
+        append_side(mesh, b.patches, b.shooting, *b.material, b.from, b.apart, true);
         for (std::size_t i = 0; i < b.shooting.size(); ++i) {
             mesh.patches[b.front + i].twin = static_cast<std::uint32_t>(back + i);
             mesh.patches[back + i].twin = static_cast<std::uint32_t>(b.front + i);
