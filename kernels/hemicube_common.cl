@@ -252,13 +252,13 @@ size_t cell_stride(const HrShot* shot) {
 }
 
 // The record counts of setup's work-groups (group_records): a shot's launch has at most this many
-// (one per cluster of lane groups, or per HEMIRAD_WG patches), whatever the launch's row length,
+// (one per cluster of lane groups, or per HEMIRAD_WG elements), whatever the launch's row length,
 // so that the occluder pass's counts sit where the final pass finds them.
 size_t group_stride(const HrShot* shot) {
 #if HEMIRAD_SETUP_LANES
     const size_t items = ((size_t)shot->elements + HR_SETUP_LANES - 1) / HR_SETUP_LANES;
 #else
-    const size_t items = (size_t)shot->patches;
+    const size_t items = (size_t)shot->elements;
 #endif
     return max((size_t)1, (items + HEMIRAD_WG - 1) / HEMIRAD_WG);
 }

@@ -64,8 +64,8 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_SCAN_WG, 1, 1))) void scan(
 // record in the list of every tile it may cover. The order within a list varies from run to
 // run; the raster's result does not depend on it.
 __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(
-    const HrShot first_shot, __global const HrShot* more_shots, __global const HrPatch* patches,
-    __global const HrBox* boxes, __global const uint* group_records, __global uint* cursors, __global uint* lists) {
+    const HrShot first_shot, __global const HrShot* more_shots, __global const HrBox* boxes,
+    __global const uint* group_records, __global uint* cursors, __global uint* lists) {
     const size_t b = get_global_id(1);
     const HrShot shot_value = batch_shot(first_shot, more_shots, b);
     const HrShot* shot = &shot_value;
@@ -73,5 +73,5 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void scatter(
     group_records += b * group_stride(shot);
     cursors += b * counter_stride(shot);
     lists += b * (size_t)shot->list_capacity;
-    bin_records(shot, patches, boxes, group_records[get_group_id(0)], cursors, lists);
+    bin_records(shot, boxes, group_records[get_group_id(0)], cursors, lists);
 }

@@ -1,6 +1,6 @@
 // Stage 1, setup (included by hemicube.cl): cull, clip and project each element on each face
 // into packed records with their cell boxes, then count them per tile. setup_element is the
-// scalar path, an element at a time (the per-patch work-item of GPUs, and the lanes path's
+// scalar path, an element at a time (a work-item per element on GPUs, and the lanes path's
 // exceptions); hemicube_setup_lanes.cl the CPU path in double8 lanes and hemicube_cull.cl its
 // occlusion culling, both compiled only with HEMIRAD_SETUP_LANES; then the counting shared with
 // scatter (bin_records) and the setup kernel.
@@ -131,12 +131,13 @@ void setup_element(const HrShot* shot, const Element* e, int k, __global HrRecor
 #include "hemicube_cull.cl"         // its culling and cull_clusters (HEMIRAD_SETUP_LANES too)
 
 // The record slots of work-group g of setup (and of scatter): lanes setup, a region of
-// group_capacity; otherwise five per element it sets up, from five times its first element.
-uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g) {
+// group_capacity; otherwise five per element it sets up (an element makes a record per face at
+// most), from five times its first element.
+uint group_first_slot(const HrShot* shot, int g) {
 #if HEMIRAD_SETUP_LANES
     return (uint)g * shot->group_capacity;
 #else
-    return shot->patches == 0 ? 0u : (uint)(HR_FACES * patches[min(g * HEMIRAD_WG, shot->patches - 1)].first_element);
+    return (uint)(HR_FACES * g * HEMIRAD_WG);
 #endif
 }
 
@@ -144,10 +145,10 @@ uint group_first_slot(const HrShot* shot, __global const HrPatch* patches, int g
 // work-group's), an atomic increment of the counter of every tile its box touches, in the
 // work-group's counter copy; with lists, the counter is a cursor and the record's index goes
 // into the list at it.
-void bin_records(const HrShot* shot, __global const HrPatch* patches, __global const HrBox* boxes, uint used,
+void bin_records(const HrShot* shot, __global const HrBox* boxes, uint used,
                  __global uint* counters, __global uint* lists) {
     __global uint* copy = counters + counter_copy(shot->tile_base[HR_FACES]);
-    const uint first = group_first_slot(shot, patches, (int)get_group_id(0));
+    const uint first = group_first_slot(shot, (int)get_group_id(0));
     used = min(used, region_end(shot) - first);  // a full region's stored records (the host reruns the shot)
     for (uint slot = first + get_local_id(0); slot < first + used; slot += HEMIRAD_WG) {
         const HrBox box = boxes[slot];
@@ -160,8 +161,9 @@ void bin_records(const HrShot* shot, __global const HrPatch* patches, __global c
     }
 }
 
-// One work-item per patch (setup_element for its elements, none when the patch is the shooter
-// or lies below its base plane) or, with SETUP_LANES, per HR_SETUP_LANES elements
+// One work-item per element (setup_element; nothing when its patch is the shooter's or lies
+// below the base plane), so that a shot is as many work-items as elements, not a few hundred
+// patches each walking its elements in turn; or, with SETUP_LANES, per HR_SETUP_LANES elements
 // (setup_lanes); the records packed per work-group: group_records[g] says how many the region
 // of group g holds; each record then counted into the tiles it may cover (scan left the counts
 // at zero). Also zeroes the sums for the raster.
@@ -190,7 +192,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     const bool kept = entry < -1;
     const int cluster = kept ? -2 - entry : entry;
     if (get_local_id(0) == 0)
-        used = group_first_slot(shot, patches, (int)get_group_id(0)) + (kept ? group_records[get_group_id(0)] : 0u);
+        used = group_first_slot(shot, (int)get_group_id(0)) + (kept ? group_records[get_group_id(0)] : 0u);
     barrier(CLK_LOCAL_MEM_FENCE);
     const int p = cluster * HEMIRAD_WG + (int)get_local_id(0);
     if (get_global_id(0) == 0) sums[shot->elements] = 0;
@@ -225,20 +227,21 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
         atom_add(&sums[shot->elements + 3], (long)hidden);
     }
 #else
-    if (get_local_id(0) == 0) used = group_first_slot(shot, patches, (int)get_group_id(0));
+    if (get_local_id(0) == 0) used = group_first_slot(shot, (int)get_group_id(0));
     barrier(CLK_LOCAL_MEM_FENCE);
-    const int p = (int)get_global_id(0);
+    const int k = (int)get_global_id(0);
     // The sums' clear, ahead of the raster in the queue (scan leaves the tile counts at zero).
-    for (int c = p; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
-    if (p < shot->patches && p != shot->shooter && p != shot->twin) {  // the shooter's own surface, either side
-        // Elements tile their patch: when the patch is below the base plane, so are they. A
-        // cluster (n = 0) has no polygon to tell.
+    for (int c = k; c <= shot->elements; c += (int)get_global_size(0)) sums[c] = 0;
+    const int p = k < shot->elements ? elements[k].patch : -1;
+    if (p >= 0 && p != shot->shooter && p != shot->twin) {  // the shooter's own surface, either side
+        // Elements tile their patch: when the patch is below the base plane, so are they (the
+        // reference skips them by this test). A cluster (n = 0) has no polygon to tell.
         __global const HrPatch* patch = patches + p;
         bool patch_above = patch->n == 0;
         for (int i = 0; i < patch->n; ++i)
             patch_above = patch_above || to_local(shot, vec(patch->v[3 * i], patch->v[3 * i + 1], patch->v[3 * i + 2]))
                                                  .z > shot->eps;
-        for (int k = patch->first_element; patch_above && k < patch->first_element + patch->elements; ++k) {
+        if (patch_above) {
             const Element element = element_at(elements + k);
             setup_element(shot, &element, k, records, boxes, &used);
         }
@@ -247,7 +250,7 @@ __kernel __attribute__((reqd_work_group_size(HEMIRAD_WG, 1, 1))) void setup(
     // The work-group's records complete, each is counted into the tiles it may cover. After the
     // barrier, not as it is stored: on CPUs an atomic waits for the stores before it.
     barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
-    const uint count = used - group_first_slot(shot, patches, (int)get_group_id(0));
+    const uint count = used - group_first_slot(shot, (int)get_group_id(0));
     if (get_local_id(0) == 0) group_records[get_group_id(0)] = count;
-    bin_records(shot, patches, boxes, count, tile_counts, 0);
+    bin_records(shot, boxes, count, tile_counts, 0);
 }

@@ -38,7 +38,8 @@ typedef struct {
     hr_double centroid[3];
     hr_int n;         // 3 or 4
     hr_int has_twin;  // 1: a doubleSided twin draws this surface's back
-    hr_int pad[2];
+    hr_int patch;     // the patch it belongs to
+    hr_int pad;
 } HrElement;
 
 // Elements in groups of HR_SETUP_LANES as structures of arrays, what the CPU setup loads a

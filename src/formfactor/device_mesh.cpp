@@ -47,6 +47,7 @@ void pack_elements(const mesh::Mesh& mesh, std::size_t first, std::size_t count,
         copy3(e.centroid, h.centroid);
         h.n = e.poly.n;
         h.has_twin = e.has_twin ? 1 : 0;
+        h.patch = static_cast<hr_int>(e.patch);
     }
 }
 

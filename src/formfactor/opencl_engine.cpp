@@ -27,7 +27,7 @@ namespace {
 
 // The layout header is the contract with the kernel: pin it down.
 static_assert(sizeof(HrElement) == 160 && offsetof(HrElement, normal) == 96 && offsetof(HrElement, centroid) == 120 &&
-              offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 148);
+              offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 148 && offsetof(HrElement, patch) == 152);
 static_assert(sizeof(HrElementLanes) == 1280 && offsetof(HrElementLanes, normal) == 768 &&
               offsetof(HrElementLanes, n) == 1152 && offsetof(HrElementLanes, patch) == 1216 &&
               offsetof(HrElementLanes, bound) == 1248);
@@ -626,7 +626,7 @@ void OpenCLEngine::allocate_records(std::size_t shots) {
 std::size_t OpenCLEngine::setup_groups() const {
     const std::size_t wg = static_cast<std::size_t>(tuning_.work_group);
     const std::size_t items =
-        tuning_.setup_lanes ? (mesh_.elements.size() + HR_SETUP_LANES - 1) / HR_SETUP_LANES : mesh_.patches.size();
+        tuning_.setup_lanes ? (mesh_.elements.size() + HR_SETUP_LANES - 1) / HR_SETUP_LANES : mesh_.elements.size();
     return std::max<std::size_t>(1, (items + wg - 1) / wg);
 }
 
@@ -718,7 +718,7 @@ OpenCLEngine::LaunchNeeds OpenCLEngine::run_batch(const std::vector<ShotRequest>
         bind(scan_, first, shots_, tile_counts_, offsets_, cursors_, sums_, group_records_,
              static_cast<hr_int>(launch_groups));
     };
-    bind(scatter_, first, shots_, patches_, boxes_, group_records_, cursors_, lists_);
+    bind(scatter_, first, shots_, boxes_, group_records_, cursors_, lists_);
     const auto bind_raster = [&](bool occluder_pass) {
         bind(raster_, first, shots_, records_, boxes_, offsets_, lists_, delta_fixed_, ids_buffer_, sums_, block_depth_,
              hr_int{occluder_pass ? 1 : 0});
