@@ -96,26 +96,31 @@ void setup_lanes(const HrShot* shot, __global const HrElementLanes* group, int f
     }
     live &= above;
     if (!any_of8(live)) return;  // all behind the base plane (or the shooter's): no record
-    // Planes every vertex is outside of by the margin: the face is hidden (HIDDEN_MARGIN).
-    llong deep_all = -1;
-    {
-        const ldouble margin = magnitude * HIDDEN_MARGIN;
-        for (int i = 0; i < 4; ++i) deep_all &= outside_bits_lanes(lx[i], ly[i], lz[i], eps, margin);
-    }
-
     // The one face with no vertex outside, every other hidden: the first of its planes any
-    // vertex is outside of (lowest bit) has all outside, or one has all outside by the margin.
-    llong face = -1, fast = live;
+    // vertex is outside of (lowest bit) has all outside, or one has all outside by the margin
+    // (HIDDEN_MARGIN). The margin's test only for lanes the first leaves in doubt (elements
+    // across a face's diagonal, mostly), and only where a lane of the group has such a face.
+    llong face = -1, fast = live, settled = 0, doubt = 0;  // settled: bit f, face f needs no margin
     for (int f = 0; f < HR_FACES; ++f) {
         const long planes = f == 0 ? 0x1f : 0x0f;
         const llong any_out = (outside_any >> (5 * f)) & planes, all_out = (outside_all >> (5 * f)) & planes;
         const llong inside = any_out == 0;
         fast &= ~(inside & (face >= 0));  // two such faces: leave it to setup_element
         face = select(face, (llong)(f), inside);
-        const llong deep_out = (deep_all >> (5 * f)) & planes;
-        fast &= inside | ((any_out & -any_out & all_out) != 0) | (deep_out != 0);
+        const llong ok = inside | ((any_out & -any_out & all_out) != 0);
+        settled |= ok & (1L << f);
+        doubt |= ~ok;
     }
     fast &= face >= 0;
+    if (any_of8(fast & doubt)) {
+        const ldouble margin = magnitude * HIDDEN_MARGIN;
+        llong deep_all = -1;  // planes every vertex is outside of by the margin
+        for (int i = 0; i < 4; ++i) deep_all &= outside_bits_lanes(lx[i], ly[i], lz[i], eps, margin);
+        for (int f = 0; f < HR_FACES; ++f) {
+            const long planes = f == 0 ? 0x1f : 0x0f;
+            fast &= ((settled & (1L << f)) != 0) | (((deep_all >> (5 * f)) & planes) != 0);
+        }
+    }
 
     const ldouble normal_u = normal_x * shot->u[0] + normal_y * shot->u[1] + normal_z * shot->u[2];
     const ldouble normal_v = normal_x * shot->v[0] + normal_y * shot->v[1] + normal_z * shot->v[2];
