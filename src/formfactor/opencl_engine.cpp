@@ -985,7 +985,9 @@ void OpenCLEngine::shoot_fitting(const std::vector<ShotRequest>& shots, std::vec
     // A power of two: the product is exact, as ldexp would be, at a fraction of the cost (a shot
     // of a large scene converts a sum per element).
     const double unit = std::ldexp(1.0, -HR_FIXED_SHIFT);
-    for (std::size_t i = 0; i < shots.size(); ++i) {
+    // Each shot's row on a host thread of its own: a GPU returns a batch of shots at once, and
+    // one core scanning a sum per element of each (8 MB a shot at 1M elements) would hold it.
+    parallel::for_each(shots.size(), 1, [&](std::size_t i) {
         const hr_long* sums = sums_host_.data() + i * sum_stride();
         const auto fixed_to_double = [unit](hr_long s) { return static_cast<double>(s) * unit; };
         if (tuning_.setup_lanes) {  // only the clusters set up hold sums (ascending); the rest see nothing
@@ -1002,7 +1004,7 @@ void OpenCLEngine::shoot_fitting(const std::vector<ShotRequest>& shots, std::vec
         out[i].blocked = static_cast<double>(sums[elements]) * unit;
         if (launches_ > fault_.wrong_after && !out[i].F.empty())  // HEMIRAD_FAULT: what a broken device might return
             *std::max_element(out[i].F.begin(), out[i].F.end()) *= 1.25;
-    }
+    });
 }
 
 const std::vector<std::int32_t>* OpenCLEngine::last_ids(std::size_t shot) const {
