@@ -27,7 +27,8 @@ namespace {
 
 // The layout header is the contract with the kernel: pin it down.
 static_assert(sizeof(HrElement) == 160 && offsetof(HrElement, normal) == 96 && offsetof(HrElement, centroid) == 120 &&
-              offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 148 && offsetof(HrElement, patch) == 152);
+              offsetof(HrElement, n) == 144 && offsetof(HrElement, has_twin) == 148 &&
+              offsetof(HrElement, patch) == 152);
 static_assert(sizeof(HrElementLanes) == 1280 && offsetof(HrElementLanes, normal) == 768 &&
               offsetof(HrElementLanes, n) == 1152 && offsetof(HrElementLanes, patch) == 1216 &&
               offsetof(HrElementLanes, bound) == 1248);
