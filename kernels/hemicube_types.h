@@ -59,12 +59,11 @@ typedef struct {
     hr_double bound[4];
 } HrElementLanes;
 
-// One patch: its polygon decides whether all of its elements lie below the base plane.
+// One patch: its polygon decides whether all of its elements lie below the base plane (each
+// element's HrElement::patch says which).
 typedef struct {
     hr_double v[12];
     hr_int n;
-    hr_int first_element;  // its elements are first_element .. first_element + elements - 1
-    hr_int elements;
     hr_int pad;
 } HrPatch;
 

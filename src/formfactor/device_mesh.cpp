@@ -84,8 +84,6 @@ std::vector<HrPatch> pack_patches(const mesh::Mesh& mesh) {
         patches[p] = {};
         copy_polygon(mesh.patches[p].poly, patches[p].v);
         patches[p].n = mesh.patches[p].poly.n;
-        patches[p].first_element = static_cast<hr_int>(mesh.patches[p].first_element);
-        patches[p].elements = static_cast<hr_int>(mesh.patches[p].element_count);
     }
     return patches;
 }

@@ -32,7 +32,7 @@ static_assert(sizeof(HrElement) == 160 && offsetof(HrElement, normal) == 96 && o
 static_assert(sizeof(HrElementLanes) == 1280 && offsetof(HrElementLanes, normal) == 768 &&
               offsetof(HrElementLanes, n) == 1152 && offsetof(HrElementLanes, patch) == 1216 &&
               offsetof(HrElementLanes, bound) == 1248);
-static_assert(sizeof(HrPatch) == 112 && offsetof(HrPatch, n) == 96 && offsetof(HrPatch, elements) == 104);
+static_assert(sizeof(HrPatch) == 104 && offsetof(HrPatch, n) == 96);
 static_assert(sizeof(HrShot) == 168 && offsetof(HrShot, eps) == 96 && offsetof(HrShot, n) == 104 &&
               offsetof(HrShot, twin) == 112 && offsetof(HrShot, patches) == 120 && offsetof(HrShot, tiles_x) == 124 &&
               offsetof(HrShot, tile_base) == 128 && offsetof(HrShot, list_capacity) == 152 &&
