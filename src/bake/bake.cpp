@@ -335,12 +335,12 @@ TimeEstimate say_expected_time(const Plan& p, const Meshed& m, Warnings& warning
     // what the rest takes, and says so (the ww2 city's "about 61 s" took 6 min, 3 of them solving).
     const bool solve_counted = m.solver == "matrix";
     if (expected.total() > kSayTimeAbove)
-        warnings.add(fmt::format("this bake is expected to take {} {} ({}{}; modelled on 2 CPU cores through PoCL, a "
-                                 "GPU is faster); --progress shows how far it is; Ctrl-C stops it leaving the output folder as "
-                                 "it was, and its checkpoint lets the same command go on (unless --no-checkpoint)",
-                                 solve_counted ? "about" : "more than", format_duration(expected.total()),
-                                 expected.describe(),
-                                 solve_counted ? "" : ", besides the progressive solve, whose passes are not known before it runs"));
+        warnings.add(fmt::format(
+            "this bake is expected to take {} {} ({}{}; modelled on 2 CPU cores through PoCL, a "
+            "GPU is faster); --progress shows how far it is; Ctrl-C stops it leaving the output folder as "
+            "it was, and its checkpoint lets the same command go on (unless --no-checkpoint)",
+            solve_counted ? "about" : "more than", format_duration(expected.total()), expected.describe(),
+            solve_counted ? "" : ", besides the progressive solve, whose passes are not known before it runs"));
     return expected;
 }
 
