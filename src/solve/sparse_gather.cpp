@@ -110,14 +110,32 @@ struct NodeState {
 };
 
 // One candidate point per cell of `size`: among the vertices `score` gives a value > 0, the one of
-// the highest (ties: nearest the cell's centre, then the lower index). Returns (score, vertex).
+// the highest (ties: nearest the cell's centre, then the lower index). With `middle`, ties go to
+// the vertex nearest the mean of the cell's candidates instead: a seed stands for the piece of its
+// surface in the cell, and where that piece is smaller than the cell (a leaf card, a surface's
+// border) the cell's centre lies off it, its nearest vertex on the piece's rim, and the rim's
+// light is the piece's least typical (a card's corner in a crown, in its neighbours' shade).
 std::vector<std::pair<double, std::uint32_t>> pick_per_cell(const output::WeldedNode& node, const NodeState& s,
-                                                            double size, const std::vector<double>& score) {
+                                                            double size, const std::vector<double>& score,
+                                                            bool middle = false) {
+    std::unordered_map<CellKey, std::pair<glm::dvec3, double>, CellHash> mean;  // sum of positions, count
+    if (middle)
+        for (std::uint32_t v = 0; v < node.positions.size(); ++v) {
+            if (!(score[v] > 0.0)) continue;
+            glm::dvec3 centre;
+            auto& [sum, count] = mean[cell_of(node.positions[v], s.component[v], size, centre)];
+            sum += node.positions[v];
+            count += 1.0;
+        }
     std::unordered_map<CellKey, std::tuple<double, double, std::uint32_t>, CellHash> best;
     for (std::uint32_t v = 0; v < node.positions.size(); ++v) {
         if (!(score[v] > 0.0)) continue;
         glm::dvec3 centre;
         const CellKey key = cell_of(node.positions[v], s.component[v], size, centre);
+        if (middle) {
+            const auto& [sum, count] = mean.at(key);
+            centre = sum / count;
+        }
         const double d = glm::length(node.positions[v] - centre);
         const auto [it, fresh] = best.try_emplace(key, score[v], d, v);
         if (fresh) continue;
@@ -201,6 +219,14 @@ Interpolation interpolation_on(const Graph& g, const std::vector<char>& gathered
 }
 
 }  // namespace
+
+glm::dvec3 corrected_light(const glm::dvec3& own, const glm::dvec3& c) {
+    const glm::dvec3 added = glm::max(own + c, glm::dvec3(0.0));
+    const double y = luminance(own), dy = luminance(c);
+    if (!(dy < 0.0) || !(y > 0.0)) return added;
+    const double w = std::min(1.0, -dy / y);
+    return (1.0 - w) * added + w * std::max(0.0, 1.0 + dy / y) * own;
+}
 
 Interpolation interpolation(const output::WeldedNode& node, const std::vector<char>& gathered_vertex, int k) {
     if (k > 16) throw InternalError("interpolation: at most 16 neighbours");
@@ -327,7 +353,7 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
         parallel::for_each(node_count, 1, [&](std::size_t n) {
             if (!is_gathered[n]) return;
             const std::vector<double> one(welded.nodes[n].positions.size(), 1.0);
-            seeds[n] = pick_per_cell(welded.nodes[n], state[n], size, one);
+            seeds[n] = pick_per_cell(welded.nodes[n], state[n], size, one, /*middle=*/true);
         });
         std::size_t count = 0;
         for (std::size_t n = 0; n < node_count; ++n) count += seeds[n].size();
@@ -449,8 +475,9 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
             // The direct light stays the elements'. The correction is a difference, so where the
             // points nearby lie in more shade than this vertex's elements it can exceed their
             // light: never below none (the Cornell box with 30 points had pixels at −0.003, the
-            // ww2 city cyan specks in its red trees).
-            const glm::dvec3 H = glm::max(h[n][v] + correction, glm::dvec3(0.0));
+            // ww2 city cyan specks in its red trees), and a darkening keeps their hue
+            // (corrected_light).
+            const glm::dvec3 H = direct_at(n, v) + corrected_light(h[n][v] - direct_at(n, v), correction);
             current.irradiance[n][v] = H;
             current.radiosity[n][v] = e[n][v] + r[n][v] * H;
         }

@@ -80,6 +80,16 @@ struct Interpolation {
 };
 Interpolation interpolation(const output::WeldedNode& node, const std::vector<char>& gathered_vertex, int k);
 
+// The light of a vertex not shot: its elements' reflected light `own` (≥ 0, per channel) with the
+// gathered points' correction `c` (interpolated, gathered minus elements', per channel). Where c
+// brightens (luminance ≥ 0) it is added, channel by channel; where it darkens, by a weight
+// w = min(1, −Y(c)/Y(own)) it is instead a scale of `own` by 1 + Y(c)/Y(own): the elements' hue
+// kept and the corrected luminance given. Added alone and clamped at zero channel by channel, a
+// darkening larger than a channel's light left only the other channels: Littlest Tokyo's orange
+// wall behind a lantern string came out saturated red (cluster apart, 2026-12-07). The blend is
+// continuous in own and c, never negative, and never lights a dark vertex in its own faint hue.
+glm::dvec3 corrected_light(const glm::dvec3& own, const glm::dvec3& c);
+
 // The sparse gather: as final_gather (its arguments; settings' batch, progress and cancel; one
 // pass), but shooting at most `sparse.budget` points, chosen as above, and interpolating the
 // rest. `out` then holds every vertex's light, as final_gather's does.
