@@ -226,8 +226,7 @@ TEST_CASE("sparse gather: few points correcting many vertices never make light n
     std::filesystem::remove_all(dir);
 }
 
-TEST_CASE("sparse gather: a correction brightens by adding and darkens keeping the elements' hue",
-          "[gather][sparse]") {
+TEST_CASE("sparse gather: a correction brightens by adding and darkens keeping the elements' hue", "[gather][sparse]") {
     const auto Y = [](const glm::dvec3& c) { return 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b; };
     // Brightening (luminance of the correction ≥ 0): added, channel by channel.
     const glm::dvec3 up = solve::corrected_light({0.2, 0.3, 0.4}, {0.1, -0.02, 0.2});  // luminance +0.0213
@@ -272,14 +271,16 @@ TEST_CASE("sparse gather: a correction brightens by adding and darkens keeping t
     }
 }
 
-TEST_CASE("sparse gather: the leaf canopy with a point a card against the path-traced reference", "[gather][sparse][bake]") {
+TEST_CASE("sparse gather: the leaf canopy with a point a card against the path-traced reference",
+          "[gather][sparse][bake]") {
     // 508 double-sided cards, each a surface of its own (bench/reference/leaf_canopy): a budget of
     // 1,000 points gives most card sides one seed, whose correction then stands for the card. The
     // seed nearest the grid cell's centre was mostly a card's rim vertex, in its neighbours' shade:
     // 8.2% per pixel, the whole picture 6.4% dark (elements' light alone: 6.7%, 3.3%). The seed
     // nearest the middle of its piece of surface: 5.3%, 0.2%.
     const std::filesystem::path root(HEMIRAD_SOURCE_DIR);
-    const bench::ImageReference reference = bench::load_image_reference((root / "bench/reference/leaf_canopy").string());
+    const bench::ImageReference reference =
+        bench::load_image_reference((root / "bench/reference/leaf_canopy").string());
     const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hemirad-test-sparse-canopy";
     std::filesystem::remove_all(dir);
     bake::Options o;
