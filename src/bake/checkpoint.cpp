@@ -30,7 +30,10 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[] = "hemirad checkpoint\n";
-constexpr std::uint32_t kFormat = 8;  // 2: the state's hash before the end marker; 3: progressive hit shares, round coverage; 4: running sums; 5: progressive shot counters per patch; 6: the stage's byte first; 7: no twin flags in the welded mesh; 8: a sparse gather's counts
+// Format versions: 2: the state's hash before the end marker; 3: progressive hit shares, round
+// coverage; 4: running sums; 5: progressive shot counters per patch; 6: the stage's byte first;
+// 7: no twin flags in the welded mesh; 8: a sparse gather's counts; 9: its coverage points.
+constexpr std::uint32_t kFormat = 9;
 constexpr std::uint64_t kEndMarker = 0x444e452d4b504b43ull;  // "CKPK-END"
 
 // FNV-1a, 64 bits, over raw bytes.

@@ -200,6 +200,7 @@ void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded
         g.points = sg.points;
         g.sparse_seeds = sg.seeds;
         g.sparse_levels = sg.levels;
+        g.sparse_covered = sg.covered;
         g.sparse_vertices = sg.vertices;
         g.sparse_interpolated = sg.interpolated;
         g.sparse_unreached = sg.unreached;
@@ -214,12 +215,15 @@ void gather_vertices(const LightContext& c, Lit& lit, output::WeldedMesh& welded
         const std::string unreached =
             sg.unreached > 0 ? fmt::format(" ({} on surfaces with no point keep their elements' light)", sg.unreached)
                              : std::string();
-        c.warnings.add(fmt::format(
-            "final gather sparse: {} vertices, more than the {} hemicubes {}; shot at {} of them ({} seeds, {} "
-            "levels where the light varies{}), one pass, no contact grading or gather refinement, the others "
-            "interpolated{}; --gather-points 0 gathers at every vertex",
-            sg.vertices, ss.budget, allowed, sg.points, sg.seeds, sg.levels,
-            sg.capped ? ", cut short by the budget" : "", unreached),
+        c.warnings.add(
+            fmt::format(
+                "final gather sparse: {} vertices, more than the {} hemicubes {}; shot at {} of them ({} seeds, {} "
+                "levels where the light varies{}{}), one pass, no contact grading or gather refinement, the others "
+                "interpolated{}; --gather-points 0 gathers at every vertex",
+                sg.vertices, ss.budget, allowed, sg.points, sg.seeds, sg.levels,
+                sg.capped ? ", cut short by the budget" : "",
+                sg.covered > 0 ? fmt::format(", {} spread where the light looked smooth", sg.covered) : std::string(),
+                unreached),
             true);  // what accuracy was given up: said under --quiet too
         return;
     }

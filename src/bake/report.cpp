@@ -202,6 +202,7 @@ ordered_json make_report(const Record& r) {
                                              {"points", g.points},
                                              {"seeds", g.sparse_seeds},
                                              {"levels", g.sparse_levels},
+                                             {"covered", g.sparse_covered},
                                              {"interpolated", g.sparse_interpolated},
                                              {"unreached", g.sparse_unreached},
                                              {"capped", g.sparse_capped}};

@@ -143,6 +143,7 @@ void solved_io(IO& io, L& lit) {
     io.item(lit.gathered.gather_split);
     io.item(lit.gathered.sparse_seeds);
     io.item(lit.gathered.sparse_levels);
+    io.item(lit.gathered.sparse_covered);
     io.item(lit.gathered.sparse_vertices);
     io.item(lit.gathered.sparse_interpolated);
     io.item(lit.gathered.sparse_unreached);

@@ -123,6 +123,7 @@ struct Gathered {
     // A sparse gather's (more vertices than --gather-points): its points and what it interpolated.
     long sparse_seeds = 0;           // 0: every vertex was gathered (or none)
     int sparse_levels = 0;
+    long sparse_covered = 0;
     std::size_t sparse_vertices = 0, sparse_interpolated = 0, sparse_unreached = 0;
     bool sparse_capped = false;
     std::size_t sparse_budget = 0;   // the hemicubes it was allowed

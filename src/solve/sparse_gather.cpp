@@ -9,6 +9,7 @@
 #include <queue>
 #include <tuple>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "core/error.h"
 #include "core/parallel.h"
@@ -107,25 +108,48 @@ struct NodeState {
     std::vector<char> hidden;       // gathered, and seeing mostly backs
     std::vector<char> contact;      // a corner of an element along a contact line (mesh/contact.h)
     std::vector<glm::dvec3> light;  // at gathered vertices: the gathered reflected light (H − direct)
+    std::vector<double> area;       // a third of the area of each triangle around the vertex
 };
+
+// A third of each triangle's area to each of its corners: the surface a vertex stands for.
+std::vector<double> vertex_areas(const output::WeldedNode& node) {
+    std::vector<double> area(node.positions.size(), 0.0);
+    for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+        const std::uint32_t* i = &node.indices[3 * t];
+        const double third = glm::length(glm::cross(node.positions[i[1]] - node.positions[i[0]],
+                                                    node.positions[i[2]] - node.positions[i[0]])) /
+                             6.0;
+        for (int a = 0; a < 3; ++a) area[i[a]] += third;
+    }
+    return area;
+}
 
 // One candidate point per cell of `size`: among the vertices `score` gives a value > 0, the one of
 // the highest (ties: nearest the cell's centre, then the lower index). With `middle`, ties go to
-// the vertex nearest the mean of the cell's candidates instead: a seed stands for the piece of its
-// surface in the cell, and where that piece is smaller than the cell (a leaf card, a surface's
-// border) the cell's centre lies off it, its nearest vertex on the piece's rim, and the rim's
-// light is the piece's least typical (a card's corner in a crown, in its neighbours' shade).
+// the vertex nearest the area centroid of the cell's candidates (each weighing the surface it
+// stands for) instead: a seed stands for the piece of its surface in the cell, and where that
+// piece is smaller than the cell (a leaf card, a surface's border) the cell's centre lies off it,
+// its nearest vertex on the piece's rim, and the rim's light is the piece's least typical (a
+// card's corner in a crown, in its neighbours' shade). By area, not by vertex: vertices crowd
+// where the mesh was refined, beside lamps and shadows, and their plain mean drew the seeds of
+// Littlest Tokyo's street toward its lamps, whose light the street then took as a whole.
 std::vector<std::pair<double, std::uint32_t>> pick_per_cell(const output::WeldedNode& node, const NodeState& s,
                                                             double size, const std::vector<double>& score,
                                                             bool middle = false) {
-    std::unordered_map<CellKey, std::pair<glm::dvec3, double>, CellHash> mean;  // sum of positions, count
+    struct Sums {
+        glm::dvec3 weighted{0.0}, plain{0.0};  // positions × area, positions
+        double area = 0.0, count = 0.0;
+    };
+    std::unordered_map<CellKey, Sums, CellHash> mean;
     if (middle)
         for (std::uint32_t v = 0; v < node.positions.size(); ++v) {
             if (!(score[v] > 0.0)) continue;
             glm::dvec3 centre;
-            auto& [sum, count] = mean[cell_of(node.positions[v], s.component[v], size, centre)];
-            sum += node.positions[v];
-            count += 1.0;
+            Sums& m = mean[cell_of(node.positions[v], s.component[v], size, centre)];
+            m.weighted += s.area[v] * node.positions[v];
+            m.plain += node.positions[v];
+            m.area += s.area[v];
+            m.count += 1.0;
         }
     std::unordered_map<CellKey, std::tuple<double, double, std::uint32_t>, CellHash> best;
     for (std::uint32_t v = 0; v < node.positions.size(); ++v) {
@@ -133,8 +157,8 @@ std::vector<std::pair<double, std::uint32_t>> pick_per_cell(const output::Welded
         glm::dvec3 centre;
         const CellKey key = cell_of(node.positions[v], s.component[v], size, centre);
         if (middle) {
-            const auto& [sum, count] = mean.at(key);
-            centre = sum / count;
+            const Sums& m = mean.at(key);
+            centre = m.area > 0.0 ? m.weighted / m.area : m.plain / m.count;
         }
         const double d = glm::length(node.positions[v] - centre);
         const auto [it, fresh] = best.try_emplace(key, score[v], d, v);
@@ -260,6 +284,7 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
         if (!is_gathered[n]) return;
         state[n].graph = edge_graph(welded.nodes[n]);
         state[n].component = components(state[n].graph);
+        state[n].area = vertex_areas(welded.nodes[n]);
     });
     double area = 0.0, mean = 0.0;
     for (std::size_t n = 0; n < node_count; ++n) {
@@ -446,6 +471,56 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
         }
         ++result.levels;
         interpolate();
+    }
+
+    // Coverage: the budget the levels left (where the light looked smooth between the points) goes
+    // to a point in each piece of surface, per grid cell, that holds none, the grid grown until
+    // they fit. The tests above compare elements' means and the points' spread, and a surface with
+    // one point (a leaf card) shows neither: the leaf canopy at 4,000 points shot 1,146 and was
+    // 5.7% off per pixel where every vertex gathered is 1.7%.
+    if (static_cast<std::size_t>(shot) < sparse.budget) {
+        const std::size_t room = sparse.budget - static_cast<std::size_t>(shot);
+        double cover = std::sqrt(std::max(area, 1e-300) / double(sparse.budget));
+        std::vector<std::vector<std::pair<double, std::uint32_t>>> picked(node_count);
+        std::size_t count = 0;
+        for (int attempt = 0;; ++attempt) {
+            parallel::for_each(node_count, 1, [&](std::size_t n) {
+                if (!is_gathered[n]) return;
+                const output::WeldedNode& node = welded.nodes[n];
+                const NodeState& s = state[n];
+                std::unordered_set<CellKey, CellHash> held;  // cells with a point
+                glm::dvec3 centre;
+                for (std::uint32_t v = 0; v < node.positions.size(); ++v)
+                    if (s.shot[v]) held.insert(cell_of(node.positions[v], s.component[v], cover, centre));
+                std::vector<double> score(node.positions.size(), 0.0);
+                for (std::uint32_t v = 0; v < node.positions.size(); ++v)
+                    if (!s.shot[v] && !held.count(cell_of(node.positions[v], s.component[v], cover, centre)))
+                        score[v] = 1.0;
+                picked[n] = pick_per_cell(node, s, cover, score, /*middle=*/true);
+            });
+            count = 0;
+            for (std::size_t n = 0; n < node_count; ++n) count += picked[n].size();
+            if (count <= room || attempt == 40) break;
+            cover *= std::max(1.1, std::sqrt(double(count) / double(room)));
+        }
+        if (count > 0) {
+            std::vector<std::vector<char>> fresh(node_count);
+            std::size_t taken = 0;
+            for (std::size_t n = 0; n < node_count && taken < room; ++n)
+                for (const auto& [score, v] : picked[n]) {
+                    if (taken == room) break;
+                    if (fresh[n].empty()) fresh[n].assign(welded.nodes[n].positions.size(), 0);
+                    fresh[n][v] = 1;
+                    ++taken;
+                }
+            const long before = shot;
+            if (!gather_marked(fresh)) {
+                result.cancelled = true;
+                return result;
+            }
+            result.covered = shot - before;
+            interpolate();
+        }
     }
 
     // The others: their elements' light and the gathered points' correction (below).

@@ -21,6 +21,8 @@
 //     them), marks its cell of a grid half as fine as the last; the marked cells' worst vertices
 //     are gathered next, the worst first within the budget. Vertices along contact lines
 //     (mesh/contact.h) come first, where the budget is at least a quarter of the vertices.
+//     What budget the levels leave goes to coverage: a point in each piece of surface, per cell
+//     of a grid sized to it, that holds none (a surface of one point shows neither test).
 //  4. A vertex not shot takes its elements' light plus the interpolated correction the gathered
 //     points found for theirs (gathered minus their elements' mean): the elements' detail stays
 //     and their bias goes. Points that saw mostly backs are no source, and end with their seen
@@ -59,6 +61,7 @@ struct SparseGathered {
     long points = 0;               // hemicubes shot, all levels
     long seeds = 0;                // of them, the first level's
     int levels = 0;                // densification levels that added points
+    long covered = 0;              // points of the coverage round (the budget the levels left)
     std::size_t vertices = 0;      // vertices of the gathered nodes
     std::size_t interpolated = 0;  // of them, those given an interpolated light
     std::size_t unreached = 0;     // ... and those no gathered point reached (the elements' means)
