@@ -89,7 +89,7 @@ Interpolation interpolation(const output::WeldedNode& node, const std::vector<ch
 // w = min(1, −Y(c)/Y(own)) it is instead a scale of `own` by 1 + Y(c)/Y(own): the elements' hue
 // kept and the corrected luminance given. Added alone and clamped at zero channel by channel, a
 // darkening larger than a channel's light left only the other channels: Littlest Tokyo's orange
-// wall behind a lantern string came out saturated red (cluster apart, 2026-12-07). The blend is
+// wall behind a lantern string came out saturated red (clusters apart, 2026-12-07). The blend is
 // continuous in own and c, never negative, and never lights a dark vertex in its own faint hue.
 glm::dvec3 corrected_light(const glm::dvec3& own, const glm::dvec3& c);
 
