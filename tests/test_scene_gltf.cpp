@@ -277,6 +277,8 @@ TEST_CASE("attributes the loader does not read and that do not fit their buffers
     json g = scene_with_tree(dir);
     g["accessors"][1]["bufferView"] = 99;           // the floor's NORMAL names no bufferView that exists
     g["accessors"][13]["count"] = 1000000000000000;  // the glass's NORMAL claims 10^15 elements of a 48-byte view
+    g["accessors"][10]["count"] = 0;                 // the mirrored quad's TEXCOORD_0 is empty (glTF forbids it)
+    g["accessors"][10]["byteOffset"] = 12;           // ... and starts past its view, as a web export's did
     write_json(dir / "broken.gltf", g);
     const json report = bake_ok(dir, dir / "broken.gltf", dir / "out", {});
     std::string warnings;
@@ -285,6 +287,8 @@ TEST_CASE("attributes the loader does not read and that do not fit their buffers
     CHECK(warnings.find("baked.gltf: NORMAL of a primitive of node 'floor' left out: accessor 1 runs past its "
                         "bufferView") != std::string::npos);
     CHECK(warnings.find("baked.gltf: accessor 13 runs past its bufferView") != std::string::npos);
+    CHECK(warnings.find("baked.gltf: TEXCOORD_0 of a primitive of node 'mirrored' left out: accessor 10 has no "
+                        "elements (count 0, which glTF does not allow)") != std::string::npos);
     const tinygltf::Model m = load_model(dir / "out" / "baked.gltf");
     const tinygltf::Primitive& floor = mesh_of(m, "floor").primitives.at(0);
     CHECK(floor.attributes.count("NORMAL") == 0);

@@ -68,6 +68,12 @@ bool read_raw(const tinygltf::Model& m, int index, std::vector<unsigned char>& o
         why = fmt::format("accessor {} has a layout hemirad does not copy", index);
         return false;
     }
+    // glTF asks for at least one element; an empty one (a web export's empty primitive, whose
+    // offset then ran past its empty bufferView) is said as what it is.
+    if (a.count == 0) {
+        why = fmt::format("accessor {} has no elements (count 0, which glTF does not allow)", index);
+        return false;
+    }
     // The first byte of `count` elements of `element` bytes, `stride` apart (0: packed), from
     // `offset` into a bufferView; null where the view, its buffer or the span does not exist.
     const auto span = [&](int view_index, std::size_t offset, std::size_t stride, std::size_t count,
