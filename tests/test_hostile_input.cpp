@@ -439,3 +439,36 @@ TEST_CASE("hostile input: 100,000 point lights say how long they will take befor
     CHECK(r.out.find("lights' hemicubes 256 / 200000") != std::string::npos);
     CHECK(!fs::exists(dir / "out"));
 }
+
+TEST_CASE("a bake's time warning says 'about' where it counts the solve and 'more than' where it does not",
+          "[cli][eta]") {
+    // The warning counted the final gather and not the progressive solve, and still said "about":
+    // the ww2 city's "about 61 s" took 6 minutes, 3 of them solving. The Cornell box with a gather
+    // of N 512 is said to take about 2 minutes; each bake is stopped once its solve starts.
+    TempDir dir;
+    for (const std::string solver : {"matrix", "progressive"}) {
+        const std::string script =
+            hemirad_command(
+                bake_args(kCornellBox, dir / solver, {"--gather", "512", "--solver", solver, "--no-checkpoint"})) +
+            " 2>" + solver + ".txt & pid=$!; i=0; while ! grep -q \"form factors on\" " + solver +
+            ".txt 2>/dev/null && [ $i -lt 1200 ]; do sleep 0.05; i=$((i+1)); done; kill -TERM $pid; wait $pid; "
+            "echo code=$?; cat " +
+            solver + ".txt";
+        const RunResult r = run_shell(dir, script);
+        INFO("solver " << solver << ", stdout: " << r.out);
+        CHECK(r.out.find("code=130") != std::string::npos);
+        const std::size_t warned = r.out.find("this bake is expected to take ");
+        REQUIRE(warned != std::string::npos);
+        CHECK(warned < r.out.find("form factors on"));
+        if (solver == "matrix") {
+            CHECK(r.out.find("expected to take about ") != std::string::npos);
+            CHECK(r.out.find("(solve ") != std::string::npos);
+            CHECK(r.out.find("besides the progressive solve") == std::string::npos);
+        } else {
+            CHECK(r.out.find("expected to take more than ") != std::string::npos);
+            CHECK(r.out.find("besides the progressive solve, whose passes are not known before it runs") !=
+                  std::string::npos);
+        }
+        CHECK(!fs::exists(dir / solver));
+    }
+}
