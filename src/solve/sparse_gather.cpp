@@ -111,15 +111,19 @@ struct NodeState {
     std::vector<double> area;       // a third of the area of each triangle around the vertex
 };
 
+// Twice the area of triangle t of `node`.
+double doubled_area(const output::WeldedNode& node, std::size_t t) {
+    const std::uint32_t* i = &node.indices[3 * t];
+    return glm::length(
+        glm::cross(node.positions[i[1]] - node.positions[i[0]], node.positions[i[2]] - node.positions[i[0]]));
+}
+
 // A third of each triangle's area to each of its corners: the surface a vertex stands for.
 std::vector<double> vertex_areas(const output::WeldedNode& node) {
     std::vector<double> area(node.positions.size(), 0.0);
     for (std::size_t t = 0; t < node.triangle_count(); ++t) {
-        const std::uint32_t* i = &node.indices[3 * t];
-        const double third = glm::length(glm::cross(node.positions[i[1]] - node.positions[i[0]],
-                                                    node.positions[i[2]] - node.positions[i[0]])) /
-                             6.0;
-        for (int a = 0; a < 3; ++a) area[i[a]] += third;
+        const double third = doubled_area(node, t) / 6.0;
+        for (int a = 0; a < 3; ++a) area[node.indices[3 * t + a]] += third;
     }
     return area;
 }
@@ -299,11 +303,7 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
         s.light.assign(node.positions.size(), glm::dvec3(0.0));
         result.vertices += node.positions.size();
         for (std::size_t v = 0; v < node.positions.size(); ++v) mean += luminance(h[n][v] - direct_at(n, v));
-        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
-            const glm::dvec3 a = node.positions[node.indices[3 * t]], b = node.positions[node.indices[3 * t + 1]],
-                             c = node.positions[node.indices[3 * t + 2]];
-            area += 0.5 * glm::length(glm::cross(b - a, c - a));
-        }
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) area += 0.5 * doubled_area(node, t);
     }
     if (result.vertices == 0) {
         out = std::move(current);
