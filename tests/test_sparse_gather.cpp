@@ -1,8 +1,8 @@
 // The sparse final gather (solve/sparse_gather.h): its interpolation weights by hand, its light at
 // the points it shoots against the full gather's, its floor under a lamp against the analytic
 // irradiance, and a bake of the Cornell box against the path-traced reference.
-#include <catch2/catch.hpp>
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +14,7 @@
 #include "formfactor/reference.h"
 #include "mesh/mesh.h"
 #include "output/welded_mesh.h"
+#include "reference_bake.h"
 #include "scene/scene.h"
 #include "solve/final_gather.h"
 #include "solve/sparse_gather.h"
@@ -165,28 +166,15 @@ TEST_CASE("sparse gather: the Cornell box with a third of its vertices shot, aga
     // bench --accuracy's reference (an independent path tracer, bench/reference/cornell_box):
     // without a gather the default bake's pixels are 6.7% off, with the full gather 1.39%; a
     // sparse gather of 4,000 points of its 10,370 vertices must take most of the way.
-    const std::filesystem::path root(HEMIRAD_SOURCE_DIR);
-    const bench::ImageReference reference =
-        bench::load_image_reference((root / "bench/reference/cornell_box").string());
-    const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hemirad-test-sparse-gather";
-    std::filesystem::remove_all(dir);
-    const auto bake_rms = [&](const std::string& name, long points, int gather) {
-        bake::Options o;
-        o.scene = (root / "scenes/cornell_box.gltf").string();
-        o.output = (dir / name).string();
-        o.gather_points = points;
-        o.gather = gather;
-        o.image_width = reference.width;
-        o.quiet = true;
-        o.no_checkpoint = true;
-        bake::run(o);
-        int width = 0, height = 0;
-        const std::vector<float> rgb = bench::read_rgb(dir / name / "render.exr", width, height);
-        std::ifstream in(dir / name / "report.json");
-        return std::pair(bench::compare_pixels(rgb, width, height, reference).rms, nlohmann::json::parse(in));
+    const auto bake_rms = [&](long points, int gather) {
+        test::Against a = test::bake_against_reference("cornell_box", [&](bake::Options& o) {
+            o.gather_points = points;
+            o.gather = gather;
+        });
+        return std::pair(a.errors.rms, std::move(a.report));
     };
-    const auto [none, none_report] = bake_rms("none", -1, 0);
-    const auto [sparse, report] = bake_rms("sparse", 4000, -1);
+    const auto [none, none_report] = bake_rms(-1, 0);
+    const auto [sparse, report] = bake_rms(4000, -1);
     CAPTURE(none, sparse, report["counts"]);
     const nlohmann::json& sg = report.at("counts").at("sparse_gather");
     CHECK(sg.at("budget") == 4000);
@@ -198,7 +186,6 @@ TEST_CASE("sparse gather: the Cornell box with a third of its vertices shot, aga
     CHECK(report.at("settings").at("gather_points") == 4000);
     CHECK(none > 0.05);
     CHECK(sparse < 0.6 * none);
-    std::filesystem::remove_all(dir);
 }
 
 TEST_CASE("sparse gather: few points correcting many vertices never make light negative", "[gather][sparse][bake]") {
@@ -283,26 +270,11 @@ TEST_CASE(
     //   nearest the area centroid of its piece of surface: 5.6%, 1.1% light.
     // - 4,000 points: the levels found nothing in doubt on a card of one point and shot 1,146
     //   (5.7%); the budget they leave spread over the cards: 3,910 points, 3.7%.
-    const std::filesystem::path root(HEMIRAD_SOURCE_DIR);
-    const bench::ImageReference reference =
-        bench::load_image_reference((root / "bench/reference/leaf_canopy").string());
-    const std::filesystem::path dir = std::filesystem::temp_directory_path() / "hemirad-test-sparse-canopy";
     for (const long points : {1000L, 4000L}) {
-        std::filesystem::remove_all(dir);
-        bake::Options o;
-        o.scene = (root / "scenes/leaf_canopy.gltf").string();
-        o.output = dir.string();
-        o.gather_points = points;
-        o.image_width = reference.width;
-        o.quiet = true;
-        o.no_checkpoint = true;
-        bake::run(o);
-        int width = 0, height = 0;
-        const std::vector<float> rgb = bench::read_rgb(dir / "render.exr", width, height);
-        const bench::PixelErrors e = bench::compare_pixels(rgb, width, height, reference);
-        std::ifstream in(dir / "report.json");
-        const nlohmann::json report = nlohmann::json::parse(in);
-        const nlohmann::json& sg = report.at("counts").at("sparse_gather");
+        const test::Against a =
+            test::bake_against_reference("leaf_canopy", [&](bake::Options& o) { o.gather_points = points; });
+        const bench::PixelErrors& e = a.errors;
+        const nlohmann::json& sg = a.report.at("counts").at("sparse_gather");
         CAPTURE(points, e.rms, e.mean, sg);
         CHECK(sg.at("points").get<long>() > 9 * points / 10);
         CHECK(sg.at("points").get<long>() <= points);
@@ -310,5 +282,4 @@ TEST_CASE(
         CHECK(std::abs(e.mean) < 0.02);
         if (points == 4000) CHECK(sg.at("covered").get<long>() > 2000);
     }
-    std::filesystem::remove_all(dir);
 }
