@@ -254,7 +254,7 @@ TEST_CASE("eta: a gather past its budget is planned as a sparse one of the budge
     const std::vector<StagePlan> all = hemirad::bake::predict_stages(w);
     const StagePlan* full = gather_of(all);
     REQUIRE(full != nullptr);
-    const double unit = hemirad::bake::gather_point_seconds(800.0);
+    const double unit = hemirad::bake::gather_point_seconds(800.0, 96);
     CHECK(full->unit_seconds == Approx(unit));
     const double refined = 8000.0 * 3.6, points = refined * 1.3;
     CHECK(full->units == Approx(points * (1.0 + 0.05 * 3.0 + 0.3)));
@@ -267,18 +267,18 @@ TEST_CASE("eta: a gather past its budget is planned as a sparse one of the budge
     CHECK(gather_of(hemirad::bake::predict_stages(w))->units == Approx(1000.0));
     // Unless given, the budget is also what the model allows the drawn mesh: here far above.
     w.gather_points_given = false;
-    CHECK(hemirad::bake::timed_gather_budget(800.0) > 1000.0);
+    CHECK(hemirad::bake::timed_gather_budget(800.0, 96) > 1000.0);
     CHECK(gather_of(hemirad::bake::predict_stages(w))->units == Approx(1000.0));
     // A drawn mesh so large that the model's time allows fewer: those, and never below the floor.
     w.gather_budget = 50000;
     w.shape.counts.elements = 80000;
     w.gather_cluster_cells = 10.0 * refined;  // as many cells drawn as refined elements
     const double drawn = 800.0 + 10.0 * refined;
-    const double timed = std::floor(hemirad::bake::kGatherSeconds / hemirad::bake::gather_point_seconds(drawn));
+    const double timed = std::floor(hemirad::bake::kGatherSeconds / hemirad::bake::gather_point_seconds(drawn, 96));
     REQUIRE(timed < 10.0 * points);
     REQUIRE(timed < 50000.0);
-    CHECK(hemirad::bake::timed_gather_budget(drawn) == Approx(std::max(timed, hemirad::bake::kMinGatherPoints)));
+    CHECK(hemirad::bake::timed_gather_budget(drawn, 96) == Approx(std::max(timed, hemirad::bake::kMinGatherPoints)));
     CHECK(gather_of(hemirad::bake::predict_stages(w))->units ==
           Approx(std::max(timed, hemirad::bake::kMinGatherPoints)));
-    CHECK(hemirad::bake::timed_gather_budget(1e12) == hemirad::bake::kMinGatherPoints);
+    CHECK(hemirad::bake::timed_gather_budget(1e12, 96) == hemirad::bake::kMinGatherPoints);
 }

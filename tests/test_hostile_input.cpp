@@ -444,12 +444,12 @@ TEST_CASE("a bake's time warning says 'about' where it counts the solve and 'mor
           "[cli][eta]") {
     // The warning counted the final gather and not the progressive solve, and still said "about":
     // the ww2 city's "about 61 s" took 6 minutes, 3 of them solving. The Cornell box with a gather
-    // of N 512 is said to take about 2 minutes; each bake is stopped once its solve starts.
+    // of N 1024 is said to take about 3 minutes; each bake is stopped once its solve starts.
     TempDir dir;
     for (const std::string solver : {"matrix", "progressive"}) {
         const std::string script =
             hemirad_command(
-                bake_args(kCornellBox, dir / solver, {"--gather", "512", "--solver", solver, "--no-checkpoint"})) +
+                bake_args(kCornellBox, dir / solver, {"--gather", "1024", "--solver", solver, "--no-checkpoint"})) +
             " 2>" + solver + ".txt & pid=$!; i=0; while ! grep -q \"form factors on\" " + solver +
             ".txt 2>/dev/null && [ $i -lt 1200 ]; do sleep 0.05; i=$((i+1)); done; kill -TERM $pid; wait $pid; "
             "echo code=$?; cat " +

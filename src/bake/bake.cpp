@@ -327,10 +327,13 @@ std::string checkpoint_fingerprint(const Plan& p, const Setup& s, const Meshed& 
 TimeEstimate say_expected_time(const Plan& p, const Meshed& m, Warnings& warnings) {
     const BakeShape& shape = m.shape;
     const double refined = shape.counts.elements * (shape.refine_levels > 0 ? 2.0 : 1.0);
-    const double budget = double(gather_budget(p));
+    // The gather draws about what the mesh before refinement would (its patches and cluster faces).
+    const double drawn = p.o.gather > 0 ? double(gather_drawn(m.mesh)) : 0.0;
+    double budget = double(gather_budget(p));
+    if (budget > 0.0 && p.o.gather_points < 0) budget = std::min(budget, timed_gather_budget(drawn, p.o.gather));
     const double gathered = p.o.gather > 0 ? (budget > 0.0 ? std::min(refined, budget) : refined) : 0.0;
-    const TimeEstimate expected =
-        expected_bake_time(shape, m.solver, double(m.mesh.lights.size()), gathered, p.o.gather);
+    const TimeEstimate expected = expected_bake_time(shape, m.solver, double(m.mesh.lights.size()), gathered,
+                                                     p.o.gather > 0 ? gather_point_seconds(drawn, p.o.gather) : 0.0);
     // The progressive solve's passes are not counted (expected_bake_time): the time said is then
     // what the rest takes, and says so (the ww2 city's "about 61 s" took 6 min, 3 of them solving).
     const bool solve_counted = m.solver == "matrix";

@@ -142,8 +142,9 @@ double refinement_room(const BakeShape& s, const std::string& solver, double lim
 
 namespace {
 
-// A hemicube of a batch (lights', the final gather's) on OpenCL, per unit of the element scale
-// below: its cells' cost at N = 256, or its elements' setup where N is small. Measured on 2 PoCL
+// A hemicube of a batch (the lights'; the final gather has its own model, stage_progress.h) on
+// OpenCL, per unit of the element scale below: its cells' cost at N = 256, or its elements' setup
+// where N is small. Measured on 2 PoCL
 // cores: 200,000 point lights in the closed room (N = 256) 0.71 ms a hemicube, the Cornell box's
 // gather (N = 96) 0.25 ms a point; --gather 32 on a 300k-element jungle about 2 ms a point.
 constexpr double kBatchedCellSeconds = 1.42e-3, kBatchedSetupSeconds = 1.9e-4;
@@ -189,7 +190,7 @@ std::string TimeEstimate::describe() const {
 }
 
 TimeEstimate expected_bake_time(const BakeShape& s, const std::string& solver, double light_hemicubes,
-                                double gather_points, int gather) {
+                                double gather_points, double gather_point_seconds) {
     TimeEstimate e;
     // The matrix solve is counted work (a row per patch, then sweeps); progressive shooting's
     // passes depend on how the light spreads, and the model of them, made for choosing a solver,
@@ -197,8 +198,7 @@ TimeEstimate expected_bake_time(const BakeShape& s, const std::string& solver, d
     if (solver == "matrix") e.parts.emplace_back("solve", expected_times(s).matrix);
     if (light_hemicubes > 0.0)
         e.parts.emplace_back("lights' hemicubes", light_hemicubes * batched_shot_seconds(s, s.hemicube));
-    if (gather > 0 && gather_points > 0.0)
-        e.parts.emplace_back("final gather", gather_points * batched_shot_seconds(s, gather));
+    if (gather_points > 0.0) e.parts.emplace_back("final gather", gather_points * gather_point_seconds);
     return e;
 }
 

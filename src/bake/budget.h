@@ -63,8 +63,8 @@ struct SolverTimes {
 SolverTimes expected_times(const BakeShape& shape);
 
 // The model's parts, for the progress line's time model (eta.h): a solver's hemicube of
-// resolution `hemicube` on the mesh of `shape`; a batched one (the lights', refinement's
-// re-gather, the final gather); the progressive passes expected (about three rounds of
+// resolution `hemicube` on the mesh of `shape`; a batched one (the lights'; the final gather's is
+// stage_progress.h's gather_point_seconds); the progressive passes expected (about three rounds of
 // √(924·P)).
 double shot_seconds(const BakeShape& shape, int hemicube);
 double batched_shot_seconds(const BakeShape& shape, int hemicube);
@@ -73,8 +73,9 @@ double expected_passes(const BakeShape& shape);
 // Seconds the counted work of a bake is expected to take, by part, in the model of
 // expected_times (2 CPU cores through PoCL; a GPU is faster): the matrix solve's rows and sweeps
 // (not progressive shooting, whose passes are not known before), the lights' hemicubes
-// (`light_hemicubes`), and the final gather (`gather_points` hemicubes of resolution `gather`,
-// the first pass's; the later passes re-use its rows). Said before a bake that would take minutes.
+// (`light_hemicubes`), and the final gather (`gather_points` first hemicubes of
+// `gather_point_seconds` each, as stage_progress.h's model has them; the later passes re-use
+// their rows). Said before a bake that would take minutes.
 struct TimeEstimate {
     std::vector<std::pair<std::string, double>> parts;  // (what, seconds)
     double total() const;
@@ -82,7 +83,7 @@ struct TimeEstimate {
 };
 std::string format_duration(double seconds);  // "45 s", "12 min", "2.5 h"
 TimeEstimate expected_bake_time(const BakeShape& shape, const std::string& solver, double light_hemicubes,
-                                double gather_points, int gather);
+                                double gather_points, double gather_point_seconds);
 
 // `auto`'s choice: the matrix where the bake with it needs at most half the memory limit and it
 // is expected to be no slower (timed as on OpenCL whatever the engine, so that every device bakes

@@ -50,7 +50,7 @@ std::size_t gather_budget(const Plan& plan) {
 std::size_t gather_budget(const Plan& plan, const mesh::Mesh& mesh) {
     const std::size_t budget = gather_budget(plan);
     if (budget == 0 || plan.o.gather_points >= 0) return budget;
-    return std::min(budget, static_cast<std::size_t>(timed_gather_budget(double(gather_drawn(mesh)))));
+    return std::min(budget, static_cast<std::size_t>(timed_gather_budget(double(gather_drawn(mesh)), plan.o.gather)));
 }
 
 std::size_t gather_drawn(const mesh::Mesh& mesh) {

@@ -67,13 +67,16 @@ constexpr double kPassSecondsPerElement = 3.3e-8, kPassSeconds256 = 5e-4;
 // Gather refinement's new vertices, as a share of the gather's (at most half again); a vertex's
 // later passes, as a share of its first (they re-use its row where the budget kept it).
 constexpr double kGatherRefineShare = 0.3;
-// A gather vertex's first pass: a fixed part (its hemicube's set-up and drawing, its row's light
-// on the host) and a part per element it draws (solve::gather_mesh: a planar patch one, a
-// cluster's face one). Fitted on six bakes (the Cornell box, the atrium and the lit room at
-// the default quality, N 96 and four passes; city:4k, city:10k and furniture:20k at draft, N 32 and
-// one pass: 61–751 µs a vertex, 569–26,000 drawn), within 25% of each; the hemicube's N made no
-// clear difference.
-constexpr double kGatherVertexSeconds = 2e-4, kGatherSecondsPerDrawn = 2e-8;
+// A gather vertex's first pass, at the hemicube's N: a part that grows as the square root of the
+// elements the gather draws (solve::gather_mesh: a planar patch one, a cluster's face one; from one
+// point most of them are culled in groups, behind its plane or hidden, so the cost grows well below
+// linearly), a little with N, and its cells' part (3N² of them). Measured on 2 PoCL cores with the
+// gather stage's host work (the sparse gather's levels and interpolation) in it: seven public
+// scenes at the default (N 96; 32k–526k drawn, 2.9–10.2 ms a point) fit a square root (exponent
+// 0.53 free), where the linear model before was 1.0–3.4× short; the Cornell box at N 32 to 384
+// (742 drawn, 0.24–1.74 ms) and an inn at N 32 to 192 (32k drawn, 2.9–5.2 ms) set the N parts.
+// Measured over the model: 0.70–1.30 on those fourteen bakes.
+constexpr double kGatherSecondsPerRootDrawn = 1.7e-5, kGatherSecondsPerCell = 2.5e-9;
 constexpr double kLaterPassShare = 0.05;
 // The matrix solve measured against the budget's model (bake/budget.h, made for choosing a
 // solver): 0.27–0.72 on six generated and bundled bakes (the Cornell box, the atrium, the lit
@@ -115,10 +118,14 @@ double expected_solve_passes(const WorkCounts& w, double holders) {
     return passes;
 }
 
-double gather_point_seconds(double drawn) { return kGatherVertexSeconds + kGatherSecondsPerDrawn * drawn; }
+double gather_point_seconds(double drawn, int hemicube) {
+    const double n = double(std::max(8, hemicube));
+    return kGatherSecondsPerRootDrawn * std::sqrt(std::max(1.0, drawn)) * (0.6 + 0.4 * n / 96.0) +
+           kGatherSecondsPerCell * 3.0 * n * n;
+}
 
-double timed_gather_budget(double drawn) {
-    return std::max(kMinGatherPoints, std::floor(kGatherSeconds / gather_point_seconds(drawn)));
+double timed_gather_budget(double drawn, int hemicube) {
+    return std::max(kMinGatherPoints, std::floor(kGatherSeconds / gather_point_seconds(drawn, hemicube)));
 }
 
 double expected_pass_seconds(const BakeShape& s) {
@@ -154,12 +161,12 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         const double points = refined * kGatherVerticesPerElement;
         const double drawn = w.gather_planar_patches + w.gather_cluster_cells;
         double budget = w.gather_budget;
-        if (budget > 0.0 && !w.gather_points_given) budget = std::min(budget, timed_gather_budget(drawn));
+        if (budget > 0.0 && !w.gather_points_given) budget = std::min(budget, timed_gather_budget(drawn, w.gather));
         const bool sparse = budget > 0.0 && points > budget;
         const double units =
             sparse ? budget
                    : points * (1.0 + kLaterPassShare * (passes - 1.0) + (w.gather_refine ? kGatherRefineShare : 0.0));
-        out.push_back({"gather", Cost::hemicube, units, gather_point_seconds(drawn)});
+        out.push_back({"gather", Cost::hemicube, units, gather_point_seconds(drawn, w.gather)});
     }
     double output = 0.0;
     for (const auto& step : predict_output(refined, w.triangles, s.pixels)) output += step.second;

@@ -57,16 +57,16 @@ double expected_solve_passes(const WorkCounts& w, double holders);
 // A progressive pass's seconds on 2 CPU cores through PoCL: per element of the mesh (set up,
 // drawn, received), and a hemicube's fixed part at its N.
 double expected_pass_seconds(const BakeShape& shape);
-// A gather vertex's first hemicube, by the model (2 CPU cores), for a drawn mesh of `drawn` elements
-// (solve::gather_mesh).
-double gather_point_seconds(double drawn);
+// A gather vertex's first hemicube of resolution `hemicube`, by the model (2 CPU cores), for a
+// drawn mesh of `drawn` elements (solve::gather_mesh), the gather stage's host work included.
+double gather_point_seconds(double drawn, int hemicube);
 // The gather hemicubes the quality's gather shoots at most on such a drawn mesh, unless
 // --gather-points says: as many as the model expects to take kGatherSeconds, at least
-// kMinGatherPoints (a scene of 931k output vertices drawing 440k elements: about 10,000 at 9 ms a
-// hemicube, where every vertex would take 2 h 20 min). A count, not a time: the same on every
+// kMinGatherPoints (the 147k-triangle ww2 city, 807k output vertices drawing 242k elements: about
+// 10,700 at 8.4 ms a hemicube, where every vertex would take 2 h). A count, not a time: the same on every
 // device, so the same bytes.
 inline constexpr double kGatherSeconds = 90.0, kMinGatherPoints = 2000.0;
-double timed_gather_budget(double drawn);
+double timed_gather_budget(double drawn, int hemicube);
 // The progressive solve's passes expected from the plan's `planned` and the decay's `fitted`
 // (stage_progress.cpp says how).
 double blend_passes(double planned, double fitted, const DecayFit& decay, double threshold);
