@@ -144,9 +144,9 @@ namespace {
 
 // A hemicube of a batch (the lights'; the final gather has its own model, stage_progress.h) on
 // OpenCL, per unit of the element scale below: its cells' cost at N = 256, or its elements' setup
-// where N is small. Measured on 2 PoCL
-// cores: 200,000 point lights in the closed room (N = 256) 0.71 ms a hemicube, the Cornell box's
-// gather (N = 96) 0.25 ms a point; --gather 32 on a 300k-element jungle about 2 ms a point.
+// where N is small. Measured on 2 PoCL cores: 200,000 point lights in the closed room (N = 256)
+// 0.71 ms a hemicube, the Cornell box's gather (N = 96) 0.25 ms a point; --gather 32 on a
+// 300k-element jungle about 2 ms a point.
 constexpr double kBatchedCellSeconds = 1.42e-3, kBatchedSetupSeconds = 1.9e-4;
 
 }  // namespace
