@@ -9,6 +9,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 namespace hemirad::parallel {
 
@@ -31,6 +32,14 @@ void for_each(std::size_t count, std::size_t grain, const Body& body) {
     for_ranges(count, grain, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) body(i);
     });
+}
+
+// Sorts [begin, end) by operator< on the host's threads. Only for values whose order is total
+// and whose equal values are identical (keys, not records): which of two equal values comes first
+// may depend on the threads.
+template <typename Iterator>
+void sort(Iterator begin, Iterator end) {
+    tbb::parallel_sort(begin, end);
 }
 
 // The threads the host stages may use now (all cores unless a ThreadLimit holds).

@@ -72,72 +72,87 @@ void fill_hidden(const output::WeldedMesh& welded, const std::vector<std::pair<s
     }
 }
 
+// gather_points of one node, appended to `points`.
+void node_gather_points(const output::WeldedNode& node, std::vector<mesh::GatherPoint>& points) {
+    // Per vertex: the sum of the centroids of the triangles around it, and their count.
+    std::vector<glm::dvec3> around(node.positions.size(), glm::dvec3(0.0));
+    std::vector<int> count(node.positions.size(), 0);
+    for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+        const std::uint32_t* v = &node.indices[3 * t];
+        const glm::dvec3 c = (node.positions[v[0]] + node.positions[v[1]] + node.positions[v[2]]) / 3.0;
+        for (int k = 0; k < 3; ++k) {
+            around[v[k]] += c;
+            ++count[v[k]];
+        }
+    }
+    // Vertices on an edge of one triangle only: where the surface ends, folds at a crease or
+    // meets another node (each side of a crease has its own vertices).
+    std::vector<char> rim(node.positions.size(), 0);
+    {
+        std::vector<std::uint64_t> edges(3 * node.triangle_count());  // (lower, higher) vertex
+        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+            for (int k = 0; k < 3; ++k) {
+                std::uint32_t a = node.indices[3 * t + k], b = node.indices[3 * t + (k + 1) % 3];
+                if (a > b) std::swap(a, b);
+                edges[3 * t + std::size_t(k)] = (std::uint64_t(a) << 32) | b;
+            }
+        }
+        parallel::sort(edges.begin(), edges.end());
+        for (std::size_t i = 0; i < edges.size();) {
+            std::size_t j = i + 1;
+            while (j < edges.size() && edges[j] == edges[i]) ++j;
+            if (j - i == 1) rim[edges[i] >> 32] = rim[edges[i] & 0xffffffffu] = 1;
+            i = j;
+        }
+    }
+    // On a convex curve the centroids lie behind the surface: a point moved toward them would
+    // look out from under its own triangles (of a double-sided surface, at their other side's
+    // light: a closed emitting cylinder's outer vertices gathered its inside, twice the lamp).
+    // It is raised along the normal onto the plane of every triangle around it that it lies
+    // behind (by more than rounding; never on a flat or concave surface).
+    std::vector<double> raise(node.positions.size(), 0.0);
+    std::vector<glm::dvec3> moved(node.positions.size());
+    for (std::size_t v = 0; v < node.positions.size(); ++v) {
+        moved[v] = node.positions[v];
+        if (count[v] > 0)
+            moved[v] += (rim[v] ? kGatherRimInset : kGatherInset) * (around[v] / double(count[v]) - node.positions[v]);
+    }
+    for (std::size_t t = 0; t < node.triangle_count(); ++t) {
+        const std::uint32_t* v = &node.indices[3 * t];
+        const glm::dvec3 a = node.positions[v[0]], b = node.positions[v[1]], c = node.positions[v[2]];
+        const glm::dvec3 cross = glm::cross(b - a, c - a);
+        const double length = glm::length(cross);
+        if (!(length > 0.0)) continue;
+        const glm::dvec3 n = cross / length;
+        const double size = std::max({glm::length(b - a), glm::length(c - b), glm::length(a - c)});
+        for (int k = 0; k < 3; ++k) {
+            const double behind = -glm::dot(n, moved[v[k]] - node.positions[v[k]]);
+            const double facing = glm::dot(n, node.normals[v[k]]);
+            if (behind > 1e-9 * size && facing > 0.1) raise[v[k]] = std::max(raise[v[k]], behind / facing);
+        }
+    }
+    for (std::size_t v = 0; v < node.positions.size(); ++v) {
+        mesh::GatherPoint p;
+        p.position = moved[v] + raise[v] * node.normals[v];
+        p.normal = node.normals[v];
+        points.push_back(p);
+    }
+}
+
 }  // namespace
 
 std::vector<mesh::GatherPoint> gather_points(const output::WeldedMesh& welded,
                                              const std::function<bool(std::size_t node)>& gathered) {
+    // Each node's points on the host's threads, then in node order.
+    std::vector<std::vector<mesh::GatherPoint>> of(welded.nodes.size());
+    parallel::for_each(welded.nodes.size(), 1, [&](std::size_t n) {
+        if (gathered(n)) node_gather_points(welded.nodes[n], of[n]);
+    });
+    std::size_t total = 0;
+    for (const auto& points : of) total += points.size();
     std::vector<mesh::GatherPoint> points;
-    for (std::size_t n = 0; n < welded.nodes.size(); ++n) {
-        if (!gathered(n)) continue;
-        const output::WeldedNode& node = welded.nodes[n];
-        // Per vertex: the sum of the centroids of the triangles around it, and their count.
-        std::vector<glm::dvec3> around(node.positions.size(), glm::dvec3(0.0));
-        std::vector<int> count(node.positions.size(), 0);
-        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
-            const std::uint32_t* v = &node.indices[3 * t];
-            const glm::dvec3 c = (node.positions[v[0]] + node.positions[v[1]] + node.positions[v[2]]) / 3.0;
-            for (int k = 0; k < 3; ++k) {
-                around[v[k]] += c;
-                ++count[v[k]];
-            }
-        }
-        // Vertices on an edge of one triangle only: where the surface ends, folds at a crease or
-        // meets another node (each side of a crease has its own vertices).
-        std::vector<char> rim(node.positions.size(), 0);
-        {
-            std::unordered_map<std::uint64_t, int> uses;
-            for (std::size_t t = 0; t < node.triangle_count(); ++t) {
-                for (int k = 0; k < 3; ++k) {
-                    std::uint32_t a = node.indices[3 * t + k], b = node.indices[3 * t + (k + 1) % 3];
-                    if (a > b) std::swap(a, b);
-                    ++uses[(std::uint64_t(a) << 32) | b];
-                }
-            }
-            for (const auto& [edge, count_of] : uses)
-                if (count_of == 1) rim[edge >> 32] = rim[edge & 0xffffffffu] = 1;
-        }
-        // On a convex curve the centroids lie behind the surface: a point moved toward them would
-        // look out from under its own triangles (of a double-sided surface, at their other side's
-        // light: a closed emitting cylinder's outer vertices gathered its inside, twice the lamp).
-        // It is raised along the normal onto the plane of every triangle around it that it lies
-        // behind (by more than rounding; never on a flat or concave surface).
-        std::vector<double> raise(node.positions.size(), 0.0);
-        std::vector<glm::dvec3> moved(node.positions.size());
-        for (std::size_t v = 0; v < node.positions.size(); ++v) {
-            moved[v] = node.positions[v];
-            if (count[v] > 0) moved[v] += (rim[v] ? kGatherRimInset : kGatherInset) * (around[v] / double(count[v]) - node.positions[v]);
-        }
-        for (std::size_t t = 0; t < node.triangle_count(); ++t) {
-            const std::uint32_t* v = &node.indices[3 * t];
-            const glm::dvec3 a = node.positions[v[0]], b = node.positions[v[1]], c = node.positions[v[2]];
-            const glm::dvec3 cross = glm::cross(b - a, c - a);
-            const double length = glm::length(cross);
-            if (!(length > 0.0)) continue;
-            const glm::dvec3 n = cross / length;
-            const double size = std::max({glm::length(b - a), glm::length(c - b), glm::length(a - c)});
-            for (int k = 0; k < 3; ++k) {
-                const double behind = -glm::dot(n, moved[v[k]] - node.positions[v[k]]);
-                const double facing = glm::dot(n, node.normals[v[k]]);
-                if (behind > 1e-9 * size && facing > 0.1) raise[v[k]] = std::max(raise[v[k]], behind / facing);
-            }
-        }
-        for (std::size_t v = 0; v < node.positions.size(); ++v) {
-            mesh::GatherPoint p;
-            p.position = moved[v] + raise[v] * node.normals[v];
-            p.normal = node.normals[v];
-            points.push_back(p);
-        }
-    }
+    points.reserve(total);
+    for (const auto& node_points : of) points.insert(points.end(), node_points.begin(), node_points.end());
     return points;
 }
 

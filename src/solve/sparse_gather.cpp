@@ -83,6 +83,10 @@ struct CellKey {
     std::uint32_t component;
     std::int64_t x, y, z;
     bool operator==(const CellKey& o) const { return component == o.component && x == o.x && y == o.y && z == o.z; }
+    bool operator!=(const CellKey& o) const { return !(*this == o); }
+    bool operator<(const CellKey& o) const {
+        return std::tie(component, x, y, z) < std::tie(o.component, o.x, o.y, o.z);
+    }
 };
 struct CellHash {
     std::size_t operator()(const CellKey& k) const {
@@ -175,6 +179,22 @@ std::vector<std::pair<double, std::uint32_t>> pick_per_cell(const output::Welded
     for (const auto& [key, b] : best) out.push_back({std::get<0>(b), std::get<2>(b)});
     std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
     return out;
+}
+
+// How many points pick_per_cell(node, s, size, score) returns where every score is > 0 (one per
+// surface in each cell it touches), counted without picking them, on the host's threads: the
+// seeds' cell size is searched by this count (up to 41 tries over every vertex of a scene of
+// millions, where there are more surfaces than seeds).
+std::size_t cells_held(const output::WeldedNode& node, const NodeState& s, double size) {
+    std::vector<CellKey> keys(node.positions.size());
+    parallel::for_ranges(keys.size(), 1 << 14, [&](std::size_t begin, std::size_t end) {
+        glm::dvec3 centre;
+        for (std::size_t v = begin; v < end; ++v) keys[v] = cell_of(node.positions[v], s.component[v], size, centre);
+    });
+    parallel::sort(keys.begin(), keys.end());
+    std::size_t held = keys.empty() ? 0 : 1;
+    for (std::size_t i = 1; i < keys.size(); ++i) held += keys[i] != keys[i - 1] ? 1 : 0;
+    return held;
 }
 
 // The K nearest gathered vertices of every vertex along the graph's edges: a Dijkstra from all of
@@ -375,16 +395,20 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     double size = std::sqrt(std::max(area, 1e-300) / double(seed_budget));
     std::vector<std::vector<std::pair<double, std::uint32_t>>> seeds(node_count);
     for (int attempt = 0;; ++attempt) {
+        std::vector<std::size_t> held(node_count, 0);
         parallel::for_each(node_count, 1, [&](std::size_t n) {
-            if (!is_gathered[n]) return;
-            const std::vector<double> one(welded.nodes[n].positions.size(), 1.0);
-            seeds[n] = pick_per_cell(welded.nodes[n], state[n], size, one, /*middle=*/true);
+            if (is_gathered[n]) held[n] = cells_held(welded.nodes[n], state[n], size);
         });
         std::size_t count = 0;
-        for (std::size_t n = 0; n < node_count; ++n) count += seeds[n].size();
+        for (std::size_t n = 0; n < node_count; ++n) count += held[n];
         if (count <= seed_budget || attempt == 40) break;
         size *= std::max(1.1, std::sqrt(double(count) / double(seed_budget)));
     }
+    parallel::for_each(node_count, 1, [&](std::size_t n) {
+        if (!is_gathered[n]) return;
+        const std::vector<double> one(welded.nodes[n].positions.size(), 1.0);
+        seeds[n] = pick_per_cell(welded.nodes[n], state[n], size, one, /*middle=*/true);
+    });
     // Still too many (more separate surfaces than the share): the surfaces with most vertices
     // keep theirs (ties: node, then vertex order); the others are not gathered.
     {
