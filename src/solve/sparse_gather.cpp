@@ -191,6 +191,8 @@ std::size_t cells_held(const output::WeldedNode& node, const NodeState& s, doubl
         glm::dvec3 centre;
         for (std::size_t v = begin; v < end; ++v) keys[v] = cell_of(node.positions[v], s.component[v], size, centre);
     });
+    // Neighbours in the vertex order mostly share a cell: runs of one key are sorted as one.
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
     parallel::sort(keys.begin(), keys.end());
     std::size_t held = keys.empty() ? 0 : 1;
     for (std::size_t i = 1; i < keys.size(); ++i) held += keys[i] != keys[i - 1] ? 1 : 0;
