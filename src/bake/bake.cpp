@@ -324,16 +324,15 @@ std::string checkpoint_fingerprint(const Plan& p, const Setup& s, const Meshed& 
 }
 
 // Work that would take minutes is said before it starts (by the model of 2 CPU cores).
-TimeEstimate say_expected_time(const Plan& p, const Meshed& m, Warnings& warnings) {
+// `w`: work_counts of the bake, whose drawn mesh the gather's cost and budget are taken from.
+TimeEstimate say_expected_time(const Plan& p, const Meshed& m, const WorkCounts& w, Warnings& warnings) {
     const BakeShape& shape = m.shape;
     const double refined = shape.counts.elements * (shape.refine_levels > 0 ? 2.0 : 1.0);
-    // The gather draws about what the mesh before refinement would (its patches and cluster faces).
-    const double drawn = p.o.gather > 0 ? double(gather_drawn(m.mesh)) : 0.0;
-    double budget = double(gather_budget(p));
-    if (budget > 0.0 && p.o.gather_points < 0) budget = std::min(budget, timed_gather_budget(drawn, p.o.gather));
+    const double budget = planned_gather_budget(w);
     const double gathered = p.o.gather > 0 ? (budget > 0.0 ? std::min(refined, budget) : refined) : 0.0;
-    const TimeEstimate expected = expected_bake_time(shape, m.solver, double(m.mesh.lights.size()), gathered,
-                                                     p.o.gather > 0 ? gather_point_seconds(drawn, p.o.gather) : 0.0);
+    const TimeEstimate expected =
+        expected_bake_time(shape, m.solver, double(m.mesh.lights.size()), gathered,
+                           p.o.gather > 0 ? gather_point_seconds(gather_drawn(w), p.o.gather) : 0.0);
     // The progressive solve's passes are not counted (expected_bake_time): the time said is then
     // what the rest takes, and says so (the ww2 city's "about 61 s" took 6 min, 3 of them solving).
     const bool solve_counted = m.solver == "matrix";
@@ -560,7 +559,8 @@ void run(const Options& options, Progress& shown) {
     t0 = Clock::now();
     Meshed meshed = build_mesh(plan, setup, scene);
     timings.mesh = seconds_since(t0);
-    progress.plan_rest(work_counts(plan, setup, meshed, scene));
+    const WorkCounts counts = work_counts(plan, setup, meshed, scene);
+    progress.plan_rest(counts);
     progress.begin_stage("engines");  // until the solve begins: the device's set-up
 
     formfactor::Settings ff;
@@ -575,7 +575,7 @@ void run(const Options& options, Progress& shown) {
     Warnings warnings(progress);
     for (const std::string& w : scene.warnings) warnings.add(w, /*always=*/true);
     if (!choice.warning.empty()) warnings.add(choice.warning, /*always=*/true);
-    const TimeEstimate expected = say_expected_time(plan, meshed, warnings);
+    const TimeEstimate expected = say_expected_time(plan, meshed, counts, warnings);
     plan_checkpoints(checkpoints, plan, setup, meshed, expected.total(), warnings, progress);
 
     const std::size_t elements_before = meshed.mesh.elements.size();

@@ -128,6 +128,16 @@ double timed_gather_budget(double drawn, int hemicube) {
     return std::max(kMinGatherPoints, std::floor(kGatherSeconds / gather_point_seconds(drawn, hemicube)));
 }
 
+double gather_drawn(const WorkCounts& w) {
+    return w.gather_planar_patches + w.gather_cluster_cells;
+}
+
+double planned_gather_budget(const WorkCounts& w) {
+    if (w.gather_budget > 0.0 && !w.gather_points_given)
+        return std::min(w.gather_budget, timed_gather_budget(gather_drawn(w), w.gather));
+    return w.gather_budget;
+}
+
 double expected_pass_seconds(const BakeShape& s) {
     const double n = n_share(s.hemicube);
     return kPassSeconds256 * n * n + s.counts.elements * kPassSecondsPerElement;
@@ -159,9 +169,8 @@ std::vector<StagePlan> predict_stages(const WorkCounts& w) {
         // gather: the budget's hemicubes, one pass.
         const double passes = std::max(1, w.gather_passes);
         const double points = refined * kGatherVerticesPerElement;
-        const double drawn = w.gather_planar_patches + w.gather_cluster_cells;
-        double budget = w.gather_budget;
-        if (budget > 0.0 && !w.gather_points_given) budget = std::min(budget, timed_gather_budget(drawn, w.gather));
+        const double drawn = gather_drawn(w);
+        const double budget = planned_gather_budget(w);
         const bool sparse = budget > 0.0 && points > budget;
         const double units =
             sparse ? budget

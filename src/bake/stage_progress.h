@@ -67,6 +67,10 @@ double gather_point_seconds(double drawn, int hemicube);
 // device, so the same bytes.
 inline constexpr double kGatherSeconds = 90.0, kMinGatherPoints = 2000.0;
 double timed_gather_budget(double drawn, int hemicube);
+// The elements a gather of these counts draws, and the hemicubes it is allowed (0: no limit): the
+// budget, and unless --gather-points is given, at most what the time model allows them.
+double gather_drawn(const WorkCounts& w);
+double planned_gather_budget(const WorkCounts& w);
 // The progressive solve's passes expected from the plan's `planned` and the decay's `fitted`
 // (stage_progress.cpp says how).
 double blend_passes(double planned, double fitted, const DecayFit& decay, double threshold);
