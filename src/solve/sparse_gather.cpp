@@ -181,22 +181,42 @@ std::vector<std::pair<double, std::uint32_t>> pick_per_cell(const output::Welded
     return out;
 }
 
-// How many points pick_per_cell(node, s, size, score) returns where every score is > 0 (one per
-// surface in each cell it touches), counted without picking them, on the host's threads: the
-// seeds' cell size is searched by this count (up to 41 tries over every vertex of a scene of
-// millions, where there are more surfaces than seeds).
-std::size_t cells_held(const output::WeldedNode& node, const NodeState& s, double size) {
+// How many points pick_per_cell(node, s, size, *score) returns (one per surface in each cell its
+// candidates touch; no `score`: every vertex a candidate), counted without picking them, on the
+// host's threads: a cell size is searched by this count (grown_cells: up to 41 tries over every
+// vertex of a scene of millions, where there are more surfaces than seeds).
+std::size_t cells_held(const output::WeldedNode& node, const NodeState& s, double size,
+                       const std::vector<double>* score) {
     std::vector<CellKey> keys(node.positions.size());
+    std::vector<char> kept(node.positions.size());
     parallel::for_ranges(keys.size(), 1 << 14, [&](std::size_t begin, std::size_t end) {
         glm::dvec3 centre;
-        for (std::size_t v = begin; v < end; ++v) keys[v] = cell_of(node.positions[v], s.component[v], size, centre);
+        for (std::size_t v = begin; v < end; ++v) {
+            kept[v] = !score || (*score)[v] > 0.0 ? 1 : 0;
+            if (kept[v]) keys[v] = cell_of(node.positions[v], s.component[v], size, centre);
+        }
     });
+    std::size_t at = 0;
+    for (std::size_t v = 0; v < keys.size(); ++v)
+        if (kept[v]) keys[at++] = keys[v];
+    keys.resize(at);
     // Neighbours in the vertex order mostly share a cell: runs of one key are sorted as one.
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
     parallel::sort(keys.begin(), keys.end());
     std::size_t held = keys.empty() ? 0 : 1;
     for (std::size_t i = 1; i < keys.size(); ++i) held += keys[i] != keys[i - 1] ? 1 : 0;
     return held;
+}
+
+// The cell size, from `size` grown at least 1.1× a try (41 tries at most, then as it is), at which
+// `count(size)` points (per cell, summed over the nodes) fit in `room`.
+template <typename Count>
+double grown_cells(double size, std::size_t room, const Count& count) {
+    for (int attempt = 0;; ++attempt) {
+        const std::size_t held = count(size);
+        if (held <= room || attempt == 40) return size;
+        size *= std::max(1.1, std::sqrt(double(held) / double(room)));
+    }
 }
 
 // The K nearest gathered vertices of every vertex along the graph's edges: a Dijkstra from all of
@@ -394,18 +414,20 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     // Level 0: the seeds, one per node, surface and cell, the cell grown until they fit their share.
     const std::size_t seed_budget =
         std::max<std::size_t>(1, static_cast<std::size_t>(sparse.seed_share * double(sparse.budget)));
-    double size = std::sqrt(std::max(area, 1e-300) / double(seed_budget));
-    std::vector<std::vector<std::pair<double, std::uint32_t>>> seeds(node_count);
-    for (int attempt = 0;; ++attempt) {
+    // cells_held summed over the gathered nodes in node order (`scores`: per node; none: every vertex).
+    const auto held_over_nodes = [&](double size, const std::vector<std::vector<double>>* scores) {
         std::vector<std::size_t> held(node_count, 0);
         parallel::for_each(node_count, 1, [&](std::size_t n) {
-            if (is_gathered[n]) held[n] = cells_held(welded.nodes[n], state[n], size);
+            if (is_gathered[n]) held[n] = cells_held(welded.nodes[n], state[n], size, scores ? &(*scores)[n] : nullptr);
         });
         std::size_t count = 0;
         for (std::size_t n = 0; n < node_count; ++n) count += held[n];
-        if (count <= seed_budget || attempt == 40) break;
-        size *= std::max(1.1, std::sqrt(double(count) / double(seed_budget)));
-    }
+        return count;
+    };
+    double size =  // the seeds' cell; the levels halve it
+        grown_cells(std::sqrt(std::max(area, 1e-300) / double(seed_budget)), seed_budget,
+                    [&](double cell) { return held_over_nodes(cell, nullptr); });
+    std::vector<std::vector<std::pair<double, std::uint32_t>>> seeds(node_count);
     parallel::for_each(node_count, 1, [&](std::size_t n) {
         if (!is_gathered[n]) return;
         const std::vector<double> one(welded.nodes[n].positions.size(), 1.0);
@@ -506,29 +528,35 @@ SparseGathered sparse_gather(const mesh::Mesh& mesh, const output::WeldedMesh& w
     // 5.7% off per pixel where every vertex gathered is 1.7%.
     if (static_cast<std::size_t>(shot) < sparse.budget) {
         const std::size_t room = sparse.budget - static_cast<std::size_t>(shot);
-        double cover = std::sqrt(std::max(area, 1e-300) / double(sparse.budget));
-        std::vector<std::vector<std::pair<double, std::uint32_t>>> picked(node_count);
-        std::size_t count = 0;
-        for (int attempt = 0;; ++attempt) {
-            parallel::for_each(node_count, 1, [&](std::size_t n) {
-                if (!is_gathered[n]) return;
-                const output::WeldedNode& node = welded.nodes[n];
-                const NodeState& s = state[n];
-                std::unordered_set<CellKey, CellHash> held;  // cells with a point
-                glm::dvec3 centre;
-                for (std::uint32_t v = 0; v < node.positions.size(); ++v)
-                    if (s.shot[v]) held.insert(cell_of(node.positions[v], s.component[v], cover, centre));
-                std::vector<double> score(node.positions.size(), 0.0);
-                for (std::uint32_t v = 0; v < node.positions.size(); ++v)
-                    if (!s.shot[v] && !held.count(cell_of(node.positions[v], s.component[v], cover, centre)))
-                        score[v] = 1.0;
-                picked[n] = pick_per_cell(node, s, cover, score, /*middle=*/true);
+        // Per gathered node, 1 at each vertex not shot in a cell of `cover` that holds no point.
+        const auto uncovered = [&](std::size_t n, double cover) {
+            const output::WeldedNode& node = welded.nodes[n];
+            const NodeState& s = state[n];
+            std::unordered_set<CellKey, CellHash> held;  // cells with a point
+            glm::dvec3 centre;
+            for (std::uint32_t v = 0; v < node.positions.size(); ++v)
+                if (s.shot[v]) held.insert(cell_of(node.positions[v], s.component[v], cover, centre));
+            std::vector<double> score(node.positions.size(), 0.0);
+            for (std::uint32_t v = 0; v < node.positions.size(); ++v)
+                if (!s.shot[v] && !held.count(cell_of(node.positions[v], s.component[v], cover, centre)))
+                    score[v] = 1.0;
+            return score;
+        };
+        const double cover =
+            grown_cells(std::sqrt(std::max(area, 1e-300) / double(sparse.budget)), room, [&](double cell) {
+                std::vector<std::vector<double>> score(node_count);
+                parallel::for_each(node_count, 1, [&](std::size_t n) {
+                    if (is_gathered[n]) score[n] = uncovered(n, cell);
+                });
+                return held_over_nodes(cell, &score);
             });
-            count = 0;
-            for (std::size_t n = 0; n < node_count; ++n) count += picked[n].size();
-            if (count <= room || attempt == 40) break;
-            cover *= std::max(1.1, std::sqrt(double(count) / double(room)));
-        }
+        std::vector<std::vector<std::pair<double, std::uint32_t>>> picked(node_count);
+        parallel::for_each(node_count, 1, [&](std::size_t n) {
+            if (is_gathered[n])
+                picked[n] = pick_per_cell(welded.nodes[n], state[n], cover, uncovered(n, cover), /*middle=*/true);
+        });
+        std::size_t count = 0;
+        for (std::size_t n = 0; n < node_count; ++n) count += picked[n].size();
         if (count > 0) {
             std::vector<std::vector<char>> fresh(node_count);
             std::size_t taken = 0;
