@@ -18,6 +18,8 @@ writes, next to this script:
                        with a repeated floor texture, an alpha-masked card and an emissive sign
     leaf_canopy.gltf   300 double-sided leaf cards in a crown, 160 glowing ones in a dense crown by
                        a wall and 48 emitting lantern cards, none sharing an edge, in the closed room
+    night_street.gltf  two houses on a street at night, lit only by two crowns of emitting leaf
+                       cards and a string of lantern cards, none sharing an edge, open to the sky
     atrium.gltf        a 6 m x 4 m x 6 m atrium lit only by the sun (a KHR_lights_punctual
                        directional light) through a 2 m x 2 m opening in its roof, with a block
                        in the sunlit patch; bake it with --sky for the sky through the opening
@@ -1137,6 +1139,120 @@ def make_leaf_canopy(path):
                    double_sided=("leaf", "lantern", "glow"))
 
 
+# The night street: two glowing tree crowns of emitting cards beside and over the roofs of two
+# houses, and a string of lanterns between them; nothing else emits, nothing closes the sky.
+STREET_HALF_X, STREET_HALF_Z = 12.0, 8.0
+STREET_HOUSES = (  # name, x0, x1, z0, z1, height
+    ("house_west", -9.0, -3.0, -7.0, -2.0, 4.0),
+    ("house_east", 3.0, 9.0, -7.0, -2.0, 5.0),
+)
+STREET_CROWNS = (  # name, centre, radii, cards, emission, trunk top
+    ("crown_pink", (0.0, 4.5, -4.5), (2.0, 1.5, 1.8), 200, (1.0, 0.45, 0.6), 2.6),
+    ("crown_orange", (-6.0, 5.0, 0.5), (1.6, 1.2, 1.5), 160, (1.0, 0.6, 0.25), 3.4),
+)
+STREET_CARD, STREET_CARD_GAP, STREET_CARD_TILT = 0.25, 0.36, 35.0
+STREET_LANTERNS, STREET_LANTERN_SIDE = 40, 0.12
+
+
+def make_night_street(path):
+    """Two houses on a street at night, lit only by two crowns of double-sided emitting leaf cards
+    (no two sharing an edge) and a string of lantern cards: the exported city trees that glow at
+    night, in the open."""
+    import random
+
+    rng = random.Random(7)
+    b = GltfBuilder(
+        {
+            "title": "Night street",
+            "source": "procedural (scenes/make_scenes.py)",
+            "units": "metres",
+            "layout": "a 24 x 16 m ground (y = 0, facing up, reflectance (0.4, 0.38, 0.35)); two box houses, "
+                      "walls (0.75, 0.7, 0.6), flat roofs (0.55, 0.3, 0.25), one-sided, no floor: 'house_west' "
+                      "x in [-9, -3], z in [-7, -2], 4 m high, and 'house_east' x in [3, 9], 5 m high; open sky",
+            "crowns": "node 'crown_pink': 200 double-sided 25 cm cards emitting (1, 0.45, 0.6) x 2, reflectance "
+                      "(0.4, 0.3, 0.35), centred in an ellipsoid at (0, 4.5, -4.5) with radii (2, 1.5, 1.8) between "
+                      "the houses, 1 m from each; 'crown_orange': 160 cards emitting (1, 0.6, 0.25) x 2 in an "
+                      "ellipsoid at (-6, 5, 0.5), radii (1.6, 1.2, 1.5), over the street in front of the west "
+                      "house's roof; cards face up tilted up to 35 degrees, centres at least 36 cm apart, so none "
+                      "touch; a 30 cm square trunk under each (reflectance (0.35, 0.25, 0.15))",
+            "lanterns": "node 'lanterns': 40 double-sided 12 cm cards emitting (1, 0.8, 0.5) x 6, reflectance 0.5, "
+                        "on a sagging string from (-3, 3.6, -1.5) to (3, 4.4, -1.5)",
+            "purpose": "the ww2 city's glowing trees by roofs and walls at night, in small: many emitting faces "
+                       "of one material that share no edge, which hemirad clusters across their gaps; a "
+                       "path-traced reference (bench/reference/night_street) measures what that costs",
+        }
+    )
+    b.material("ground", (0.4, 0.38, 0.35))
+    b.material("wall", (0.75, 0.7, 0.6))
+    b.material("roof", (0.55, 0.3, 0.25))
+    b.material("bark", (0.35, 0.25, 0.15))
+    for name, _, _, _, emission, _ in STREET_CROWNS:
+        b.material(name, (0.4, 0.3, 0.35), emission=emission, strength=2.0, double_sided=True)
+    b.material("lantern", (0.5, 0.5, 0.5), emission=(1.0, 0.8, 0.5), strength=6.0, double_sided=True)
+    rules = {"ground": faces_direction((0.0, 1.0, 0.0))}
+    fx, fz = STREET_HALF_X, STREET_HALF_Z
+    b.mesh_node("ground", [orient_quad([(-fx, 0.0, -fz), (fx, 0.0, -fz), (fx, 0.0, fz), (-fx, 0.0, fz)],
+                                       rules["ground"])], "ground")
+    solids = []  # boxes cards must keep clear of: (x0, x1, y0, y1, z0, z1)
+    for name, x0, x1, z0, z1, height in STREET_HOUSES:
+        faces = box_faces(x0, x1, 0.0, height, z0, z1)
+        centre = ((x0 + x1) / 2.0, height / 2.0, (z0 + z1) / 2.0)
+        rules[name] = rules[name + "_roof"] = faces_away_from(centre)
+        b.mesh_node(name, [orient_quad(faces[f], rules[name])
+                           for f in ("wall_north", "wall_south", "wall_east", "wall_west")], "wall")
+        b.mesh_node(name + "_roof", [orient_quad(faces["ceiling"], rules[name])], "roof")
+        solids.append((x0, x1, 0.0, height, z0, z1))
+
+    def in_ellipsoid(centre, radii):
+        def draw(r):
+            while True:
+                p = [2.0 * r.random() - 1.0 for _ in range(3)]
+                if dot(p, p) <= 1.0:
+                    return tuple(centre[k] + radii[k] * p[k] for k in range(3))
+        return draw
+
+    placed, cards_all = [], []
+    for name, centre, radii, count, _, trunk_top in STREET_CROWNS:
+        h = 0.15
+        trunk = box_faces(centre[0] - h, centre[0] + h, 0.0, trunk_top, centre[2] - h, centre[2] + h)
+        rules[name + "_trunk"] = faces_away_from((centre[0], trunk_top / 2.0, centre[2]))
+        b.mesh_node(name + "_trunk", [orient_quad(trunk[f], rules[name + "_trunk"])
+                                      for f in ("ceiling", "wall_north", "wall_south", "wall_east", "wall_west")],
+                    "bark")
+        solids.append((centre[0] - h, centre[0] + h, 0.0, trunk_top, centre[2] - h, centre[2] + h))
+        rules[name] = faces_half((0.0, 1.0, 0.0))
+        cards = scattered_cards(rng, count, STREET_CARD, STREET_CARD_TILT, 1.0, in_ellipsoid(centre, radii), placed,
+                                STREET_CARD_GAP)
+        b.mesh_node(name, [orient_quad(q, rules[name]) for q in cards], name)
+        cards_all += cards
+
+    a, c = (-3.0, 3.6, -1.5), (3.0, 4.4, -1.5)
+
+    def on_string(r):
+        t = r.random()
+        sag = 0.8 * 4.0 * t * (1.0 - t)
+        return tuple(a[k] + t * (c[k] - a[k]) - (sag if k == 1 else 0.0) for k in range(3))
+
+    rules["lanterns"] = faces_half((0.0, -1.0, 0.0))
+    lanterns = scattered_cards(rng, STREET_LANTERNS, STREET_LANTERN_SIDE, 20.0, -1.0, on_string, placed, 0.12)
+    b.mesh_node("lanterns", [orient_quad(q, rules["lanterns"]) for q in lanterns], "lantern")
+    cards_all += lanterns
+    # Every card clear of the houses and trunks (by 10 cm) and above the ground.
+    for q in cards_all:
+        for v in q:
+            assert v[1] > 0.5
+            for x0, x1, y0, y1, z0, z1 in solids:
+                assert not (x0 - 0.1 < v[0] < x1 + 0.1 and y0 - 0.1 < v[1] < y1 + 0.1 and z0 - 0.1 < v[2] < z1 + 0.1)
+
+    cam_pos = (1.5, 8.5, 9.5)
+    target = (-1.0, 2.0, -3.0)
+    b.camera_node("camera", "street", 1.0, 4.0 / 3.0, 0.05, cam_pos, rotation=look_at_quat(cam_pos, target))
+    b.write(path)
+    d = unit(sub(target, cam_pos))
+    load_and_check(path, rules, expect_camera=("camera", cam_pos, d, cross(unit(cross(d, (0, 1, 0))), d)),
+                   double_sided=tuple(n for n, *_ in STREET_CROWNS) + ("lantern",))
+
+
 def make_lamp_facing_sky(path):
     """A lamp whose brighter side faces the open sky, above a floor: two one-sided squares back to
     back, 1 mm apart, the upper facing up (exitance 10), the lower facing the floor (exitance 1),
@@ -1397,6 +1513,7 @@ def main():
         ("lit_room.gltf", make_lit_room),
         ("atrium.gltf", make_atrium),
         ("leaf_canopy.gltf", make_leaf_canopy),
+        ("night_street.gltf", make_night_street),
     ):
         path = os.path.join(HERE, name)
         make(path)  # writes the file, reads it back and checks it (raises AssertionError on failure)

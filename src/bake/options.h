@@ -53,8 +53,9 @@ struct Options {
     std::string checkpoint;       // progressive: write the solver's state here every checkpoint_every passes
     long checkpoint_every = 500;
     std::string resume;           // progressive: go on from this checkpoint
-    // --cluster-apart: clusters also join across gaps (mesh::Settings::cluster_apart).
-    bool cluster_apart = false;
+    // Clusters also join across gaps (mesh::Settings::cluster_apart); --no-cluster-apart: connected
+    // faces only.
+    bool cluster_apart = true;
     bool no_checkpoint = false;   // --no-checkpoint: no automatic checkpoint (bake/stage_checkpoint.h)
     bool verify = false;
     long verify_every = 1;        // with --verify: check shots 0, K, 2K, …

@@ -169,11 +169,10 @@ void add_bake_options(CLI::App& bake, BakeOptions& o) {
                     "each still shoots its flux at the time it is applied (default: those holding at least half "
                     "the largest unshot flux, up to 256)")
         ->transform(integer_in(1, 256));
-    bake.add_flag("--cluster-apart", o.cluster_apart,
+    bake.add_flag("--cluster-apart,!--no-cluster-apart", o.cluster_apart,
                   "small faces of one material and node that share no edge but lie next to each other (a tree's "
                   "leaves, a grille) join one shooter where they face the same way and see its point: far fewer "
-                  "passes for foliage-heavy scenes (not yet the default: it darkens some objects in the final "
-                  "gather)");
+                  "passes for foliage-heavy scenes (default: on; --no-cluster-apart joins connected faces only)");
     bake.add_option("--threads", o.threads,
                     "host threads for the stages the host runs in parallel (contact lines, the gather's drawing "
                     "and rows, its interpolation, welding, the render); 0: every core. The bytes baked are the "

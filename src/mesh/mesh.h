@@ -107,8 +107,9 @@ struct Settings {
     // Clusters also take whole clusters nearby that share no edge with them (the same material
     // and node, normals within kClusterCos, within half a patch diagonal) where every part still
     // sees the joined cluster's shooting point: a tree's leaves, a grille, a string of lights
-    // shoot as one patch, not one each. Off (the default, `--cluster-apart` turns it on):
-    // connected faces only.
+    // shoot as one patch, not one each. A bake turns it on (`--no-cluster-apart` leaves it off);
+    // off here, for the benchmark's meshes and the tests that build meshes themselves: connected
+    // faces only.
     bool cluster_apart = false;
 };
 
