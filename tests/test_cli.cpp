@@ -1119,15 +1119,17 @@ TEST_CASE("quality presets fill in the settings the options leave out, options o
         CHECK(s["contrast"].get<double>() == preset.contrast);
         CHECK(s["gather"] == preset.gather);
         CHECK(s["gather_passes"] == preset.gather_passes);
+        CHECK(s["cluster_apart"] == true);  // clusters join across gaps unless --no-cluster-apart
     }
     const json overridden = bake_ok(dir, kClosedRoom, dir / "overridden",
                                     concat({"--quality", "high", "--hemicube", "32", "--threshold", "0.5",
-                                            "--patch-size", "1.5", "--gather", "0", "--contrast", "0.3"},
+                                            "--patch-size", "1.5", "--gather", "0", "--contrast", "0.3", "--no-cluster-apart"},
                                            quick));
     CHECK(overridden["settings"]["hemicube"] == 32);
     CHECK(overridden["settings"]["gather"] == 0);
     CHECK(overridden["settings"]["gather_passes"] == hemirad::quality_preset("high").gather_passes);
     CHECK(overridden["settings"]["contrast"].get<double>() == 0.3);
+    CHECK(overridden["settings"]["cluster_apart"] == false);
     CHECK(overridden["counts"]["gather_points"] == 0);
     CHECK(overridden["settings"]["threshold"].get<double>() == 0.5);
     CHECK(overridden["settings"]["patch_size"].get<double>() == 1.5);
