@@ -1121,10 +1121,11 @@ TEST_CASE("quality presets fill in the settings the options leave out, options o
         CHECK(s["gather_passes"] == preset.gather_passes);
         CHECK(s["cluster_apart"] == true);  // clusters join across gaps unless --no-cluster-apart
     }
-    const json overridden = bake_ok(dir, kClosedRoom, dir / "overridden",
-                                    concat({"--quality", "high", "--hemicube", "32", "--threshold", "0.5",
-                                            "--patch-size", "1.5", "--gather", "0", "--contrast", "0.3", "--no-cluster-apart"},
-                                           quick));
+    const json overridden =
+        bake_ok(dir, kClosedRoom, dir / "overridden",
+                concat({"--quality", "high", "--hemicube", "32", "--threshold", "0.5", "--patch-size", "1.5",
+                        "--gather", "0", "--contrast", "0.3", "--no-cluster-apart"},
+                       quick));
     CHECK(overridden["settings"]["hemicube"] == 32);
     CHECK(overridden["settings"]["gather"] == 0);
     CHECK(overridden["settings"]["gather_passes"] == hemirad::quality_preset("high").gather_passes);
