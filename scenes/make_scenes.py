@@ -1054,6 +1054,17 @@ def scattered_cards(rng, count, side, tilt, up, inside, placed, gap):
     return cards
 
 
+def in_ellipsoid(centre, radii):
+    """A drawer of points uniform in the ellipsoid at `centre` with `radii` (for scattered_cards):
+    draw(rng) rejects points of the unit cube outside the unit ball, then scales them."""
+    def draw(r):
+        while True:
+            p = [2.0 * r.random() - 1.0 for _ in range(3)]
+            if dot(p, p) <= 1.0:
+                return tuple(centre[k] + radii[k] * p[k] for k in range(3))
+    return draw
+
+
 def make_leaf_canopy(path):
     """300 double-sided green leaf cards in a crown, 160 double-sided glowing leaf cards in a dense
     crown by the north-east walls and 48 double-sided emitting lantern cards on a ring, no two
@@ -1100,14 +1111,6 @@ def make_leaf_canopy(path):
     rules["light"] = faces_direction((0.0, -1.0, 0.0))
     b.mesh_node("light", [orient_quad([(-lh, ly, -lh), (lh, ly, -lh), (lh, ly, lh), (-lh, ly, lh)], rules["light"])],
                 "light")
-
-    def in_ellipsoid(centre, radii):
-        def draw(r):
-            while True:
-                p = [2.0 * r.random() - 1.0 for _ in range(3)]
-                if dot(p, p) <= 1.0:
-                    return tuple(centre[k] + radii[k] * p[k] for k in range(3))
-        return draw
 
     def on_ring(r):
         a = 2 * math.pi * r.random()
@@ -1202,14 +1205,6 @@ def make_night_street(path):
                            for f in ("wall_north", "wall_south", "wall_east", "wall_west")], "wall")
         b.mesh_node(name + "_roof", [orient_quad(faces["ceiling"], rules[name])], "roof")
         solids.append((x0, x1, 0.0, height, z0, z1))
-
-    def in_ellipsoid(centre, radii):
-        def draw(r):
-            while True:
-                p = [2.0 * r.random() - 1.0 for _ in range(3)]
-                if dot(p, p) <= 1.0:
-                    return tuple(centre[k] + radii[k] * p[k] for k in range(3))
-        return draw
 
     placed, cards_all = [], []
     for name, centre, radii, count, _, trunk_top in STREET_CROWNS:
